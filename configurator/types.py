@@ -1,0 +1,166 @@
+"""The typed documents of a Robot Configurator repository: catalogue models and configurations.
+
+Pure pydantic; imported by the robot-side agent too, so nothing heavier than pydantic here.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+
+JsonScalar = bool | int | float | str
+JsonObject = dict[str, Any]
+
+
+class Strict(BaseModel):
+    """Every document type forbids unknown fields: a typo must never pass silently."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---------------------------------------------------------------- settings
+
+
+SettingType = Literal["number", "integer", "boolean", "string", "enum"]
+
+
+class SettingDefinition(Strict):
+    """A robot or logic setting: its type, default and bounds."""
+
+    type: SettingType = Field(description="number, integer, boolean, string or enum")
+    default: JsonScalar = Field(description="value used when a scenario does not set it")
+    minimum: float | None = Field(None, description="lowest allowed value (number, integer)")
+    maximum: float | None = Field(None, description="highest allowed value (number, integer)")
+    choices: list[JsonScalar] | None = Field(None, description="allowed values (enum)")
+    unit: str | None = Field(None, description="unit shown to people, e.g. m/s")
+    description: str | None = None
+
+
+# ---------------------------------------------------------------- catalogue: models/
+
+
+class RobotTemplate(Strict):
+    """A robot model: the mappings it has and the robot settings it accepts."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    mappings: list[str] = Field(description="names of the mappings this robot has")
+    settings: dict[str, SettingDefinition] = Field(default_factory=dict)
+
+
+MappingKind = Literal["topic", "service", "action_client"]
+
+
+class MappingBinding(Strict):
+    """How one mapping is bound on a platform (a ROS topic, service or action client)."""
+
+    kind: MappingKind
+    name: str = Field(description="e.g. the topic name /cmd_vel")
+    type: str = Field(description="e.g. geometry_msgs/msg/Twist")
+
+
+class MappingScheme(Strict):
+    """How each mapping is bound on one platform (simulation and real robots differ)."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    mappings: dict[str, MappingBinding]
+
+
+class Logic(Strict):
+    """One implementation of an action: a code module of the brain service."""
+
+    description: str = ""
+    mappings: list[str] = Field(default_factory=list, description="mappings the logic needs")
+    settings: dict[str, SettingDefinition] = Field(default_factory=dict)
+
+
+class Action(Strict):
+    """What a robot can do, on which platforms, by which alternative logics."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    platforms: list[str] = Field(min_length=1)
+    requires: list[str] = Field(default_factory=list, description="actions selected alongside")
+    logics: dict[str, Logic] = Field(min_length=1)
+
+
+class Task(Strict):
+    """A platform-free activity, achieved by any one of its alternative action lists."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    implementations: list[list[str]] = Field(min_length=1)
+
+
+class OntologyObject(BaseModel):
+    """An object of the environment (a Location, a door, another robot); extra fields allowed."""
+
+    model_config = ConfigDict(extra="allow", coerce_numbers_to_str=True)
+
+    id: str
+    name: str
+    type: str = Field(description="e.g. Location")
+
+
+class Environment(Strict):
+    """The world a scenario runs in: its objects and knowledge sets given to robots."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    type: str = Field(description="e.g. 2D, Gazebo, Real")
+    objects: list[OntologyObject] = Field(default_factory=list)
+    knowledge_sets: dict[str, JsonObject] = Field(default_factory=dict)
+
+
+# ---------------------------------------------------------------- configurations: configs/
+
+
+class CapabilityConfiguration(Strict):
+    """A robot's composition: platform, scheme, optional template, one logic per action."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    platform: str
+    mapping_scheme: str
+    robot_template: str | None = Field(None, description="when set, the config must fit it")
+    actions: dict[str, str] = Field(description="action -> chosen logic")
+
+
+class Goal(Strict):
+    """An initial task for the robot's planner, optionally at a location of the environment."""
+
+    task: str
+    location: str | None = Field(None, description="id or name of a Location object")
+
+
+class ScenarioConfiguration(Strict):
+    """A capability configuration plus the world it runs in, its settings and goals."""
+
+    name: str | None = Field(None, description="must equal the file name when given")
+    description: str = ""
+    capability: str
+    environment: str | None = None
+    robot_settings: dict[str, JsonScalar] = Field(default_factory=dict)
+    logic_settings: dict[str, dict[str, JsonScalar]] = Field(default_factory=dict)
+    knowledge_sets: list[str] = Field(default_factory=list)
+    knowledge: JsonObject = Field(default_factory=dict)
+    goals: list[Goal] = Field(default_factory=list)
+
+
+class RobotAssignment(Strict):
+    """Which scenario one robot runs."""
+
+    scenario: str
+    name: str | None = Field(None, description="display name; defaults to the robot id")
+    suspended: bool = Field(False, description="leave the robot as it is")
+
+
+class Fleet(Strict):
+    """The desired robot assignments."""
+
+    robots: dict[str, RobotAssignment] = Field(default_factory=dict)
+    allow_empty: bool = Field(False, description="allow a commit that unassigns every robot")

@@ -1,0 +1,178 @@
+"""The MQTT contract (DESIGN §7): topic names, broker URLs and the retained status messages.
+
+Pure pydantic; shared by the agent, the reconciler and `robotconf status`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from enum import Enum
+from typing import Literal
+from urllib.parse import unquote, urlsplit
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from configurator.types import ROBOT_ID_PATTERN
+
+DEFAULT_PREFIX = "robotconf"
+BROKER_ENV = "ROBOTCONF_BROKER"
+DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
+
+
+@dataclass(frozen=True)
+class Topics:
+    """Topic names under one prefix."""
+
+    prefix: str = DEFAULT_PREFIX
+
+    def launch(self, robot_id: str) -> str:
+        return f"{self.prefix}/robots/{robot_id}/launch"
+
+    def status(self, robot_id: str) -> str:
+        return f"{self.prefix}/robots/{robot_id}/status"
+
+    def description(self, robot_id: str) -> str:
+        return f"{self.prefix}/robots/{robot_id}/description"
+
+    @property
+    def reconciler_status(self) -> str:
+        return f"{self.prefix}/reconciler/status"
+
+    @property
+    def all_launch(self) -> str:
+        return f"{self.prefix}/robots/+/launch"
+
+    @property
+    def all_status(self) -> str:
+        return f"{self.prefix}/robots/+/status"
+
+    @property
+    def all_description(self) -> str:
+        return f"{self.prefix}/robots/+/description"
+
+    def robot_of(self, topic: str) -> tuple[str, str] | None:
+        """(robot id, leaf) for a topic under `<prefix>/robots/`, else None."""
+        head = f"{self.prefix}/robots/"
+        if not topic.startswith(head):
+            return None
+        parts = topic[len(head) :].split("/")
+        if len(parts) != 2:
+            return None
+        return parts[0], parts[1]
+
+
+def validate_prefix(prefix: str) -> str:
+    if not prefix or any(c in prefix for c in "#+") or prefix.startswith("/") or prefix.endswith("/"):
+        raise ValueError(
+            f"topic prefix {prefix!r} is not usable: it must be non-empty, without '+' or '#', "
+            "and not start or end with '/' (e.g. 'robotconf' or 'lab1/robotconf')"
+        )
+    return prefix
+
+
+@dataclass(frozen=True)
+class BrokerAddress:
+    host: str
+    port: int
+    tls: bool
+    username: str | None = None
+    password: str | None = None
+
+    @property
+    def url(self) -> str:
+        return f"{'mqtts' if self.tls else 'mqtt'}://{self.host}:{self.port}"
+
+
+def parse_broker_url(url: str) -> BrokerAddress:
+    """`mqtt://host[:port]` or `mqtts://host[:port]` (TLS); credentials in the URL allowed."""
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+    except ValueError as exc:
+        raise ValueError(f"broker URL {url!r} is not valid ({exc}); e.g. mqtt://127.0.0.1:1883") from exc
+    if parts.scheme not in ("mqtt", "mqtts"):
+        raise ValueError(
+            f"broker URL {url!r} must start with mqtt:// or mqtts:// (TLS), "
+            "e.g. mqtt://127.0.0.1:1883"
+        )
+    if not parts.hostname:
+        raise ValueError(f"broker URL {url!r} has no host; e.g. mqtt://127.0.0.1:1883")
+    if parts.path not in ("", "/") or parts.query or parts.fragment:
+        raise ValueError(f"broker URL {url!r} must be only scheme://host:port")
+    tls = parts.scheme == "mqtts"
+    return BrokerAddress(
+        host=parts.hostname,
+        port=port or (8883 if tls else 1883),
+        tls=tls,
+        username=unquote(parts.username) if parts.username else None,
+        password=unquote(parts.password) if parts.password else None,
+    )
+
+
+# ---------------------------------------------------------------- retained messages
+
+
+class AgentState(str, Enum):
+    """Supervisor states of an agent and its brain service (DESIGN §7)."""
+
+    OFFLINE = "offline"
+    IDLE = "idle"
+    STARTING = "starting"
+    RUNNING = "running"
+    STOPPING = "stopping"
+    EXITED = "exited"
+    FAILED = "failed"
+    BACKOFF = "backoff"
+    REJECTED = "rejected"
+
+
+def now() -> float:
+    return round(time.time(), 3)
+
+
+class _Message(BaseModel):
+    # Tolerant on read: a newer peer may add fields.
+    model_config = ConfigDict(extra="ignore")
+
+
+class RobotDescription(_Message):
+    """What the robot says about itself when it connects."""
+
+    id: str = Field(pattern=ROBOT_ID_PATTERN)
+    name: str | None = None
+    recommended_template: str | None = None
+    platform: str | None = None
+
+
+class AgentStatus(_Message):
+    """The agent's retained status; `seq` grows at every connection (late-will detection)."""
+
+    robot_id: str
+    state: AgentState
+    digest: str | None = None
+    revision: str | None = None
+    pid: int | None = None
+    exit_code: int | None = None
+    restarts: int = 0
+    since: float = Field(default_factory=now, description="unix time of the last transition")
+    message: str = ""
+    warnings: list[str] = Field(default_factory=list)
+    seq: int = 0
+
+
+class ReconcilerStatus(_Message):
+    """The reconciler's retained status (Flux-style: ready or stalled, with why)."""
+
+    state: Literal["Ready", "Stalled", "Progressing"]
+    ready: bool
+    branch: str | None = None
+    source: str | None = None
+    last_applied_revision: str | None = None
+    last_attempted_revision: str | None = None
+    diagnostics: list[str] = Field(default_factory=list)
+    message: str = ""
+    robots: int = 0
+    published: int = 0
+    cleared: int = 0
+    since: float = Field(default_factory=now)

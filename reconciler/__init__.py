@@ -1,0 +1,1 @@
+"""The reconciler: the git branch's head commit becomes the retained launch topics."""
