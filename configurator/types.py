@@ -42,6 +42,13 @@ class SettingDefinition(Strict):
 # ---------------------------------------------------------------- catalogue: models/
 
 
+class PlatformInfo(Strict):
+    """Optional `models/platforms/<P>/platform.yaml`: what the platform is."""
+
+    name: str | None = Field(None, description="must equal the folder name when given")
+    description: str = ""
+
+
 class RobotTemplate(Strict):
     """A robot model: the mappings it has and the robot settings it accepts."""
 

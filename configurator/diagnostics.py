@@ -1,0 +1,95 @@
+"""Diagnostics: one located finding (`path:line:col: severity CODE message`) and their formats."""
+
+from __future__ import annotations
+
+import difflib
+import json
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+from enum import Enum
+
+
+class Severity(str, Enum):
+    ERROR = "error"
+    WARNING = "warning"
+
+
+@dataclass(frozen=True, order=True)
+class Diagnostic:
+    """One finding. Fields are ordered so that sorting a list sorts by file, line, column."""
+
+    path: str
+    line: int
+    col: int
+    severity: Severity
+    code: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.path}:{self.line}:{self.col}: {self.severity.value} {self.code} {self.message}"
+
+    @property
+    def is_error(self) -> bool:
+        return self.severity is Severity.ERROR
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """` (did you mean 'x'?)` for a near miss, else a short list of what exists."""
+    candidates = sorted(set(known))
+    close = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
+    if not close:
+        lowered = {c.lower(): c for c in candidates}
+        if name.lower() in lowered:
+            close = [lowered[name.lower()]]
+    if close:
+        return f"; did you mean '{close[0]}'?"
+    if not candidates:
+        return "; none exist"
+    shown = ", ".join(candidates[:8])
+    more = f", ... ({len(candidates)} in all)" if len(candidates) > 8 else ""
+    return f"; known: {shown}{more}"
+
+
+def format_text(diagnostics: list[Diagnostic]) -> str:
+    return "".join(f"{d}\n" for d in diagnostics)
+
+
+def format_json(diagnostics: list[Diagnostic]) -> str:
+    rows = [dict(asdict(d), severity=d.severity.value) for d in diagnostics]
+    summary = {
+        "errors": sum(d.is_error for d in diagnostics),
+        "warnings": sum(not d.is_error for d in diagnostics),
+        "diagnostics": rows,
+    }
+    return json.dumps(summary, indent=2) + "\n"
+
+
+def _github_escape(value: str, *, prop: bool = False) -> str:
+    value = value.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+    if prop:
+        value = value.replace(":", "%3A").replace(",", "%2C")
+    return value
+
+
+def format_github(diagnostics: list[Diagnostic]) -> str:
+    """GitHub Actions workflow commands: each finding becomes an annotation on the PR diff."""
+    lines = []
+    for d in diagnostics:
+        props = ",".join(
+            [
+                f"file={_github_escape(d.path, prop=True)}",
+                f"line={d.line}",
+                f"col={d.col}",
+                f"title={_github_escape(d.code, prop=True)}",
+            ]
+        )
+        lines.append(f"::{d.severity.value} {props}::{_github_escape(d.message)}\n")
+    return "".join(lines)
+
+
+def summary_line(diagnostics: list[Diagnostic], files: int) -> str:
+    errors = sum(d.is_error for d in diagnostics)
+    warnings = len(diagnostics) - errors
+    if not diagnostics:
+        return f"{files} files checked: no problems"
+    return f"{files} files checked: {errors} error(s), {warnings} warning(s)"

@@ -1,0 +1,188 @@
+"""Loads a repository from a source: the folder decides each file's kind, the types check it.
+
+One loader serves the work tree and any commit; what cannot be read becomes a diagnostic and the
+file is remembered as broken so that references to it are not reported twice.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from configurator.diagnostics import Diagnostic, Severity
+from configurator.repository import Entry, Platform, Repository
+from configurator.source import Source
+from configurator.types import (
+    Action,
+    CapabilityConfiguration,
+    Environment,
+    Fleet,
+    MappingScheme,
+    PlatformInfo,
+    RobotTemplate,
+    ScenarioConfiguration,
+    Task,
+)
+from configurator.typing_errors import typing_diagnostics
+from configurator.yamlio import YamlDocument, YamlReadError, parse_document
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One kind of file: where it lives and the type that checks it."""
+
+    name: str
+    pattern: re.Pattern[str]
+    model: type[BaseModel]
+    title: str
+
+
+KINDS = (
+    Kind("fleet", re.compile(r"^configs/(fleet)\.yaml$"), Fleet, "fleet"),
+    Kind(
+        "capability",
+        re.compile(r"^configs/capabilities/([^/]+)\.yaml$"),
+        CapabilityConfiguration,
+        "capability configuration",
+    ),
+    Kind(
+        "scenario",
+        re.compile(r"^configs/scenarios/([^/]+)\.yaml$"),
+        ScenarioConfiguration,
+        "scenario configuration",
+    ),
+    Kind("platform", re.compile(r"^models/platforms/([^/]+)/platform\.yaml$"), PlatformInfo, "platform"),
+    Kind(
+        "robot-template",
+        re.compile(r"^models/platforms/([^/]+)/robot-templates/([^/]+)\.yaml$"),
+        RobotTemplate,
+        "robot template",
+    ),
+    Kind(
+        "mapping-scheme",
+        re.compile(r"^models/platforms/([^/]+)/mapping-schemes/([^/]+)\.yaml$"),
+        MappingScheme,
+        "mapping scheme",
+    ),
+    Kind("action", re.compile(r"^models/actions/([^/]+)\.yaml$"), Action, "action"),
+    Kind("task", re.compile(r"^models/tasks/([^/]+)\.yaml$"), Task, "task"),
+    Kind("environment", re.compile(r"^models/environments/([^/]+)\.yaml$"), Environment, "environment"),
+)
+KIND_BY_NAME = {kind.name: kind for kind in KINDS}
+
+_PLACES = (
+    "configs/fleet.yaml, configs/capabilities/<name>.yaml, configs/scenarios/<name>.yaml, "
+    "models/actions/, models/tasks/, models/environments/, "
+    "models/platforms/<platform>/{platform.yaml,robot-templates/,mapping-schemes/}"
+)
+_PLATFORM_DIR = re.compile(r"^models/platforms/([^/]+)/")
+
+
+def classify(path: str) -> tuple[Kind, tuple[str, ...]] | None:
+    for kind in KINDS:
+        match = kind.pattern.match(path)
+        if match:
+            return kind, match.groups()
+    return None
+
+
+def _error(path: str, code: str, message: str, line: int = 1, col: int = 1) -> Diagnostic:
+    return Diagnostic(path, line, col, Severity.ERROR, code, message)
+
+
+def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
+    """Every file of the source, typed; diagnostics for everything that is not readable."""
+    repo = Repository(revision=source.revision)
+    diagnostics: list[Diagnostic] = []
+    for path in source.files():
+        platform_dir = _PLATFORM_DIR.match(path)
+        if platform_dir:
+            repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
+        if not path.endswith((".yaml", ".yml")):
+            continue  # READMEs and the like may sit beside the YAML files
+        if path.endswith(".yml"):
+            diagnostics.append(
+                _error(path, "RC105", "YAML files here end in .yaml; rename this .yml file")
+            )
+            continue
+        found = classify(path)
+        if found is None:
+            diagnostics.append(
+                _error(path, "RC105", f"not a known place for a YAML file; expected {_PLACES}")
+            )
+            continue
+        kind, groups = found
+        name = groups[-1]
+        repo.files_read += 1
+        doc, model = _load_one(source, path, kind, diagnostics)
+        if model is None or doc is None:
+            repo.broken.setdefault(kind.name, set()).add(_qualified(groups))
+            if kind.name == "robot-template":
+                repo.platforms[groups[0]].broken_templates.add(name)
+            elif kind.name == "mapping-scheme":
+                repo.platforms[groups[0]].broken_schemes.add(name)
+            continue
+        declared = getattr(model, "name", None)
+        if kind.name != "fleet" and declared is not None and declared != name:
+            line, col = doc.locate(["name"])
+            diagnostics.append(
+                _error(
+                    path,
+                    "RC104",
+                    f"name '{declared}' differs from the file name '{name}'; "
+                    f"a {kind.title}'s name is its file name (rename one, or drop 'name:')",
+                    line,
+                    col,
+                )
+            )
+        _add(repo, kind.name, groups, Entry(name, model, doc))
+    return repo, diagnostics
+
+
+def _qualified(groups: tuple[str, ...]) -> str:
+    return "/".join(groups)
+
+
+def _load_one(
+    source: Source, path: str, kind: Kind, diagnostics: list[Diagnostic]
+) -> tuple[YamlDocument | None, Any]:
+    try:
+        raw = source.read(path)
+    except OSError as exc:
+        diagnostics.append(_error(path, "RC008", f"cannot read the file: {exc.strerror or exc}"))
+        return None, None
+    try:
+        doc = parse_document(path, raw)
+    except YamlReadError as exc:
+        for p in exc.problems:
+            diagnostics.append(_error(path, p.code, p.message, p.line, p.col))
+        return None, None
+    try:
+        return doc, kind.model.model_validate(doc.data)
+    except ValidationError as exc:
+        diagnostics.extend(typing_diagnostics(doc, kind.model, exc, f"a {kind.title}"))
+        return doc, None
+
+
+def _add(repo: Repository, kind: str, groups: tuple[str, ...], entry: Entry[Any]) -> None:
+    if kind == "fleet":
+        repo.fleet = entry
+    elif kind == "capability":
+        repo.capabilities[entry.name] = entry
+    elif kind == "scenario":
+        repo.scenarios[entry.name] = entry
+    elif kind == "platform":
+        repo.platforms[groups[0]].info = entry
+    elif kind == "robot-template":
+        repo.platforms[groups[0]].templates[entry.name] = entry
+    elif kind == "mapping-scheme":
+        repo.platforms[groups[0]].schemes[entry.name] = entry
+    elif kind == "action":
+        repo.actions[entry.name] = entry
+    elif kind == "task":
+        repo.tasks[entry.name] = entry
+    elif kind == "environment":
+        repo.environments[entry.name] = entry

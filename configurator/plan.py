@@ -1,0 +1,151 @@
+"""Plans a rollout: per robot, what changes between two rendered fleets (added, removed, changed)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from configurator.render import FleetRender
+
+ChangeKind = Literal["added", "removed", "changed", "held"]
+
+
+@dataclass
+class RobotChange:
+    robot_id: str
+    kind: ChangeKind  # held: it would change, but the robot is suspended
+    scenario_before: str | None
+    scenario_after: str | None
+    fields: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Plan:
+    base: str
+    head: str
+    changes: list[RobotChange]
+    unchanged: int
+
+    @property
+    def restarts(self) -> list[str]:
+        """Robots whose brain the reconciler will restart or stop."""
+        return [c.robot_id for c in self.changes if c.kind != "held"]
+
+
+def changed_fields(before: Any, after: Any, path: str = "") -> list[str]:
+    """Dotted paths of the leaves that differ (lists of equal length compared item by item)."""
+    if isinstance(before, dict) and isinstance(after, dict):
+        found = []
+        for key in sorted(set(before) | set(after)):
+            sub = f"{path}.{key}" if path else str(key)
+            if key not in before or key not in after:
+                found.append(sub)
+            else:
+                found.extend(changed_fields(before[key], after[key], sub))
+        return found
+    if isinstance(before, list) and isinstance(after, list) and len(before) == len(after):
+        found = []
+        for i, (b, a) in enumerate(zip(before, after, strict=True)):
+            found.extend(changed_fields(b, a, f"{path}[{i}]"))
+        return found
+    return [] if before == after else [path or "(whole request)"]
+
+
+def make_plan(base: FleetRender, head: FleetRender) -> Plan:
+    changes: list[RobotChange] = []
+    unchanged = 0
+    for robot_id in sorted(set(base.requests) | set(head.requests)):
+        old = base.requests.get(robot_id)
+        new = head.requests.get(robot_id)
+        before, after = base.scenario_of.get(robot_id), head.scenario_of.get(robot_id)
+        if old is None:
+            kind: ChangeKind = "held" if robot_id in head.suspended else "added"
+            changes.append(RobotChange(robot_id, kind, None, after))
+        elif new is None:
+            changes.append(RobotChange(robot_id, "removed", before, None))
+        elif old.digest != new.digest:
+            kind = "held" if robot_id in head.suspended else "changed"
+            fields = changed_fields(old.content(), new.content())
+            changes.append(RobotChange(robot_id, kind, before, after, fields))
+        else:
+            unchanged += 1
+    return Plan(base.revision, head.revision, changes, unchanged)
+
+
+def _counts(plan: Plan) -> str:
+    count = {k: sum(c.kind == k for c in plan.changes) for k in ("changed", "added", "removed", "held")}
+    text = f"{count['changed']} changed, {count['added']} added, {count['removed']} removed"
+    if count["held"]:
+        text += f", {count['held']} held (suspended)"
+    return text + f", {plan.unchanged} unchanged"
+
+
+def _short(rev: str) -> str:
+    return rev[:12] if len(rev) >= 40 and "+" not in rev else rev
+
+
+_SIGN = {"added": "+", "removed": "-", "changed": "~", "held": "="}
+
+
+def format_plan_text(plan: Plan) -> str:
+    lines = [f"plan {_short(plan.base)} -> {_short(plan.head)}: {_counts(plan)}"]
+    for c in plan.changes:
+        scenario = c.scenario_after or c.scenario_before or ""
+        if c.kind == "removed":
+            detail = f"(was {c.scenario_before}; its brain will be stopped)"
+        elif c.kind == "added":
+            detail = scenario
+        else:
+            moved = (
+                f"{c.scenario_before} -> {c.scenario_after}"
+                if c.scenario_before != c.scenario_after
+                else scenario
+            )
+            detail = f"{moved}: {', '.join(c.fields)}"
+            if c.kind == "held":
+                detail += " (suspended: left as it is)"
+        lines.append(f"  {_SIGN[c.kind]} {c.robot_id}  {detail}")
+    return "\n".join(lines) + "\n"
+
+
+def format_plan_markdown(plan: Plan) -> str:
+    lines = [
+        f"### robotconf plan `{_short(plan.base)}` → `{_short(plan.head)}`",
+        "",
+        _counts(plan) + ".",
+        "",
+    ]
+    if not plan.changes:
+        lines.append("No robot's Launch Request changes: no robot restarts.")
+        return "\n".join(lines) + "\n"
+    lines += ["| robot | change | scenario | changed fields |", "| --- | --- | --- | --- |"]
+    for c in plan.changes:
+        scenario = (
+            f"{c.scenario_before} → {c.scenario_after}"
+            if c.scenario_before and c.scenario_after and c.scenario_before != c.scenario_after
+            else (c.scenario_after or c.scenario_before or "")
+        )
+        fields = "<br>".join(f"`{f}`" for f in c.fields[:20])
+        if len(c.fields) > 20:
+            fields += f"<br>… {len(c.fields) - 20} more"
+        kind = "held (suspended)" if c.kind == "held" else c.kind
+        lines.append(f"| `{c.robot_id}` | {kind} | {scenario} | {fields} |")
+    return "\n".join(lines) + "\n"
+
+
+def plan_as_json(plan: Plan) -> dict[str, Any]:
+    return {
+        "base": plan.base,
+        "head": plan.head,
+        "unchanged": plan.unchanged,
+        "changes": [
+            {
+                "robot_id": c.robot_id,
+                "change": c.kind,
+                "scenario_before": c.scenario_before,
+                "scenario_after": c.scenario_after,
+                "fields": c.fields,
+            }
+            for c in plan.changes
+        ],
+    }

@@ -1,0 +1,139 @@
+"""Renders Launch Requests: fleet -> scenario -> capability -> catalogue, defaults filled.
+
+Pure: the caller has validated the repository; a request is never rendered from a bad one.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from typing import Any
+
+from configurator.composition import achievable_tasks, find_location
+from configurator.diagnostics import did_you_mean
+from configurator.launch import (
+    LaunchCapability,
+    LaunchGoal,
+    LaunchRequest,
+    LaunchScenario,
+    make_launch_request,
+)
+from configurator.repository import Repository
+from configurator.resolve import resolve_capability
+from configurator.types import JsonObject, SettingDefinition
+
+
+class RenderError(Exception):
+    """The repository does not describe this robot (unknown id, no fleet)."""
+
+
+@dataclass
+class FleetRender:
+    """Every assigned robot's request; suspended robots are rendered but flagged."""
+
+    revision: str
+    requests: dict[str, LaunchRequest] = field(default_factory=dict)
+    suspended: set[str] = field(default_factory=set)
+    scenario_of: dict[str, str] = field(default_factory=dict)
+    allow_empty: bool = False
+
+
+def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
+    """`over` merged into a copy of `base`: mappings merge key by key, anything else replaces."""
+    merged = copy.deepcopy(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def _settings(definitions: dict[str, SettingDefinition], chosen: dict[str, Any]) -> JsonObject:
+    values: JsonObject = {name: d.default for name, d in definitions.items()}
+    values.update(chosen)
+    return values
+
+
+def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
+    scenario = repo.scenarios[scenario_name].model
+    capability = repo.capabilities[scenario.capability].model
+    resolved = resolve_capability(repo, capability)
+    if resolved.scheme is None:
+        raise RenderError(f"capability '{scenario.capability}' has no usable mapping scheme")
+    tasks = {name: entry.model for name, entry in repo.tasks.items()}
+    needed = sorted({m for s in resolved.selections.values() for m in s.logic.mappings})
+    logic_settings = {
+        s.logic_name: _settings(s.logic.settings, scenario.logic_settings.get(s.logic_name, {}))
+        for s in resolved.selections.values()
+        if s.logic.settings or s.logic_name in scenario.logic_settings
+    }
+    robot_settings = (
+        _settings(resolved.template.settings, scenario.robot_settings) if resolved.template else {}
+    )
+
+    environment = None
+    knowledge: JsonObject = {}
+    if scenario.environment is not None:
+        environment = repo.environments[scenario.environment].model
+        for set_name in scenario.knowledge_sets:
+            knowledge = deep_merge(knowledge, environment.knowledge_sets[set_name])
+    knowledge = deep_merge(knowledge, scenario.knowledge)
+
+    goals = []
+    for goal in scenario.goals:
+        location = None
+        if goal.location is not None and environment is not None:
+            location = find_location(environment, goal.location)[0].model_dump(mode="json")
+        goals.append(LaunchGoal(task=goal.task, location=location))
+
+    return LaunchScenario(
+        name=scenario_name,
+        capability=LaunchCapability(
+            name=scenario.capability,
+            platform=capability.platform,
+            robot_template=capability.robot_template,
+            mapping_scheme=capability.mapping_scheme,
+            tasks=achievable_tasks(tasks, capability.actions),
+            actions=sorted(capability.actions),
+            logics=dict(capability.actions),
+            mappings={m: resolved.scheme.mappings[m] for m in needed},
+        ),
+        environment_name=scenario.environment,
+        environment_type=environment.type if environment else None,
+        robot_settings=robot_settings,
+        logic_settings=logic_settings,
+        environment_knowledge=knowledge,
+        goals=goals,
+    )
+
+
+def render_fleet(repo: Repository) -> FleetRender:
+    if repo.fleet is None:
+        raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
+    result = FleetRender(revision=repo.revision, allow_empty=repo.fleet.model.allow_empty)
+    scenarios: dict[str, LaunchScenario] = {}
+    for robot_id, assignment in repo.fleet.model.robots.items():
+        scenario = scenarios.get(assignment.scenario)
+        if scenario is None:
+            scenario = scenarios[assignment.scenario] = render_scenario(repo, assignment.scenario)
+        result.requests[robot_id] = make_launch_request(
+            robot_id, assignment.name or robot_id, repo.revision, scenario
+        )
+        result.scenario_of[robot_id] = assignment.scenario
+        if assignment.suspended:
+            result.suspended.add(robot_id)
+    return result
+
+
+def render_robot(repo: Repository, robot_id: str) -> LaunchRequest:
+    if repo.fleet is None:
+        raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
+    assignment = repo.fleet.model.robots.get(robot_id)
+    if assignment is None:
+        raise RenderError(
+            f"robot '{robot_id}' is not in configs/fleet.yaml"
+            f"{did_you_mean(robot_id, repo.fleet.model.robots)}"
+        )
+    scenario = render_scenario(repo, assignment.scenario)
+    return make_launch_request(robot_id, assignment.name or robot_id, repo.revision, scenario)

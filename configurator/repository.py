@@ -1,0 +1,69 @@
+"""The loaded repository: every typed document by kind and name, and where each came from."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+from pydantic import BaseModel
+
+from configurator.types import (
+    Action,
+    CapabilityConfiguration,
+    Environment,
+    Fleet,
+    MappingScheme,
+    PlatformInfo,
+    RobotTemplate,
+    ScenarioConfiguration,
+    Task,
+)
+from configurator.yamlio import YamlDocument
+
+M = TypeVar("M", bound=BaseModel)
+
+
+@dataclass(frozen=True)
+class Entry(Generic[M]):
+    """One typed document and the file it was read from."""
+
+    name: str
+    model: M
+    doc: YamlDocument
+
+    @property
+    def path(self) -> str:
+        return self.doc.path
+
+
+@dataclass
+class Platform:
+    name: str
+    info: Entry[PlatformInfo] | None = None
+    templates: dict[str, Entry[RobotTemplate]] = field(default_factory=dict)
+    schemes: dict[str, Entry[MappingScheme]] = field(default_factory=dict)
+    # Files present but unreadable: references to them are not reported a second time.
+    broken_templates: set[str] = field(default_factory=set)
+    broken_schemes: set[str] = field(default_factory=set)
+
+
+@dataclass
+class Repository:
+    """What exists (the catalogue) and what is chosen (the configurations) at one revision."""
+
+    revision: str
+    platforms: dict[str, Platform] = field(default_factory=dict)
+    actions: dict[str, Entry[Action]] = field(default_factory=dict)
+    tasks: dict[str, Entry[Task]] = field(default_factory=dict)
+    environments: dict[str, Entry[Environment]] = field(default_factory=dict)
+    capabilities: dict[str, Entry[CapabilityConfiguration]] = field(default_factory=dict)
+    scenarios: dict[str, Entry[ScenarioConfiguration]] = field(default_factory=dict)
+    fleet: Entry[Fleet] | None = None
+    broken: dict[str, set[str]] = field(default_factory=dict)
+    files_read: int = 0
+
+    def is_broken(self, kind: str, name: str) -> bool:
+        return name in self.broken.get(kind, set())
+
+    def platform(self, name: str) -> Platform | None:
+        return self.platforms.get(name)

@@ -1,0 +1,346 @@
+"""Configuration rules (RC2xx-RC5xx): every capability, scenario and robot is buildable."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from configurator.composition import (
+    find_location,
+    implementation_for,
+    missing_requires,
+    scheme_gaps,
+    setting_problem,
+    template_gaps,
+)
+from configurator.diagnostics import did_you_mean
+from configurator.repository import Entry, Repository
+from configurator.resolve import ResolvedCapability, resolve_capability
+from configurator.rules.report import Reporter
+from configurator.types import (
+    CapabilityConfiguration,
+    JsonScalar,
+    ScenarioConfiguration,
+    SettingDefinition,
+)
+
+ROBOT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+def check_capability(
+    repo: Repository, entry: Entry[CapabilityConfiguration], report: Reporter
+) -> ResolvedCapability:
+    config = entry.model
+    resolved = resolve_capability(repo, config)
+    platform = resolved.platform
+    if platform is None:
+        report.error(
+            entry,
+            ["platform"],
+            "RC201",
+            f"unknown platform '{config.platform}'{did_you_mean(config.platform, repo.platforms)}",
+        )
+        return resolved
+    if resolved.scheme is None and config.mapping_scheme not in platform.broken_schemes:
+        report.error(
+            entry,
+            ["mapping_scheme"],
+            "RC202",
+            f"platform {platform.name} has no mapping scheme '{config.mapping_scheme}'"
+            f"{did_you_mean(config.mapping_scheme, platform.schemes)}",
+        )
+    template_name = config.robot_template
+    if (
+        template_name is not None
+        and resolved.template is None
+        and template_name not in platform.broken_templates
+    ):
+        report.error(
+            entry,
+            ["robot_template"],
+            "RC203",
+            f"platform {platform.name} has no robot template '{template_name}'"
+            f"{did_you_mean(template_name, platform.templates)}",
+        )
+
+    for action_name, logic_name in config.actions.items():
+        action_entry = repo.actions.get(action_name)
+        if action_entry is None:
+            if not repo.is_broken("action", action_name):
+                report.error(
+                    entry,
+                    ["actions", action_name],
+                    "RC204",
+                    f"unknown action '{action_name}'{did_you_mean(action_name, repo.actions)}",
+                    key=True,
+                )
+            continue
+        action = action_entry.model
+        if platform.name not in action.platforms:
+            report.error(
+                entry,
+                ["actions", action_name],
+                "RC204",
+                f"action '{action_name}' is for {', '.join(action.platforms)}, "
+                f"not platform {platform.name}",
+                key=True,
+            )
+        selection = resolved.selections.get(action_name)
+        if selection is None:
+            report.error(
+                entry,
+                ["actions", action_name],
+                "RC205",
+                f"action '{action_name}' has no logic '{logic_name}'"
+                f"{did_you_mean(logic_name, action.logics)}",
+            )
+            continue
+        for required in missing_requires(action, config.actions):
+            report.error(
+                entry,
+                ["actions", action_name],
+                "RC303",
+                f"action '{action_name}' requires action '{required}', which is not selected; "
+                f"add it under actions",
+                key=True,
+            )
+
+    _check_mappings(entry, resolved, report)
+    return resolved
+
+
+def _check_mappings(
+    entry: Entry[CapabilityConfiguration], resolved: ResolvedCapability, report: Reporter
+) -> None:
+    """Every mapping a selected logic needs is in the template and bound by the scheme."""
+    config = entry.model
+    if resolved.template is not None:
+        needers: dict[str, list[str]] = {}
+        for selection in resolved.selections.values():
+            for mapping in template_gaps(selection.logic, resolved.template):
+                needers.setdefault(mapping, []).append(selection.logic_name)
+        if needers:
+            listing = "; ".join(f"'{m}' needed by {', '.join(ls)}" for m, ls in needers.items())
+            report.error(
+                entry,
+                ["robot_template"],
+                "RC301",
+                f"robot template '{config.robot_template}' lacks mappings the selected logics "
+                f"need: {listing}",
+            )
+    if resolved.scheme is not None:
+        for action_name, selection in resolved.selections.items():
+            unbound = scheme_gaps(selection.logic, resolved.scheme)
+            if unbound:
+                report.error(
+                    entry,
+                    ["actions", action_name],
+                    "RC302",
+                    f"logic '{selection.logic_name}' needs {', '.join(unbound)}, which mapping "
+                    f"scheme '{config.mapping_scheme}' does not bind",
+                )
+
+
+def _check_setting(
+    report: Reporter,
+    entry: Entry[Any],
+    loc: list[str | int],
+    name: str,
+    value: JsonScalar,
+    definitions: dict[str, SettingDefinition],
+    owner: str,
+) -> None:
+    definition = definitions.get(name)
+    if definition is None:
+        report.error(
+            entry,
+            loc,
+            "RC401",
+            f"{owner} has no setting '{name}'{did_you_mean(name, definitions)}",
+            key=True,
+        )
+        return
+    problem = setting_problem(definition, value)
+    if problem is not None:
+        report.error(entry, loc, problem[0], f"setting '{name}' {problem[1]}")
+
+
+def check_scenario(
+    repo: Repository,
+    entry: Entry[ScenarioConfiguration],
+    capabilities: dict[str, ResolvedCapability],
+    report: Reporter,
+) -> None:
+    scenario = entry.model
+    resolved = capabilities.get(scenario.capability)
+    if resolved is None and not repo.is_broken("capability", scenario.capability):
+        report.error(
+            entry,
+            ["capability"],
+            "RC206",
+            f"unknown capability configuration '{scenario.capability}'"
+            f"{did_you_mean(scenario.capability, repo.capabilities)}",
+        )
+
+    if resolved is not None:
+        template = resolved.template
+        if scenario.robot_settings and resolved.config.robot_template is None:
+            report.error(
+                entry,
+                ["robot_settings"],
+                "RC405",
+                f"robot settings need a robot template, and capability '{scenario.capability}' "
+                "names none; set robot_template there or remove robot_settings",
+                key=True,
+            )
+        elif template is not None:
+            for name, value in scenario.robot_settings.items():
+                _check_setting(
+                    report,
+                    entry,
+                    ["robot_settings", name],
+                    name,
+                    value,
+                    template.settings,
+                    f"robot template '{resolved.config.robot_template}'",
+                )
+        selected_logics = {s.logic_name: s for s in resolved.selections.values()}
+        for logic_name, values in scenario.logic_settings.items():
+            selection = selected_logics.get(logic_name)
+            if selection is None:
+                report.error(
+                    entry,
+                    ["logic_settings", logic_name],
+                    "RC406",
+                    f"logic '{logic_name}' is not selected by capability "
+                    f"'{scenario.capability}'{did_you_mean(logic_name, selected_logics)}",
+                    key=True,
+                )
+                continue
+            for name, value in values.items():
+                _check_setting(
+                    report,
+                    entry,
+                    ["logic_settings", logic_name, name],
+                    name,
+                    value,
+                    selection.logic.settings,
+                    f"logic '{logic_name}'",
+                )
+
+    environment = None
+    if scenario.environment is not None:
+        env_entry = repo.environments.get(scenario.environment)
+        if env_entry is None:
+            if not repo.is_broken("environment", scenario.environment):
+                report.error(
+                    entry,
+                    ["environment"],
+                    "RC207",
+                    f"unknown environment '{scenario.environment}'"
+                    f"{did_you_mean(scenario.environment, repo.environments)}",
+                )
+        else:
+            environment = env_entry.model
+    env_known = environment is not None or scenario.environment is None
+
+    for i, set_name in enumerate(scenario.knowledge_sets):
+        if scenario.environment is None:
+            report.error(
+                entry,
+                ["knowledge_sets", i],
+                "RC208",
+                f"knowledge set '{set_name}' needs an environment; set 'environment'",
+            )
+        elif environment is not None and set_name not in environment.knowledge_sets:
+            report.error(
+                entry,
+                ["knowledge_sets", i],
+                "RC208",
+                f"environment '{scenario.environment}' has no knowledge set '{set_name}'"
+                f"{did_you_mean(set_name, environment.knowledge_sets)}",
+            )
+
+    for i, goal in enumerate(scenario.goals):
+        task_entry = repo.tasks.get(goal.task)
+        if task_entry is None:
+            if not repo.is_broken("task", goal.task):
+                report.error(
+                    entry,
+                    ["goals", i, "task"],
+                    "RC210",
+                    f"unknown task '{goal.task}'{did_you_mean(goal.task, repo.tasks)}",
+                )
+        elif resolved is not None and implementation_for(task_entry.model, resolved.config.actions) is None:
+            options = " or ".join(
+                "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations
+            )
+            report.error(
+                entry,
+                ["goals", i, "task"],
+                "RC304",
+                f"task '{goal.task}' is not achievable by capability '{scenario.capability}': "
+                f"it needs the actions {options}",
+            )
+        if goal.location is None:
+            continue
+        if scenario.environment is None:
+            report.error(
+                entry,
+                ["goals", i, "location"],
+                "RC306",
+                f"goal location '{goal.location}' needs an environment; set 'environment'",
+            )
+        elif environment is not None and env_known:
+            matches = find_location(environment, goal.location)
+            locations = [o for o in environment.objects if o.type == "Location"]
+            if not matches:
+                names = [o.name for o in locations] + [o.id for o in locations]
+                report.error(
+                    entry,
+                    ["goals", i, "location"],
+                    "RC305",
+                    f"environment '{scenario.environment}' has no object '{goal.location}'"
+                    f"{did_you_mean(goal.location, names)}",
+                )
+            elif len(matches) > 1:
+                report.error(
+                    entry,
+                    ["goals", i, "location"],
+                    "RC305",
+                    f"'{goal.location}' names {len(matches)} objects of environment "
+                    f"'{scenario.environment}'; use the object's id",
+                )
+            elif matches[0].type != "Location":
+                report.error(
+                    entry,
+                    ["goals", i, "location"],
+                    "RC305",
+                    f"'{goal.location}' is a {matches[0].type}, not a Location",
+                )
+
+
+def check_fleet(repo: Repository, report: Reporter) -> None:
+    fleet = repo.fleet
+    if fleet is None:
+        return
+    for robot_id, assignment in fleet.model.robots.items():
+        if not ROBOT_ID.match(robot_id):
+            report.error(
+                fleet,
+                ["robots", robot_id],
+                "RC501",
+                f"robot id '{robot_id}' is not usable as an MQTT topic level: use 1-64 "
+                "letters, digits, '_', '.', '-', starting with a letter or digit",
+                key=True,
+            )
+        if assignment.scenario not in repo.scenarios and not repo.is_broken(
+            "scenario", assignment.scenario
+        ):
+            report.error(
+                fleet,
+                ["robots", robot_id, "scenario"],
+                "RC209",
+                f"unknown scenario '{assignment.scenario}'"
+                f"{did_you_mean(assignment.scenario, repo.scenarios)}",
+            )

@@ -1,0 +1,207 @@
+"""JSON Schemas for editors and external tools, generated from the types and the catalogue.
+
+The configuration schemas list exactly the platforms, schemes, templates, actions, logics,
+scenarios and environments that exist, so an editor completes only what would validate.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from typing import Any
+
+from pydantic import BaseModel
+
+from configurator.launch import LaunchRequest
+from configurator.loader import KIND_BY_NAME
+from configurator.repository import Repository
+
+SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+
+# kind -> where its files live, relative to the repository root (for modelines)
+DEPTH = {
+    "fleet": 1,
+    "capability": 2,
+    "scenario": 2,
+    "action": 2,
+    "task": 2,
+    "environment": 2,
+    "platform": 3,
+    "robot-template": 4,
+    "mapping-scheme": 4,
+}
+
+
+def schema_file(kind: str) -> str:
+    return f"{kind}.schema.json"
+
+
+def modeline_ref(kind: str) -> str:
+    """The relative `$schema=` path from a file of this kind to its schema."""
+    return "../" * DEPTH[kind] + "schemas/" + schema_file(kind)
+
+
+def _base(model: type[BaseModel], title: str) -> dict[str, Any]:
+    schema = model.model_json_schema()
+    schema["$schema"] = SCHEMA_DIALECT
+    schema["title"] = title
+    return schema
+
+
+def _choices(values: dict[str, str]) -> list[dict[str, Any]]:
+    """anyOf entries that editors show with a description beside each completion."""
+    return [
+        {"const": value, "description": about} if about else {"const": value}
+        for value, about in sorted(values.items())
+    ]
+
+
+def _enum_or_nothing(values: dict[str, str], description: str) -> dict[str, Any]:
+    if not values:
+        return {"description": description + " (none exist yet)", "type": "string"}
+    return {"description": description, "anyOf": _choices(values)}
+
+
+def _capability_schema(repo: Repository) -> dict[str, Any]:
+    schema = _base(KIND_BY_NAME["capability"].model, "Capability configuration")
+    props = schema["properties"]
+    platforms = {
+        name: (p.info.model.description if p.info else "") for name, p in repo.platforms.items()
+    }
+    props["platform"] = _enum_or_nothing(platforms, "the robot's software platform")
+    schemes: dict[str, str] = {}
+    templates: dict[str, str] = {}
+    for pname, p in sorted(repo.platforms.items()):
+        for s, e in p.schemes.items():
+            schemes.setdefault(s, f"{pname}: {e.model.description}".rstrip(": "))
+        for t, e in p.templates.items():
+            templates.setdefault(
+                t, f"{pname}: {e.model.description} (mappings: {', '.join(e.model.mappings)})"
+            )
+    props["mapping_scheme"] = _enum_or_nothing(schemes, "how mappings are bound on the platform")
+    template_choice = _enum_or_nothing(templates, "the robot model this configuration must fit")
+    props["robot_template"] = {"anyOf": [template_choice, {"type": "null"}], "default": None}
+    action_props: dict[str, Any] = {}
+    for name, entry in sorted(repo.actions.items()):
+        action = entry.model
+        logics = {
+            lname: (
+                f"{logic.description + ' ' if logic.description else ''}"
+                f"(needs mappings: {', '.join(logic.mappings) or 'none'})"
+            )
+            for lname, logic in action.logics.items()
+        }
+        about = f"{action.description} [platforms: {', '.join(action.platforms)}]"
+        if action.requires:
+            about += f" [requires: {', '.join(action.requires)}]"
+        action_props[name] = {"description": about.strip(), "anyOf": _choices(logics)}
+    props["actions"] = {
+        "description": "action -> chosen logic",
+        "type": "object",
+        "properties": action_props,
+        "additionalProperties": False,
+    }
+    # Narrow scheme and template to the chosen platform.
+    rules = []
+    for pname, p in sorted(repo.platforms.items()):
+        then: dict[str, Any] = {}
+        if p.schemes:
+            then["mapping_scheme"] = {"enum": sorted(p.schemes)}
+        if p.templates:
+            then["robot_template"] = {"anyOf": [{"enum": sorted(p.templates)}, {"type": "null"}]}
+        if then:
+            rules.append(
+                {
+                    "if": {"properties": {"platform": {"const": pname}}, "required": ["platform"]},
+                    "then": {"properties": then},
+                }
+            )
+    if rules:
+        schema["allOf"] = rules
+    return schema
+
+
+def _scenario_schema(repo: Repository) -> dict[str, Any]:
+    schema = _base(KIND_BY_NAME["scenario"].model, "Scenario configuration")
+    props = schema["properties"]
+    capabilities = {
+        name: f"{e.model.platform}, {e.model.robot_template or 'no template'}: "
+        f"{', '.join(e.model.actions)}"
+        for name, e in repo.capabilities.items()
+    }
+    props["capability"] = _enum_or_nothing(capabilities, "the capability configuration it runs")
+    environments = {
+        name: f"{e.model.type}: {e.model.description}".rstrip(": ")
+        for name, e in repo.environments.items()
+    }
+    props["environment"] = {
+        "anyOf": [_enum_or_nothing(environments, "the world it runs in"), {"type": "null"}],
+        "default": None,
+    }
+    sets = sorted({s for e in repo.environments.values() for s in e.model.knowledge_sets})
+    if sets:
+        props["knowledge_sets"]["items"] = {"enum": sets}
+    robot_settings = sorted(
+        {s for p in repo.platforms.values() for t in p.templates.values() for s in t.model.settings}
+    )
+    if robot_settings:
+        props["robot_settings"]["propertyNames"] = {"enum": robot_settings}
+    logics_with_settings = sorted(
+        {
+            lname
+            for a in repo.actions.values()
+            for lname, logic in a.model.logics.items()
+            if logic.settings
+        }
+    )
+    if logics_with_settings:
+        props["logic_settings"]["propertyNames"] = {"enum": logics_with_settings}
+    goal = schema["$defs"]["Goal"]["properties"]
+    tasks = {name: e.model.description for name, e in repo.tasks.items()}
+    goal["task"] = _enum_or_nothing(tasks, "the task to achieve")
+    locations = {
+        o.name: f"{env}: Location id {o.id}"
+        for env, e in sorted(repo.environments.items())
+        for o in e.model.objects
+        if o.type == "Location"
+    }
+    if locations:
+        goal["location"] = {
+            "anyOf": [
+                {"description": "a Location object of the environment", "anyOf": _choices(locations)},
+                {"type": "string", "description": "or a Location object's id"},
+                {"type": "null"},
+            ],
+            "default": None,
+        }
+    return schema
+
+
+def _fleet_schema(repo: Repository) -> dict[str, Any]:
+    schema = _base(KIND_BY_NAME["fleet"].model, "Fleet")
+    scenarios = {name: f"capability {e.model.capability}" for name, e in repo.scenarios.items()}
+    schema["$defs"]["RobotAssignment"]["properties"]["scenario"] = _enum_or_nothing(
+        scenarios, "the scenario this robot runs"
+    )
+    schema["properties"]["robots"]["propertyNames"] = {
+        "pattern": r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+    }
+    return schema
+
+
+def generate(repo: Repository) -> dict[str, dict[str, Any]]:
+    """File name -> schema, for every kind plus the Launch Request."""
+    out: dict[str, dict[str, Any]] = {}
+    for kind_name, kind in KIND_BY_NAME.items():
+        if kind_name in ("capability", "scenario", "fleet"):
+            continue
+        out[schema_file(kind_name)] = _base(kind.model, kind.title.capitalize())
+    out[schema_file("capability")] = _capability_schema(repo)
+    out[schema_file("scenario")] = _scenario_schema(repo)
+    out[schema_file("fleet")] = _fleet_schema(repo)
+    out[schema_file("launch-request")] = _base(LaunchRequest, "Launch Request")
+    return {name: copy.deepcopy(schema) for name, schema in sorted(out.items())}
+
+
+def dump(schema: dict[str, Any]) -> str:
+    return json.dumps(schema, indent=2, sort_keys=True, ensure_ascii=False) + "\n"

@@ -1,0 +1,148 @@
+"""Turns pydantic validation errors into located, human diagnostics (RC101-RC103)."""
+
+from __future__ import annotations
+
+import types
+from collections.abc import Sequence
+from typing import Any, Union, get_args, get_origin
+
+from pydantic import BaseModel, ValidationError
+
+from configurator.diagnostics import Diagnostic, Severity, did_you_mean
+from configurator.yamlio import YamlDocument
+
+_EXPECTED = {
+    "bool_type": "true or false",
+    "bool_parsing": "true or false",
+    "int_type": "a whole number",
+    "int_parsing": "a whole number",
+    "int_from_float": "a whole number",
+    "float_type": "a number",
+    "float_parsing": "a number",
+    "string_type": "text",
+    "dict_type": "a mapping (key: value)",
+    "model_type": "a mapping (key: value)",
+    "model_attributes_type": "a mapping (key: value)",
+    "list_type": "a list",
+}
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if value is None:
+        return "nothing (null)"
+    if isinstance(value, bool):
+        return f"{str(value).lower()}"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _unwrap(annotation: Any) -> Any:
+    """The structured member of an Optional/Union annotation, else the annotation itself."""
+    origin = get_origin(annotation)
+    if origin is Union or origin is types.UnionType:
+        for arg in get_args(annotation):
+            if arg is type(None):
+                continue
+            if (isinstance(arg, type) and issubclass(arg, BaseModel)) or get_origin(arg) in (dict, list):
+                return arg
+        return annotation
+    return annotation
+
+
+def _model_at(model: type[BaseModel], loc: Sequence[str | int]) -> type[BaseModel] | None:
+    """The model class that a data path points into, for listing its allowed fields."""
+    current: Any = model
+    for part in loc:
+        current = _unwrap(current)
+        if isinstance(current, type) and issubclass(current, BaseModel):
+            info = current.model_fields.get(str(part))
+            if info is None:
+                return None
+            current = info.annotation
+        elif get_origin(current) is dict:
+            current = get_args(current)[1]
+        elif get_origin(current) is list:
+            current = get_args(current)[0]
+        else:
+            return None
+    current = _unwrap(current)
+    if isinstance(current, type) and issubclass(current, BaseModel):
+        return current
+    return None
+
+
+def _data_loc(data: Any, loc: Sequence[str | int]) -> tuple[str | int, ...]:
+    """The part of pydantic's loc that exists in the data (drops union member tags)."""
+    out: list[str | int] = []
+    current = data
+    for part in loc:
+        if isinstance(current, dict) and part in current:
+            current = current[part]
+            out.append(part)
+        elif isinstance(current, list) and isinstance(part, int) and 0 <= part < len(current):
+            current = current[part]
+            out.append(part)
+        else:
+            continue
+    return tuple(out)
+
+
+def _dotted(loc: Sequence[str | int]) -> str:
+    text = ""
+    for part in loc:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text or "the file"
+
+
+def typing_diagnostics(
+    doc: YamlDocument, model: type[BaseModel], error: ValidationError, what: str
+) -> list[Diagnostic]:
+    """One diagnostic per wrong place, pointing at the offending key or value."""
+    grouped: dict[tuple[str | int, ...], list[dict[str, Any]]] = {}
+    found: list[Diagnostic] = []
+
+    def report(loc: Sequence[str | int], code: str, message: str, *, key: bool = False) -> None:
+        line, col = doc.locate(loc, key=key)
+        found.append(Diagnostic(doc.path, line, col, Severity.ERROR, code, message))
+
+    for err in error.errors(include_url=False):
+        kind = err["type"]
+        loc = tuple(err["loc"])
+        if kind == "extra_forbidden":
+            parent = _model_at(model, loc[:-1])
+            allowed = sorted(parent.model_fields) if parent else []
+            name = str(loc[-1])
+            where = f" in {_dotted(loc[:-1])}" if loc[:-1] else ""
+            hint = did_you_mean(name, allowed) if allowed else ""
+            if hint.startswith("; known:"):
+                hint = "; allowed: " + ", ".join(allowed)
+            report(loc, "RC101", f"unknown field '{name}'{where} of {what}{hint}", key=True)
+        elif kind == "missing":
+            parent = _model_at(model, loc[:-1])
+            info = parent.model_fields.get(str(loc[-1])) if parent else None
+            about = f" ({info.description})" if info is not None and info.description else ""
+            where = f" in {_dotted(loc[:-1])}" if loc[:-1] else ""
+            report(loc[:-1], "RC102", f"missing required field '{loc[-1]}'{where}{about}")
+        else:
+            grouped.setdefault(_data_loc(doc.data, loc), []).append(err)
+
+    for loc, errs in grouped.items():
+        expected: list[str] = []
+        for err in errs:
+            text = _EXPECTED.get(err["type"])
+            if text is None:
+                text = err["msg"][0].lower() + err["msg"][1:]
+                text = text.removeprefix("input should be ").removeprefix("value error, ")
+            if text not in expected:
+                expected.append(text)
+        value = errs[0].get("input")
+        report(
+            loc,
+            "RC103",
+            f"{_dotted(loc)} must be {' or '.join(expected)}, got {_describe(value)}",
+        )
+    return found

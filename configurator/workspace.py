@@ -1,0 +1,45 @@
+"""Loads and validates a repository at the work tree or a revision: the one entry for commands."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from configurator.diagnostics import Diagnostic
+from configurator.loader import load_repository
+from configurator.repository import Repository
+from configurator.rules import check_repository
+from configurator.source import Source, open_source
+
+
+@dataclass
+class Checked:
+    """A repository and everything wrong with it, sorted by file and position."""
+
+    repo: Repository
+    diagnostics: list[Diagnostic]
+
+    @property
+    def errors(self) -> list[Diagnostic]:
+        return [d for d in self.diagnostics if d.is_error]
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+
+def check_source(source: Source) -> Checked:
+    repo, diagnostics = load_repository(source)
+    diagnostics.extend(check_repository(repo))
+    return Checked(repo, sorted(diagnostics))
+
+
+def check(root: Path, rev: str | None = None) -> Checked:
+    """Raises SourceError when the folder or revision cannot be read at all."""
+    source = open_source(root, rev)
+    try:
+        return check_source(source)
+    finally:
+        close = getattr(source, "close", None)
+        if close is not None:
+            close()

@@ -1,0 +1,307 @@
+"""Strict YAML reading that remembers where every key and value came from.
+
+Refuses what would hide a mistake or exhaust memory: duplicate keys, aliases (alias bombs),
+tabs in indentation, several documents, non-UTF-8 bytes, oversized files.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import yaml
+from yaml.constructor import SafeConstructor
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+
+try:  # the C parser is several times faster; fall back where libyaml is missing
+    from yaml import CSafeLoader as _Loader
+except ImportError:  # pragma: no cover - depends on the PyYAML build
+    from yaml import SafeLoader as _Loader  # type: ignore[assignment]
+
+MAX_FILE_BYTES = 8 * 1024 * 1024
+MAX_DEPTH = 64
+
+_STR = "tag:yaml.org,2002:str"
+_INT = "tag:yaml.org,2002:int"
+_FLOAT = "tag:yaml.org,2002:float"
+_BOOL = "tag:yaml.org,2002:bool"
+_NULL = "tag:yaml.org,2002:null"
+_TIMESTAMP = "tag:yaml.org,2002:timestamp"
+_MAP = "tag:yaml.org,2002:map"
+_SEQ = "tag:yaml.org,2002:seq"
+
+_scalars = SafeConstructor()
+
+Loc = Sequence[str | int]
+
+
+@dataclass(frozen=True)
+class YamlProblem:
+    """A reason the file could not be read as data; 1-based position."""
+
+    line: int
+    col: int
+    code: str
+    message: str
+
+
+class YamlReadError(Exception):
+    def __init__(self, problems: list[YamlProblem]) -> None:
+        super().__init__(problems[0].message)
+        self.problems = problems
+
+
+@dataclass
+class YamlDocument:
+    """A parsed file: its data and the node tree that locates every key and value in it."""
+
+    path: str
+    data: dict[str, Any]
+    root: MappingNode
+    _index: dict[int, dict[str, tuple[Node, Node]]] = field(default_factory=dict, repr=False)
+
+    def _pairs(self, node: MappingNode) -> dict[str, tuple[Node, Node]]:
+        pairs = self._index.get(id(node))
+        if pairs is None:
+            pairs = {str(k.value): (k, v) for k, v in node.value if isinstance(k, ScalarNode)}
+            self._index[id(node)] = pairs
+        return pairs
+
+    def locate(self, loc: Loc, *, key: bool = False) -> tuple[int, int]:
+        """Line and column (1-based) of the value at `loc`, or of its key with `key=True`.
+
+        A path that leaves the document stops at the deepest node that exists, so a missing
+        field is reported where its parent mapping is.
+        """
+        node: Node = self.root
+        key_node: Node | None = None
+        for part in loc:
+            if isinstance(node, MappingNode):
+                found = self._pairs(node).get(str(part))
+                if found is None:
+                    break
+                key_node, node = found
+            elif isinstance(node, SequenceNode) and isinstance(part, int):
+                if not 0 <= part < len(node.value):
+                    break
+                key_node, node = None, node.value[part]
+            else:
+                break
+        target = key_node if key and key_node is not None else node
+        mark = target.start_mark
+        return mark.line + 1, mark.column + 1
+
+
+def _problem(mark: Any, code: str, message: str) -> YamlProblem:
+    if mark is None:
+        return YamlProblem(1, 1, code, message)
+    return YamlProblem(mark.line + 1, mark.column + 1, code, message)
+
+
+def _position_of_byte(raw: bytes, offset: int) -> tuple[int, int]:
+    line = raw.count(b"\n", 0, offset) + 1
+    col = offset - (raw.rfind(b"\n", 0, offset) + 1) + 1
+    return line, col
+
+
+def decode(raw: bytes) -> str:
+    """UTF-8 text or a located RC001; a leading BOM is accepted and dropped."""
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line, col = _position_of_byte(raw, exc.start)
+        raise YamlReadError(
+            [
+                YamlProblem(
+                    line,
+                    col,
+                    "RC001",
+                    f"file is not valid UTF-8 (byte 0x{raw[exc.start]:02x}); "
+                    "save it as UTF-8",
+                )
+            ]
+        ) from None
+    return text[1:] if text.startswith("\ufeff") else text
+
+
+def _tab_indents(text: str) -> list[YamlProblem]:
+    problems = []
+    for number, line in enumerate(text.split("\n"), start=1):
+        body = line.lstrip(" ")
+        if body.startswith("\t"):
+            problems.append(
+                YamlProblem(
+                    number,
+                    len(line) - len(body) + 1,
+                    "RC002",
+                    "tab character in indentation; YAML indents with spaces only",
+                )
+            )
+    return problems
+
+
+def _compose(text: str) -> Node | None:
+    loader = _Loader(text)
+    try:
+        return loader.get_single_node()
+    except yaml.composer.ComposerError as exc:
+        if "single document" in str(exc.problem):
+            raise YamlReadError(
+                [
+                    _problem(
+                        exc.problem_mark,
+                        "RC006",
+                        "a second YAML document starts here; one file holds one document "
+                        "(remove the '---' line or split the file)",
+                    )
+                ]
+            ) from None
+        raise YamlReadError([_problem(exc.problem_mark, "RC003", _yaml_message(exc))]) from None
+    except yaml.MarkedYAMLError as exc:
+        raise YamlReadError([_problem(exc.problem_mark, "RC003", _yaml_message(exc))]) from None
+    except yaml.YAMLError as exc:
+        raise YamlReadError([YamlProblem(1, 1, "RC003", f"YAML syntax error: {exc}")]) from None
+    finally:
+        loader.dispose()
+
+
+def _yaml_message(exc: yaml.MarkedYAMLError) -> str:
+    parts = [p for p in (exc.context, exc.problem) if p]
+    text = "; ".join(parts) or "invalid YAML"
+    return f"YAML syntax error: {text}"
+
+
+class _Builder:
+    """Turns a node tree into plain data, refusing aliases and duplicate keys."""
+
+    def __init__(self) -> None:
+        self.seen: set[int] = set()
+        self.problems: list[YamlProblem] = []
+
+    def build(self, node: Node, depth: int = 0) -> Any:
+        if id(node) in self.seen:
+            raise YamlReadError(
+                [
+                    _problem(
+                        node.start_mark,
+                        "RC005",
+                        "YAML anchors and aliases (&name, *name, <<:) are not supported; "
+                        "write the value out in full",
+                    )
+                ]
+            )
+        self.seen.add(id(node))
+        if depth > MAX_DEPTH:
+            raise YamlReadError(
+                [_problem(node.start_mark, "RC009", f"nested deeper than {MAX_DEPTH} levels")]
+            )
+        if isinstance(node, ScalarNode):
+            return self.scalar(node)
+        if isinstance(node, MappingNode):
+            if node.tag != _MAP:
+                self.problems.append(_problem(node.start_mark, "RC009", _tag_message(node)))
+            result: dict[str, Any] = {}
+            first_line: dict[str, int] = {}
+            for key_node, value_node in node.value:
+                if not isinstance(key_node, ScalarNode) or key_node.tag == _NULL:
+                    self.problems.append(
+                        _problem(
+                            key_node.start_mark,
+                            "RC009",
+                            "a key must be a plain name, not a list, mapping or null",
+                        )
+                    )
+                    continue
+                key = str(key_node.value)
+                if key in result:
+                    self.problems.append(
+                        _problem(
+                            key_node.start_mark,
+                            "RC004",
+                            f"duplicate key '{key}' (first at line {first_line[key]}); "
+                            "each key may appear once",
+                        )
+                    )
+                    continue
+                first_line[key] = key_node.start_mark.line + 1
+                result[key] = self.build(value_node, depth + 1)
+            return result
+        if isinstance(node, SequenceNode):
+            if node.tag != _SEQ:
+                self.problems.append(_problem(node.start_mark, "RC009", _tag_message(node)))
+            return [self.build(item, depth + 1) for item in node.value]
+        raise YamlReadError([_problem(node.start_mark, "RC009", "unsupported YAML node")])
+
+    def scalar(self, node: ScalarNode) -> Any:
+        tag = node.tag
+        if tag == _STR or tag == _TIMESTAMP:
+            # Dates stay text: launch requests are JSON.
+            return node.value
+        if tag == _NULL:
+            return None
+        if tag == _BOOL:
+            return _scalars.construct_yaml_bool(node)
+        if tag == _INT:
+            return _scalars.construct_yaml_int(node)
+        if tag == _FLOAT:
+            value = _scalars.construct_yaml_float(node)
+            if math.isnan(value) or math.isinf(value):
+                self.problems.append(
+                    _problem(
+                        node.start_mark,
+                        "RC009",
+                        f"'{node.value}' cannot be represented in JSON; use a finite number",
+                    )
+                )
+            return value
+        self.problems.append(_problem(node.start_mark, "RC009", _tag_message(node)))
+        return node.value
+
+
+def _tag_message(node: Node) -> str:
+    return f"YAML tag '{node.tag}' is not supported; use plain strings, numbers, lists, mappings"
+
+
+def parse_document(path: str, raw: bytes) -> YamlDocument:
+    """Read one file's bytes as a top-level mapping, or raise YamlReadError with every problem."""
+    if len(raw) > MAX_FILE_BYTES:
+        raise YamlReadError(
+            [
+                YamlProblem(
+                    1,
+                    1,
+                    "RC008",
+                    f"file is {len(raw):,} bytes, over the limit of {MAX_FILE_BYTES:,}; "
+                    "split it into smaller files",
+                )
+            ]
+        )
+    text = decode(raw)
+    if "\t" in text:
+        tabs = _tab_indents(text)
+        if tabs:
+            raise YamlReadError(tabs)
+    root = _compose(text)
+    if root is None:
+        raise YamlReadError(
+            [YamlProblem(1, 1, "RC007", "file is empty; expected a mapping of fields (key: value)")]
+        )
+    if not isinstance(root, MappingNode):
+        found = "a list" if isinstance(root, SequenceNode) else "a single value"
+        raise YamlReadError(
+            [
+                _problem(
+                    root.start_mark,
+                    "RC007",
+                    f"expected a mapping of fields (key: value) at the top of the file, "
+                    f"found {found}",
+                )
+            ]
+        )
+    builder = _Builder()
+    data = builder.build(root)
+    if builder.problems:
+        raise YamlReadError(builder.problems)
+    return YamlDocument(path=path, data=data, root=root)
