@@ -163,8 +163,12 @@ def _load_one(
     try:
         return doc, kind.model.model_validate(doc.data)
     except ValidationError as exc:
-        diagnostics.extend(typing_diagnostics(doc, kind.model, exc, f"a {kind.title}"))
+        diagnostics.extend(typing_diagnostics(doc, kind.model, exc, _article(kind.title)))
         return doc, None
+
+
+def _article(title: str) -> str:
+    return f"{'an' if title[0] in 'aeiou' else 'a'} {title}"
 
 
 def _add(repo: Repository, kind: str, groups: tuple[str, ...], entry: Entry[Any]) -> None:

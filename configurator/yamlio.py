@@ -147,7 +147,7 @@ def _compose(text: str) -> Node | None:
     try:
         return loader.get_single_node()
     except yaml.composer.ComposerError as exc:
-        if "single document" in str(exc.problem):
+        if "single document" in f"{exc.context} {exc.problem}":
             raise YamlReadError(
                 [
                     _problem(
@@ -180,14 +180,15 @@ class _Builder:
         self.seen: set[int] = set()
         self.problems: list[YamlProblem] = []
 
-    def build(self, node: Node, depth: int = 0) -> Any:
+    def build(self, node: Node, depth: int = 0, where: Any = None) -> Any:
         if id(node) in self.seen:
+            # A node met twice is an alias: refuse before anything could be expanded.
             raise YamlReadError(
                 [
                     _problem(
-                        node.start_mark,
+                        where or node.start_mark,
                         "RC005",
-                        "YAML anchors and aliases (&name, *name, <<:) are not supported; "
+                        "YAML aliases (*name, <<: *name) are not supported; "
                         "write the value out in full",
                     )
                 ]
@@ -226,7 +227,7 @@ class _Builder:
                     )
                     continue
                 first_line[key] = key_node.start_mark.line + 1
-                result[key] = self.build(value_node, depth + 1)
+                result[key] = self.build(value_node, depth + 1, key_node.start_mark)
             return result
         if isinstance(node, SequenceNode):
             if node.tag != _SEQ:

@@ -207,6 +207,8 @@ def check_scenario(
         selected_logics = {s.logic_name: s for s in resolved.selections.values()}
         for logic_name, values in scenario.logic_settings.items():
             selection = selected_logics.get(logic_name)
+            if selection is None and logic_name in resolved.config.actions.values():
+                continue  # its action is unknown or unreadable: reported at the capability
             if selection is None:
                 report.error(
                     entry,
