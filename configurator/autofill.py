@@ -52,6 +52,7 @@ def autofill(
                 skipped[name] = [f"requires {', '.join(missing)}, which cannot be selected"]
                 changed = True
     config = CapabilityConfiguration(
+        name=None,
         platform=platform_name,
         mapping_scheme=scheme_name,
         robot_template=template_name,

@@ -22,9 +22,7 @@ def catalogue_summary(repo: Repository) -> dict[str, Any]:
             }
             for name, p in sorted(repo.platforms.items())
         },
-        "tasks": {
-            name: e.model.implementations for name, e in sorted(repo.tasks.items())
-        },
+        "tasks": {name: e.model.implementations for name, e in sorted(repo.tasks.items())},
         "actions": {
             name: {
                 "platforms": e.model.platforms,

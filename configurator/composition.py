@@ -106,7 +106,9 @@ def setting_problem(definition: SettingDefinition, value: JsonScalar) -> tuple[s
         number = float(value)
         low, high = definition.minimum, definition.maximum
         if (low is not None and number < low) or (high is not None and number > high):
-            bounds = f"{_num(low) if low is not None else '-inf'}..{_num(high) if high is not None else 'inf'}"
+            lower = _num(low) if low is not None else "-inf"
+            upper = _num(high) if high is not None else "inf"
+            bounds = f"{lower}..{upper}"
             unit = f" {definition.unit}" if definition.unit else ""
             return "RC403", f"{value!r} is outside {bounds}{unit}"
     return None

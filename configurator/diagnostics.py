@@ -26,7 +26,9 @@ class Diagnostic:
     message: str
 
     def __str__(self) -> str:
-        return f"{self.path}:{self.line}:{self.col}: {self.severity.value} {self.code} {self.message}"
+        return (
+            f"{self.path}:{self.line}:{self.col}: {self.severity.value} {self.code} {self.message}"
+        )
 
     @property
     def is_error(self) -> bool:

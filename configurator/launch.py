@@ -51,7 +51,7 @@ class LaunchScenario(_Wire):
 class LaunchRequest(_Wire):
     """One robot's complete start-up configuration."""
 
-    apiVersion: Literal["robotconf/v1"] = API_VERSION  # noqa: N815 - wire name
+    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
     kind: Literal["LaunchRequest"] = "LaunchRequest"
     robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
     robot_name: str

@@ -54,7 +54,12 @@ KINDS = (
         ScenarioConfiguration,
         "scenario configuration",
     ),
-    Kind("platform", re.compile(r"^models/platforms/([^/]+)/platform\.yaml$"), PlatformInfo, "platform"),
+    Kind(
+        "platform",
+        re.compile(r"^models/platforms/([^/]+)/platform\.yaml$"),
+        PlatformInfo,
+        "platform",
+    ),
     Kind(
         "robot-template",
         re.compile(r"^models/platforms/([^/]+)/robot-templates/([^/]+)\.yaml$"),
@@ -69,7 +74,12 @@ KINDS = (
     ),
     Kind("action", re.compile(r"^models/actions/([^/]+)\.yaml$"), Action, "action"),
     Kind("task", re.compile(r"^models/tasks/([^/]+)\.yaml$"), Task, "task"),
-    Kind("environment", re.compile(r"^models/environments/([^/]+)\.yaml$"), Environment, "environment"),
+    Kind(
+        "environment",
+        re.compile(r"^models/environments/([^/]+)\.yaml$"),
+        Environment,
+        "environment",
+    ),
 )
 KIND_BY_NAME = {kind.name: kind for kind in KINDS}
 

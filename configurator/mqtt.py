@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import paho.mqtt.client as paho
-from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
 from configurator.wire import BrokerAddress, parse_broker_url
 
@@ -27,7 +27,7 @@ class Connection:
     cert_file: Path | None = None
     key_file: Path | None = None
     insecure: bool = False  # skip server certificate verification (tests, lab benches only)
-    protocol: int = paho.MQTTv311
+    protocol: MQTTProtocolVersion = MQTTProtocolVersion.MQTTv311
 
     @property
     def address(self) -> BrokerAddress:
@@ -46,7 +46,7 @@ def make_client(connection: Connection, client_id: str) -> paho.Client:
         CallbackAPIVersion.VERSION2,
         client_id=client_id,
         protocol=connection.protocol,
-        clean_session=True if connection.protocol != paho.MQTTv5 else None,
+        clean_session=True if connection.protocol != MQTTProtocolVersion.MQTTv5 else None,
     )
     username = connection.username or address.username
     if username:

@@ -1,4 +1,4 @@
-"""Plans a rollout: per robot, what changes between two rendered fleets (added, removed, changed)."""
+"""Plans a rollout: per robot, what changes between two rendered fleets (added, removed...)."""
 
 from __future__ import annotations
 
@@ -73,7 +73,9 @@ def make_plan(base: FleetRender, head: FleetRender) -> Plan:
 
 
 def _counts(plan: Plan) -> str:
-    count = {k: sum(c.kind == k for c in plan.changes) for k in ("changed", "added", "removed", "held")}
+    count = {
+        k: sum(c.kind == k for c in plan.changes) for k in ("changed", "added", "removed", "held")
+    }
     text = f"{count['changed']} changed, {count['added']} added, {count['removed']} removed"
     if count["held"]:
         text += f", {count['held']} held (suspended)"

@@ -72,12 +72,11 @@ def _capability_schema(repo: Repository) -> dict[str, Any]:
     schemes: dict[str, str] = {}
     templates: dict[str, str] = {}
     for pname, p in sorted(repo.platforms.items()):
-        for s, e in p.schemes.items():
-            schemes.setdefault(s, f"{pname}: {e.model.description}".rstrip(": "))
-        for t, e in p.templates.items():
-            templates.setdefault(
-                t, f"{pname}: {e.model.description} (mappings: {', '.join(e.model.mappings)})"
-            )
+        for s, scheme in p.schemes.items():
+            schemes.setdefault(s, f"{pname}: {scheme.model.description}".rstrip(": "))
+        for t, template in p.templates.items():
+            mappings = ", ".join(template.model.mappings)
+            templates.setdefault(t, f"{pname}: {template.model.description} (mappings: {mappings})")
     props["mapping_scheme"] = _enum_or_nothing(schemes, "how mappings are bound on the platform")
     template_choice = _enum_or_nothing(templates, "the robot model this configuration must fit")
     props["robot_template"] = {"anyOf": [template_choice, {"type": "null"}], "default": None}
@@ -168,7 +167,10 @@ def _scenario_schema(repo: Repository) -> dict[str, Any]:
     if locations:
         goal["location"] = {
             "anyOf": [
-                {"description": "a Location object of the environment", "anyOf": _choices(locations)},
+                {
+                    "description": "a Location object of the environment",
+                    "anyOf": _choices(locations),
+                },
                 {"type": "string", "description": "or a Location object's id"},
                 {"type": "null"},
             ],

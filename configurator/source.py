@@ -40,7 +40,7 @@ class WorkTreeSource:
         self._revision: str | None = None
 
     def files(self) -> list[str]:
-        found = []
+        found: list[str] = []
         for top in ROOTS:
             base = self.root / top
             for dirpath, dirnames, filenames in os.walk(base):
@@ -85,7 +85,9 @@ class GitSource:
         try:
             import git
         except ImportError as exc:  # pragma: no cover - the server extra installs it
-            raise SourceError("reading a commit needs GitPython: pip install 'robotconf[server]'") from exc
+            raise SourceError(
+                "reading a commit needs GitPython: pip install 'robotconf[server]'"
+            ) from exc
         try:
             self._repo = git.Repo(root, search_parent_directories=True)
         except (git.InvalidGitRepositoryError, git.NoSuchPathError):
@@ -97,7 +99,9 @@ class GitSource:
         self._revision = commit.hexsha
         self._blobs: dict[str, Any] = {}
         # The repository may live in a subfolder of the git work tree.
-        prefix = Path(os.path.relpath(root.resolve(), Path(self._repo.working_tree_dir or root).resolve()))
+        prefix = Path(
+            os.path.relpath(root.resolve(), Path(self._repo.working_tree_dir or root).resolve())
+        )
         base = commit.tree
         if prefix.as_posix() != ".":
             try:

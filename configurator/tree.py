@@ -108,9 +108,7 @@ def _action_lines(node: ActionNode, prefix: str, last: bool) -> list[str]:
 
 def format_tree(tree: CapabilityTree) -> str:
     template = tree.robot_template or "no robot template"
-    lines = [
-        f"{tree.name}  (platform {tree.platform}, scheme {tree.mapping_scheme}, {template})"
-    ]
+    lines = [f"{tree.name}  (platform {tree.platform}, scheme {tree.mapping_scheme}, {template})"]
     groups: list[tuple[str, list[tuple[str | None, list[ActionNode]]]]] = []
     for task in tree.tasks:
         if task.achieved_by is not None:

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from typing import Any, Union, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
+from pydantic_core import ErrorDetails
 
 from configurator.diagnostics import Diagnostic, Severity, did_you_mean
 from configurator.yamlio import YamlDocument
@@ -47,7 +48,10 @@ def _unwrap(annotation: Any) -> Any:
         for arg in get_args(annotation):
             if arg is type(None):
                 continue
-            if (isinstance(arg, type) and issubclass(arg, BaseModel)) or get_origin(arg) in (dict, list):
+            if (isinstance(arg, type) and issubclass(arg, BaseModel)) or get_origin(arg) in (
+                dict,
+                list,
+            ):
                 return arg
         return annotation
     return annotation
@@ -86,8 +90,6 @@ def _data_loc(data: Any, loc: Sequence[str | int]) -> tuple[str | int, ...]:
         elif isinstance(current, list) and isinstance(part, int) and 0 <= part < len(current):
             current = current[part]
             out.append(part)
-        else:
-            continue
     return tuple(out)
 
 
@@ -102,7 +104,7 @@ def typing_diagnostics(
     doc: YamlDocument, model: type[BaseModel], error: ValidationError, what: str
 ) -> list[Diagnostic]:
     """One diagnostic per wrong place, pointing at the offending key or value."""
-    grouped: dict[tuple[str | int, ...], list[dict[str, Any]]] = {}
+    grouped: dict[tuple[str | int, ...], list[ErrorDetails]] = {}
     found: list[Diagnostic] = []
 
     def report(loc: Sequence[str | int], code: str, message: str, *, key: bool = False) -> None:

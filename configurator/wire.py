@@ -63,7 +63,12 @@ class Topics:
 
 
 def validate_prefix(prefix: str) -> str:
-    if not prefix or any(c in prefix for c in "#+") or prefix.startswith("/") or prefix.endswith("/"):
+    if (
+        not prefix
+        or any(c in prefix for c in "#+")
+        or prefix.startswith("/")
+        or prefix.endswith("/")
+    ):
         raise ValueError(
             f"topic prefix {prefix!r} is not usable: it must be non-empty, without '+' or '#', "
             "and not start or end with '/' (e.g. 'robotconf' or 'lab1/robotconf')"
@@ -90,7 +95,9 @@ def parse_broker_url(url: str) -> BrokerAddress:
         parts = urlsplit(url)
         port = parts.port
     except ValueError as exc:
-        raise ValueError(f"broker URL {url!r} is not valid ({exc}); e.g. mqtt://127.0.0.1:1883") from exc
+        raise ValueError(
+            f"broker URL {url!r} is not valid ({exc}); e.g. mqtt://127.0.0.1:1883"
+        ) from exc
     if parts.scheme not in ("mqtt", "mqtts"):
         raise ValueError(
             f"broker URL {url!r} must start with mqtt:// or mqtts:// (TLS), "

@@ -118,8 +118,7 @@ def decode(raw: bytes) -> str:
                     line,
                     col,
                     "RC001",
-                    f"file is not valid UTF-8 (byte 0x{raw[exc.start]:02x}); "
-                    "save it as UTF-8",
+                    f"file is not valid UTF-8 (byte 0x{raw[exc.start]:02x}); save it as UTF-8",
                 )
             ]
         ) from None
@@ -237,7 +236,7 @@ class _Builder:
 
     def scalar(self, node: ScalarNode) -> Any:
         tag = node.tag
-        if tag == _STR or tag == _TIMESTAMP:
+        if tag in (_STR, _TIMESTAMP):
             # Dates stay text: launch requests are JSON.
             return node.value
         if tag == _NULL:

@@ -18,7 +18,9 @@ def cmd_autofill(args: argparse.Namespace) -> int:
     platform = repo.platforms.get(args.platform)
     problems = []
     if platform is None:
-        problems.append(f"unknown platform '{args.platform}'{did_you_mean(args.platform, repo.platforms)}")
+        problems.append(
+            f"unknown platform '{args.platform}'{did_you_mean(args.platform, repo.platforms)}"
+        )
     else:
         if args.scheme not in platform.schemes:
             problems.append(

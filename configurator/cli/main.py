@@ -31,13 +31,20 @@ def _broker_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--broker",
         default=os.environ.get(BROKER_ENV),
-        help=f"mqtt://host:port or mqtts://host:port (default: ${BROKER_ENV}, else {DEFAULT_BROKER})",
+        help=f"mqtt://host:port or mqtts://host:port (default: ${BROKER_ENV}, "
+        f"else {DEFAULT_BROKER})",
     )
-    parser.add_argument("--prefix", default=DEFAULT_PREFIX, help="topic prefix (default: %(default)s)")
+    parser.add_argument(
+        "--prefix", default=DEFAULT_PREFIX, help="topic prefix (default: %(default)s)"
+    )
     parser.add_argument("--username", default=None, help="broker user name")
-    parser.add_argument("--password-file", type=Path, default=None, help="file holding the password")
+    parser.add_argument(
+        "--password-file", type=Path, default=None, help="file holding the password"
+    )
     parser.add_argument("--ca-file", type=Path, default=None, help="CA certificate for mqtts://")
-    parser.add_argument("--cert-file", type=Path, default=None, help="client certificate (mqtts://)")
+    parser.add_argument(
+        "--cert-file", type=Path, default=None, help="client certificate (mqtts://)"
+    )
     parser.add_argument("--key-file", type=Path, default=None, help="client key (mqtts://)")
     parser.add_argument(
         "--insecure",
@@ -84,7 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--head", default=None, help="the new revision (default: the work tree)")
     p.add_argument("--format", choices=["text", "markdown", "json"], default="text")
 
-    p = add("autofill", authoring.cmd_autofill, "write a capability configuration that fits a template")
+    p = add(
+        "autofill", authoring.cmd_autofill, "write a capability configuration that fits a template"
+    )
     _repo_args(p, rev=False)
     p.add_argument("--platform", required=True)
     p.add_argument("--scheme", required=True, help="mapping scheme")

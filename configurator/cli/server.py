@@ -42,9 +42,7 @@ def add_commands(add: Add, repo_args: Callable[..., Any], broker_args: Callable[
     broker_args(p)
     p.add_argument("--watch", action="store_true", help="keep showing until interrupted")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument(
-        "--wait", type=float, default=1.0, help="seconds to collect retained messages"
-    )
+    p.add_argument("--wait", type=float, default=1.0, help="seconds to collect retained messages")
 
     p = add("up", _up, "the whole loop on this machine: broker, reconciler, agents, status")
     repo_args(p, rev=False)

@@ -63,9 +63,9 @@ def check_repository(repo: Repository) -> list[Diagnostic]:
     report = Reporter()
     check_catalogue(repo, report)
     capabilities: dict[str, ResolvedCapability] = {}
-    for name, entry in repo.capabilities.items():
-        capabilities[name] = check_capability(repo, entry, report)
-    for entry in repo.scenarios.values():
-        check_scenario(repo, entry, capabilities, report)
+    for name, capability in repo.capabilities.items():
+        capabilities[name] = check_capability(repo, capability, report)
+    for scenario in repo.scenarios.values():
+        check_scenario(repo, scenario, capabilities, report)
     check_fleet(repo, report)
     return report.found

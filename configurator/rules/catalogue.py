@@ -12,7 +12,10 @@ from configurator.types import SettingDefinition
 
 
 def _settings(
-    report: Reporter, entry: Entry[Any], base: list[str | int], settings: dict[str, SettingDefinition]
+    report: Reporter,
+    entry: Entry[Any],
+    base: list[str | int],
+    settings: dict[str, SettingDefinition],
 ) -> None:
     for name, definition in settings.items():
         for field, code, message in definition_problems(definition):
@@ -29,7 +32,9 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
             seen: set[str] = set()
             for i, mapping in enumerate(template.model.mappings):
                 if mapping in seen:
-                    report.error(template, ["mappings", i], "RC607", f"mapping '{mapping}' is listed twice")
+                    report.error(
+                        template, ["mappings", i], "RC607", f"mapping '{mapping}' is listed twice"
+                    )
                 seen.add(mapping)
             for scheme in platform.schemes.values():
                 unbound = [m for m in template.model.mappings if m not in scheme.model.mappings]
@@ -51,7 +56,8 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
                     action,
                     ["platforms", i],
                     "RC605",
-                    f"unknown platform '{platform_name}'{did_you_mean(platform_name, repo.platforms)}",
+                    f"unknown platform '{platform_name}'"
+                    f"{did_you_mean(platform_name, repo.platforms)}",
                 )
         for i, required in enumerate(model.requires):
             if required == name:
@@ -69,7 +75,9 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
     for task in repo.tasks.values():
         for i, implementation in enumerate(task.model.implementations):
             if not implementation:
-                report.error(task, ["implementations", i], "RC603", "an implementation lists no actions")
+                report.error(
+                    task, ["implementations", i], "RC603", "an implementation lists no actions"
+                )
             for j, action_name in enumerate(implementation):
                 if action_name not in known_actions:
                     report.error(

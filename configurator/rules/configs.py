@@ -273,7 +273,10 @@ def check_scenario(
                     "RC210",
                     f"unknown task '{goal.task}'{did_you_mean(goal.task, repo.tasks)}",
                 )
-        elif resolved is not None and implementation_for(task_entry.model, resolved.config.actions) is None:
+        elif (
+            resolved is not None
+            and implementation_for(task_entry.model, resolved.config.actions) is None
+        ):
             options = " or ".join(
                 "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations
             )

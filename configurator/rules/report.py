@@ -14,12 +14,24 @@ class Reporter:
         self.found: list[Diagnostic] = []
 
     def error(
-        self, entry: Entry[Any], loc: Sequence[str | int], code: str, message: str, *, key: bool = False
+        self,
+        entry: Entry[Any],
+        loc: Sequence[str | int],
+        code: str,
+        message: str,
+        *,
+        key: bool = False,
     ) -> None:
         self._add(entry, loc, Severity.ERROR, code, message, key)
 
     def warning(
-        self, entry: Entry[Any], loc: Sequence[str | int], code: str, message: str, *, key: bool = False
+        self,
+        entry: Entry[Any],
+        loc: Sequence[str | int],
+        code: str,
+        message: str,
+        *,
+        key: bool = False,
     ) -> None:
         self._add(entry, loc, Severity.WARNING, code, message, key)
 

@@ -43,8 +43,9 @@ def test_plan_between_two_commits_and_markdown(lab: Lab) -> None:
     head = lab.commit("faster")
     done = lab.run("plan", "--base", base, "--head", head, "--format", "markdown")
     assert done.returncode == 1
-    assert "| `tb3-01` | changed | delivery-gazebo | `scenario.robot_settings.max_linear_speed` |" in (
-        done.stdout
+    assert (
+        "| `tb3-01` | changed | delivery-gazebo | `scenario.robot_settings.max_linear_speed` |"
+        in (done.stdout)
     )
     text = lab.run("plan", "--base", base, "--head", head).stdout
     assert "~ tb3-01" in text and "1 changed, 0 added, 0 removed" in text
@@ -79,8 +80,15 @@ def test_changed_fields_walks_dicts_and_equal_length_lists() -> None:
 
 def test_autofill_picks_logics_the_template_can_run(lab: Lab) -> None:
     done = lab.run(
-        "autofill", "--platform", "ROS2", "--scheme", "gazebo", "--template", "turtlebot3-burger",
-        "--name", "auto-burger",
+        "autofill",
+        "--platform",
+        "ROS2",
+        "--scheme",
+        "gazebo",
+        "--template",
+        "turtlebot3-burger",
+        "--name",
+        "auto-burger",
     )
     assert done.returncode == 0, done.stderr
     path = "configs/capabilities/auto-burger.yaml"
@@ -93,8 +101,15 @@ def test_autofill_picks_logics_the_template_can_run(lab: Lab) -> None:
     assert lab.read(path).startswith("# yaml-language-server: $schema=../../schemas/capability")
     assert lab.check().ok
     again = lab.run(
-        "autofill", "--platform", "ROS2", "--scheme", "gazebo", "--template", "turtlebot3-burger",
-        "--name", "auto-burger",
+        "autofill",
+        "--platform",
+        "ROS2",
+        "--scheme",
+        "gazebo",
+        "--template",
+        "turtlebot3-burger",
+        "--name",
+        "auto-burger",
     )
     assert again.returncode == 1 and "exists" in again.stderr
 
@@ -103,8 +118,15 @@ def test_autofill_honours_requires(lab: Lab) -> None:
     """When AskHelp cannot run, SendGoalId (which requires it) is dropped too."""
     lab.replace("models/actions/AskHelp.yaml", "mappings: []", "mappings: [megaphone]")
     done = lab.run(
-        "autofill", "--platform", "ROS2", "--scheme", "gazebo", "--template", "turtlebot3-waffle-pi",
-        "--name", "auto",
+        "autofill",
+        "--platform",
+        "ROS2",
+        "--scheme",
+        "gazebo",
+        "--template",
+        "turtlebot3-waffle-pi",
+        "--name",
+        "auto",
     )
     assert done.returncode == 0, done.stderr
     data = parse_document("x", lab.path("configs/capabilities/auto.yaml").read_bytes()).data
@@ -143,7 +165,10 @@ def test_tree_says_why_an_action_is_unavailable(lab: Lab) -> None:
 def test_catalog_lists_what_exists(lab: Lab) -> None:
     data = json.loads(lab.run("catalog", "--json").stdout)
     assert set(data["platforms"]) == {"ROS1", "ROS2"}
-    assert set(data["actions"]["Follow"]["logics"]) == {"follow_with_poses", "follow_with_bluetooth"}
+    assert set(data["actions"]["Follow"]["logics"]) == {
+        "follow_with_poses",
+        "follow_with_bluetooth",
+    }
     assert data["tasks"]["Patrol"] == [["NavigateToLocation"], ["OpenDoor", "NavigateToLocation"]]
     assert "GazeboDemo1" in data["environments"]
     text = lab.run("catalog").stdout
@@ -205,7 +230,11 @@ def test_every_example_file_fits_its_generated_schema_and_names_it(rel: str) -> 
 
 def test_capability_schema_refuses_what_does_not_exist() -> None:
     schema = _schema_for("configs/capabilities/x.yaml")
-    good = {"platform": "ROS2", "mapping_scheme": "gazebo", "actions": {"Follow": "follow_with_poses"}}
+    good = {
+        "platform": "ROS2",
+        "mapping_scheme": "gazebo",
+        "actions": {"Follow": "follow_with_poses"},
+    }
     jsonschema.validate(good, schema)
     for bad in (
         {**good, "platform": "ROS3"},

@@ -35,7 +35,10 @@ def test_request_shape_and_defaults(lab: Lab) -> None:
     # Chosen values override, defaults fill the rest.
     assert scenario.robot_settings["max_linear_speed"] == 0.2
     assert scenario.robot_settings["camera_resolution"] == "640x480"
-    assert scenario.logic_settings["follow_with_poses"] == {"move_speed": 0.1, "follow_distance": 0.6}
+    assert scenario.logic_settings["follow_with_poses"] == {
+        "move_speed": 0.1,
+        "follow_distance": 0.6,
+    }
     assert scenario.logic_settings["ask_help_broadcast"] == {"answer_timeout": 30}
     assert scenario.environment_name == "GazeboDemo1" and scenario.environment_type == "Gazebo"
 
@@ -45,7 +48,9 @@ def test_mappings_are_the_needed_ones_bound_by_the_scheme(lab: Lab) -> None:
     assert set(cap.mappings) == {"odometry", "cmd_vel", "camera"}
     assert cap.mappings["cmd_vel"].name == "/cmd_vel"
     lab.replace(
-        "configs/capabilities/turtlebot3-camera.yaml", "mapping_scheme: gazebo", "mapping_scheme: real-world"
+        "configs/capabilities/turtlebot3-camera.yaml",
+        "mapping_scheme: gazebo",
+        "mapping_scheme: real-world",
     )
     real = _request(lab).scenario.capability.mappings["camera"]
     sim = cap.mappings["camera"]

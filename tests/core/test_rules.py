@@ -1,4 +1,4 @@
-"""One failing case per validation rule, on a copy of the example lab; each checks code and place."""
+"""One failing case per validation rule, on a copy of the example lab: code and place."""
 
 from __future__ import annotations
 
@@ -42,7 +42,9 @@ def test_unknown_mapping_scheme_of_platform(lab: Lab) -> None:
 
 
 def test_unknown_robot_template_of_platform(lab: Lab) -> None:
-    lab.replace(CAMERA, "robot_template: turtlebot3-waffle-pi", "robot_template: turtlebot3-wafle-pi")
+    lab.replace(
+        CAMERA, "robot_template: turtlebot3-waffle-pi", "robot_template: turtlebot3-wafle-pi"
+    )
     d = lab.only("RC203")
     assert "did you mean 'turtlebot3-waffle-pi'" in d.message
 
@@ -275,7 +277,11 @@ def test_enum_without_choices(lab: Lab) -> None:
 
 
 def test_task_implementation_names_unknown_action(lab: Lab) -> None:
-    lab.replace("models/tasks/Patrol.yaml", "[OpenDoor, NavigateToLocation]", "[OpenDor, NavigateToLocation]")
+    lab.replace(
+        "models/tasks/Patrol.yaml",
+        "[OpenDoor, NavigateToLocation]",
+        "[OpenDor, NavigateToLocation]",
+    )
     d = lab.only("RC603")
     assert "unknown action 'OpenDor'; did you mean 'OpenDoor'?" in d.message
 
@@ -287,7 +293,9 @@ def test_action_requires_unknown_action(lab: Lab) -> None:
 
 
 def test_action_requires_itself(lab: Lab) -> None:
-    lab.replace("models/actions/SendGoalId.yaml", "requires: [AskHelp]", "requires: [AskHelp, SendGoalId]")
+    lab.replace(
+        "models/actions/SendGoalId.yaml", "requires: [AskHelp]", "requires: [AskHelp, SendGoalId]"
+    )
     assert "requires itself" in lab.only("RC604").message
 
 
@@ -314,7 +322,10 @@ def test_template_lists_mapping_twice(lab: Lab) -> None:
 def test_unknown_field_is_an_error_with_a_hint(lab: Lab) -> None:
     lab.replace(DELIVERY, "knowledge_sets:", "knowledge_set:")
     d = lab.only("RC101")
-    assert "unknown field 'knowledge_set'" in d.message and "did you mean 'knowledge_sets'" in d.message
+    assert (
+        "unknown field 'knowledge_set'" in d.message
+        and "did you mean 'knowledge_sets'" in d.message
+    )
     assert d.col == 1
 
 
