@@ -105,7 +105,7 @@ def _error(path: str, code: str, message: str, line: int = 1, col: int = 1) -> D
 
 def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
     """Every file of the source, typed; diagnostics for everything that is not readable."""
-    repo = Repository(revision=source.revision)
+    repo = Repository(revision_of=lambda: source.revision)
     diagnostics: list[Diagnostic] = []
     for path in source.files():
         platform_dir = _PLATFORM_DIR.match(path)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Generic, TypeVar
 
 from pydantic import BaseModel
@@ -51,7 +53,8 @@ class Platform:
 class Repository:
     """What exists (the catalogue) and what is chosen (the configurations) at one revision."""
 
-    revision: str
+    # Asking git for the revision costs an import and a process: only rendering needs it.
+    revision_of: Callable[[], str] = field(repr=False)
     platforms: dict[str, Platform] = field(default_factory=dict)
     actions: dict[str, Entry[Action]] = field(default_factory=dict)
     tasks: dict[str, Entry[Task]] = field(default_factory=dict)
@@ -61,6 +64,11 @@ class Repository:
     fleet: Entry[Fleet] | None = None
     broken: dict[str, set[str]] = field(default_factory=dict)
     files_read: int = 0
+
+    @cached_property
+    def revision(self) -> str:
+        """The commit the repository was read from (the work tree: HEAD, `+dirty` if changed)."""
+        return self.revision_of()
 
     def is_broken(self, kind: str, name: str) -> bool:
         return name in self.broken.get(kind, set())
