@@ -1,0 +1,390 @@
+"""agent.yaml (DESIGN §11): the AgentConfig model and a loader whose errors name file:line.
+
+Loading never raises a traceback at the user: every problem becomes one `ConfigError` line.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import tempfile
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from configurator.mqtt import Connection
+from configurator.types import ROBOT_ID_PATTERN
+from configurator.wire import (
+    BROKER_ENV,
+    DEFAULT_BROKER,
+    DEFAULT_PREFIX,
+    RobotDescription,
+    parse_broker_url,
+    validate_prefix,
+)
+
+PLACEHOLDER = "{launch_request}"
+COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class DescriptionConfig(_Strict):
+    """The robot as it describes itself; strict here although the wire type is tolerant."""
+
+    id: str = Field(pattern=ROBOT_ID_PATTERN)
+    name: str | None = None
+    recommended_template: str | None = None
+    platform: str | None = None
+
+    def to_wire(self) -> RobotDescription:
+        return RobotDescription(**self.model_dump())
+
+
+class RestartConfig(_Strict):
+    policy: Literal["on-failure", "always", "never"] = "on-failure"
+    max_restarts: int = Field(default=5, ge=0)
+    backoff_initial: float = Field(default=1.0, gt=0)
+    backoff_max: float = Field(default=60.0, gt=0)
+    # A brain that stayed up this long is healthy again: its next crash starts a fresh backoff.
+    reset_after: float = Field(default=60.0, gt=0)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> RestartConfig:
+        if self.backoff_initial > self.backoff_max:
+            raise ValueError(
+                f"backoff_initial ({self.backoff_initial}) is larger than backoff_max "
+                f"({self.backoff_max}); make backoff_initial <= backoff_max"
+            )
+        return self
+
+
+class TlsConfig(_Strict):
+    ca_file: Path | None = None
+    cert_file: Path | None = None
+    key_file: Path | None = None
+    insecure: bool = False  # skip server certificate checks: lab benches only
+
+
+class LogConfig(_Strict):
+    max_bytes: int = Field(default=10 * 1024 * 1024, ge=4096)
+    backups: int = Field(default=3, ge=0)
+
+
+class AgentConfig(_Strict):
+    broker: str = Field(default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER))
+    prefix: str = DEFAULT_PREFIX
+    description: DescriptionConfig
+    command: list[str]
+    workdir: Path
+    stop_timeout: float = Field(default=10.0, gt=0)
+    startsecs: float = Field(default=1.0, ge=0)
+    restart: RestartConfig = Field(default_factory=lambda: RestartConfig())
+    keepalive: int = Field(default=30, ge=5, le=3600)
+    log: LogConfig = Field(default_factory=lambda: LogConfig())
+    username: str | None = None
+    password_file: Path | None = None
+    tls: TlsConfig | None = None
+
+    @field_validator("broker")
+    @classmethod
+    def _broker(cls, value: str) -> str:
+        parse_broker_url(value)
+        return value
+
+    @field_validator("prefix")
+    @classmethod
+    def _prefix(cls, value: str) -> str:
+        return validate_prefix(value)
+
+    @field_validator("command", mode="before")
+    @classmethod
+    def _command_is_a_list(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            raise ValueError(
+                "command must be an argument list, never a shell string; "
+                f"e.g. {COMMAND_EXAMPLE}"
+            )
+        return value
+
+    @field_validator("command")
+    @classmethod
+    def _command(cls, value: list[str]) -> list[str]:
+        if not value or not value[0].strip():
+            raise ValueError(
+                "command is empty; give the brain service's argument list, "
+                f"e.g. {COMMAND_EXAMPLE}"
+            )
+        return value
+
+    @model_validator(mode="after")
+    def _credentials(self) -> AgentConfig:
+        if self.password_file is not None and not self.username:
+            raise ValueError("password_file is set but username is not; add username: ROBOT_USER")
+        if self.tls is not None and not parse_broker_url(self.broker).tls:
+            raise ValueError(
+                f"tls options need a TLS broker URL, but broker is {self.broker}; "
+                "use mqtts://host:8883"
+            )
+        if self.tls is not None and self.tls.key_file and not self.tls.cert_file:
+            raise ValueError(
+                "tls.key_file is set without tls.cert_file; add the client certificate"
+            )
+        return self
+
+    @property
+    def robot_id(self) -> str:
+        return self.description.id
+
+    def connection(self) -> Connection:
+        tls = self.tls or TlsConfig()
+        return Connection(
+            url=self.broker,
+            username=self.username,
+            password_file=self.password_file,
+            ca_file=tls.ca_file,
+            cert_file=tls.cert_file,
+            key_file=tls.key_file,
+            insecure=tls.insecure,
+        )
+
+    def resolved(self, base: Path) -> AgentConfig:
+        """Paths relative to the configuration file's folder, as a person reading it expects."""
+
+        def rel(path: Path | None) -> Path | None:
+            return None if path is None else (base / path.expanduser()).absolute()
+
+        update: dict[str, Any] = {
+            "workdir": rel(self.workdir),
+            "password_file": rel(self.password_file),
+        }
+        if self.tls is not None:
+            update["tls"] = self.tls.model_copy(
+                update={
+                    "ca_file": rel(self.tls.ca_file),
+                    "cert_file": rel(self.tls.cert_file),
+                    "key_file": rel(self.tls.key_file),
+                }
+            )
+        return self.model_copy(update=update)
+
+
+@dataclass(frozen=True)
+class ConfigError:
+    """One problem: where it is and what would be right."""
+
+    file: str
+    line: int | None
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}" if self.line else self.file
+        return f"{where}: {self.message}"
+
+
+class ConfigInvalid(Exception):
+    def __init__(self, errors: Sequence[ConfigError]) -> None:
+        super().__init__("\n".join(str(e) for e in errors))
+        self.errors = list(errors)
+
+
+# ---------------------------------------------------------------- YAML with line numbers
+
+Loc = tuple[str | int, ...]
+
+
+class _LineMap:
+    """Finds the line of a key path in a composed YAML tree (1-based)."""
+
+    def __init__(self, root: yaml.Node | None) -> None:
+        self.root = root
+
+    def line(self, loc: Loc) -> int | None:
+        node = self.root
+        if node is None:
+            return None
+        best = node.start_mark.line + 1
+        for part in loc:
+            child: yaml.Node | None = None
+            if isinstance(node, yaml.MappingNode):
+                for key, value in node.value:
+                    if isinstance(key, yaml.ScalarNode) and key.value == str(part):
+                        # Unknown keys are reported on the key itself, values on their own line.
+                        best = key.start_mark.line + 1
+                        child = value
+                        break
+            elif (
+                isinstance(node, yaml.SequenceNode)
+                and isinstance(part, int)
+                and 0 <= part < len(node.value)
+            ):
+                child = node.value[part]
+            if child is None:
+                return best
+            node = child
+            best = node.start_mark.line + 1
+        return best
+
+
+def _duplicate_keys(node: yaml.Node | None) -> Iterator[tuple[int, str]]:
+    if isinstance(node, yaml.MappingNode):
+        seen: set[str] = set()
+        for key, value in node.value:
+            if isinstance(key, yaml.ScalarNode):
+                if key.value in seen:
+                    yield key.start_mark.line + 1, key.value
+                seen.add(key.value)
+            yield from _duplicate_keys(value)
+    elif isinstance(node, yaml.SequenceNode):
+        for item in node.value:
+            yield from _duplicate_keys(item)
+
+
+_SECTIONS: dict[Loc, type[BaseModel]] = {
+    (): AgentConfig,
+    ("description",): DescriptionConfig,
+    ("restart",): RestartConfig,
+    ("tls",): TlsConfig,
+    ("log",): LogConfig,
+}
+
+_HINTS: dict[str, str] = {
+    "description": "e.g. description: {id: tb3-01, name: Delivery bot}",
+    "id": "the robot id, e.g. tb3-01",
+    "command": f"e.g. command: {COMMAND_EXAMPLE}",
+    "workdir": "e.g. workdir: /var/lib/robotconf/tb3-01",
+}
+
+
+def _dotted(loc: Loc) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def _explain(error: Any) -> tuple[Loc, str]:
+    loc: Loc = tuple(error["loc"])
+    kind = error["type"]
+    where = _dotted(loc)
+    if kind == "extra_forbidden":
+        parent, key = loc[:-1], str(loc[-1])
+        model = _SECTIONS.get(parent)
+        allowed = sorted(model.model_fields) if model else []
+        near = difflib.get_close_matches(key, allowed, n=1)
+        hint = f"did you mean '{near[0]}'?" if near else f"allowed here: {', '.join(allowed)}"
+        return loc, f"unknown key '{where}'; {hint}"
+    if kind == "missing":
+        hint = _HINTS.get(str(loc[-1]), "")
+        return loc, f"'{where}' is required" + (f"; {hint}" if hint else "")
+    if kind == "string_pattern_mismatch" and loc[-1:] == ("id",):
+        return loc, (
+            f"robot id {error['input']!r} is not topic-safe; use 1-64 letters, digits, "
+            "'_', '.' or '-', starting with a letter or digit (e.g. tb3-01)"
+        )
+    if kind == "literal_error":
+        return loc, f"{where}: {error['input']!r} is not allowed; {error['msg'].lower()}"
+    message = str(error["msg"])
+    if message.startswith("Value error, "):
+        message = message[len("Value error, ") :]
+        return loc, message if loc == () else f"{where}: {message}"
+    return loc, f"{where}: {message} (got {error.get('input')!r})"
+
+
+def _check_environment(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
+    """What only the machine can tell: files readable, the work directory writable."""
+    problem = _workdir_problem(config.workdir)
+    if problem:
+        yield ("workdir",), (
+            f"workdir {config.workdir} is not usable ({problem}); "
+            "choose a directory the agent's user can create and write"
+        )
+    files: list[tuple[Loc, Path | None]] = [(("password_file",), config.password_file)]
+    if config.tls is not None:
+        files += [
+            (("tls", "ca_file"), config.tls.ca_file),
+            (("tls", "cert_file"), config.tls.cert_file),
+            (("tls", "key_file"), config.tls.key_file),
+        ]
+    for loc, path in files:
+        if path is None:
+            continue
+        try:
+            with path.open("rb"):
+                pass
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            yield loc, f"{_dotted(loc)}: cannot read {path} ({reason}); give a readable file"
+
+
+def _workdir_problem(path: Path) -> str | None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        # A real write, because permission bits say nothing when running as root.
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):
+            pass
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
+def parse_config(text: str, filename: str, base: Path | None = None) -> AgentConfig:
+    """Validate agent.yaml text; raises ConfigInvalid listing every problem with its line."""
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigInvalid([ConfigError(filename, line, f"not valid YAML: {problem}")]) from None
+    lines = _LineMap(root)
+    dups = [
+        ConfigError(filename, line, f"key '{key}' appears twice; keep one")
+        for line, key in _duplicate_keys(root)
+    ]
+    if dups:
+        raise ConfigInvalid(dups)
+    if not isinstance(data, dict):
+        message = "must be a mapping of agent settings (broker, description, command, workdir...)"
+        raise ConfigInvalid([ConfigError(filename, lines.line(()), message)])
+    try:
+        config = AgentConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigInvalid(_errors(filename, lines, (_explain(e) for e in exc.errors()))) from None
+    if base is not None:
+        config = config.resolved(base)
+    problems = list(_check_environment(config))
+    if problems:
+        raise ConfigInvalid(_errors(filename, lines, problems))
+    return config
+
+
+def _errors(filename: str, lines: _LineMap, found: Iterable[tuple[Loc, str]]) -> list[ConfigError]:
+    out = [ConfigError(filename, lines.line(loc), message) for loc, message in found]
+    return sorted(out, key=lambda e: (e.line or 0, e.message))
+
+
+def load_config(path: Path) -> AgentConfig:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+        raise ConfigInvalid([ConfigError(str(path), None, f"cannot read: {reason}")]) from None
+    return parse_config(text, str(path), base=path.parent.absolute())
+
+
+def with_broker(config: AgentConfig, url: str) -> AgentConfig:
+    """The `--broker` override, validated like the file's value."""
+    try:
+        validated = AgentConfig.model_validate({**config.model_dump(), "broker": url})
+    except ValidationError as exc:
+        messages = [_explain(e)[1] for e in exc.errors()]
+        raise ConfigInvalid([ConfigError("--broker", None, m) for m in messages]) from None
+    return validated
