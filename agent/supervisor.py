@@ -1,0 +1,283 @@
+"""The brain's state machine (DESIGN §7) as pure logic: events in, effects and a status out.
+
+No processes, no MQTT, no clock of its own: times are passed in, so every rule is unit-tested.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+from configurator.launch import LaunchRequest
+from configurator.wire import AgentState, AgentStatus
+
+# ---------------------------------------------------------------- effects for the runtime
+
+
+@dataclass(frozen=True)
+class Spawn:
+    """Write the request and start the brain; answer with `spawned` or `spawn_failed`."""
+
+    request: LaunchRequest
+
+
+@dataclass(frozen=True)
+class Terminate:
+    pid: int
+
+
+@dataclass(frozen=True)
+class Kill:
+    pid: int
+
+
+Effect = Spawn | Terminate | Kill
+
+
+@dataclass(frozen=True)
+class Policy:
+    restart: Literal["on-failure", "always", "never"] = "on-failure"
+    max_restarts: int = 5
+    backoff_initial: float = 1.0
+    backoff_max: float = 60.0
+    reset_after: float = 60.0
+    startsecs: float = 1.0
+    stop_timeout: float = 10.0
+
+    def backoff(self, streak: int) -> float:
+        """Delay before restart number `streak + 1` of a run of failures."""
+        return float(min(self.backoff_max, self.backoff_initial * (2**streak)))
+
+
+@dataclass
+class _Assignment:
+    request: LaunchRequest
+    warnings: list[str] = field(default_factory=list)
+
+
+def describe_exit(code: int) -> str:
+    """Popen's convention: a negative code is the signal that ended the process."""
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exited with code {code}"
+
+
+class Supervisor:
+    """One robot's brain: what should run, what runs, and what to do about the difference."""
+
+    def __init__(
+        self, robot_id: str, policy: Policy, wall_clock: Callable[[], float] = time.time
+    ) -> None:
+        self.robot_id = robot_id
+        self.policy = policy
+        self._wall = wall_clock
+        self.phase = AgentState.IDLE
+        self.desired: _Assignment | None = None  # the accepted request, if any
+        self.brain: _Assignment | None = None  # the request the brain runs / last ran
+        self.pid: int | None = None
+        self.exit_code: int | None = None
+        self.restarts = 0  # restarts of the current request, shown in the status
+        self.streak = 0  # failures in a row, drives the backoff and `failed`
+        self.deadline: float | None = None  # monotonic time at which `tick` has work
+        self.message = "waiting for a launch request"
+        self.rejection: str | None = None
+        self.shutting_down = False
+        self._started_at = 0.0
+        self._killed = False
+        self._since = round(self._wall(), 3)
+        self._reported = self.state
+
+    # ------------------------------------------------------------ queries
+
+    @property
+    def state(self) -> AgentState:
+        return AgentState.REJECTED if self.rejection is not None else self.phase
+
+    @property
+    def finished(self) -> bool:
+        """Shutting down and nothing left to wait for."""
+        return self.shutting_down and self.pid is None
+
+    def status(self) -> AgentStatus:
+        """The status to publish (seq is the connection's business, filled in by the caller)."""
+        brain = self.brain
+        message = self.message
+        if self.rejection is not None:
+            message = f"rejected: {self.rejection}"
+            if self.pid is not None and brain is not None:
+                message += f" (still running {brain.request.digest}, pid {self.pid})"
+        return AgentStatus(
+            robot_id=self.robot_id,
+            state=self.state,
+            digest=brain.request.digest if brain else None,
+            revision=brain.request.revision if brain else None,
+            pid=self.pid,
+            exit_code=self.exit_code,
+            restarts=self.restarts,
+            since=self._since,
+            message=message,
+            warnings=list(brain.warnings) if brain else [],
+        )
+
+    # ------------------------------------------------------------ events
+
+    def accept(self, request: LaunchRequest, warnings: list[str], now: float) -> list[Effect]:
+        """A valid request for this robot arrived."""
+        self._set_rejection(None)
+        if self.shutting_down:
+            return []
+        if self.desired is not None and self.desired.request.digest == request.digest:
+            return []  # same content: a retained redelivery or a commit that changed nothing
+        self.desired = _Assignment(request, list(warnings))
+        self.restarts = 0
+        self.streak = 0
+        if self.pid is not None:
+            if self.phase == AgentState.STOPPING:
+                return []  # the exit will start the newest desired request
+            return self._begin_stop(now, f"stopping for new request {request.digest}")
+        return self._spawn(now)
+
+    def reject(self, reason: str, now: float) -> list[Effect]:
+        """A request was refused; the brain, if any, is left as it is."""
+        self._set_rejection(reason)
+        return []
+
+    def clear(self, now: float) -> list[Effect]:
+        """The empty retained payload: nothing assigned, stop."""
+        self._set_rejection(None)
+        self.desired = None
+        if self.pid is not None:
+            if self.phase == AgentState.STOPPING:
+                return []
+            return self._begin_stop(now, "stopping: no launch request for this robot")
+        self.deadline = None
+        self.brain = None
+        self.exit_code = None
+        self.restarts = 0
+        self._enter(AgentState.IDLE, "no launch request for this robot")
+        return []
+
+    def spawned(self, pid: int, now: float) -> list[Effect]:
+        self.pid = pid
+        self._killed = False
+        self._started_at = now
+        self.exit_code = None
+        if self.policy.startsecs <= 0:
+            self.deadline = None
+            self._enter(AgentState.RUNNING, f"running (pid {pid})")
+        else:
+            self.deadline = now + self.policy.startsecs
+            self._enter(AgentState.STARTING, f"started pid {pid}")
+        return []
+
+    def spawn_failed(self, error: str, now: float) -> list[Effect]:
+        """The command could not even be started (missing executable, unwritable request)."""
+        self.pid = None
+        self.deadline = None
+        self._enter(AgentState.FAILED, error)
+        return []
+
+    def exited(self, pid: int, code: int, now: float) -> list[Effect]:
+        if pid != self.pid:
+            return []  # a stale report about an earlier process
+        self.pid = None
+        self.exit_code = code
+        self.deadline = None
+        how = describe_exit(code)
+        if self.phase == AgentState.STOPPING or self.shutting_down:
+            if self.shutting_down:
+                self._enter(AgentState.IDLE, f"brain stopped ({how})")
+                return []
+            if self.desired is not None:
+                return self._spawn(now)
+            self.brain = None
+            self.restarts = 0
+            self._enter(AgentState.IDLE, "no launch request for this robot")
+            return []
+        if now - self._started_at >= self.policy.reset_after:
+            self.streak = 0
+        policy = self.policy
+        restart = policy.restart == "always" or (policy.restart == "on-failure" and code != 0)
+        if not restart:
+            self._enter(AgentState.EXITED if code == 0 else AgentState.FAILED, f"brain {how}")
+            return []
+        if self.streak >= policy.max_restarts:
+            self._enter(
+                AgentState.FAILED,
+                f"brain {how}; gave up after {self.restarts} restarts (max_restarts "
+                f"{policy.max_restarts})",
+            )
+            return []
+        delay = policy.backoff(self.streak)
+        self.streak += 1
+        self.deadline = now + delay
+        self._enter(AgentState.BACKOFF, f"brain {how}; restarting in {delay:g} s")
+        return []
+
+    def tick(self, now: float) -> list[Effect]:
+        """Time passed; does something only once `deadline` is reached."""
+        if self.deadline is None or now < self.deadline:
+            return []
+        self.deadline = None
+        if self.phase == AgentState.STARTING and self.pid is not None:
+            self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
+        elif self.phase == AgentState.STOPPING and self.pid is not None and not self._killed:
+            self._killed = True
+            self.message = (
+                f"brain pid {self.pid} ignored SIGTERM for {self.policy.stop_timeout:g} s: "
+                "sent SIGKILL"
+            )
+            return [Kill(self.pid)]
+        elif self.phase == AgentState.BACKOFF and self.desired is not None:
+            self.restarts += 1
+            return self._spawn(now)
+        return []
+
+    def shutdown(self, now: float) -> list[Effect]:
+        """The agent is asked to stop; asked again, it stops waiting for the brain."""
+        if self.shutting_down and self.pid is not None:
+            self._killed = True
+            return [Kill(self.pid)]
+        self.shutting_down = True
+        self.deadline = None
+        if self.pid is not None:
+            return self._begin_stop(now, "agent shutting down: stopping the brain")
+        return []
+
+    # ------------------------------------------------------------ internals
+
+    def _spawn(self, now: float) -> list[Effect]:
+        assert self.desired is not None
+        self.brain = self.desired
+        self.pid = None
+        self.deadline = None
+        self._enter(AgentState.STARTING, f"starting {self.desired.request.digest}")
+        return [Spawn(self.desired.request)]
+
+    def _begin_stop(self, now: float, why: str) -> list[Effect]:
+        assert self.pid is not None
+        self._killed = False
+        self.deadline = now + self.policy.stop_timeout
+        self._enter(AgentState.STOPPING, why)
+        return [Terminate(self.pid)]
+
+    def _enter(self, phase: AgentState, message: str) -> None:
+        self.phase = phase
+        self.message = message
+        self._touch()
+
+    def _set_rejection(self, reason: str | None) -> None:
+        self.rejection = reason
+        self._touch()
+
+    def _touch(self) -> None:
+        # `since` marks the last change of the reported state, not every message edit.
+        if self.state != self._reported:
+            self._reported = self.state
+            self._since = round(self._wall(), 3)
