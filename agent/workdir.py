@@ -1,0 +1,107 @@
+"""The agent's work directory: its file names, atomic writes, the persisted `seq` and a lock.
+
+Everything the agent must remember across its own restarts lives here, nowhere else.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import tempfile
+import threading
+from pathlib import Path
+
+REQUEST_FILE = "launch-request.json"
+LOG_FILE = "brain.log"
+PID_FILE = "brain.pid"
+SEQ_FILE = "agent.seq"
+LOCK_FILE = "agent.lock"
+
+
+def write_atomic(path: Path, data: bytes, mode: int = 0o600) -> None:
+    """Readers see the old file or the new one, never a half-written one."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as out:
+            os.fchmod(out.fileno(), mode)
+            out.write(data)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    # The rename itself must survive a power cut too.
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+class SeqStore:
+    """The connection counter of DESIGN §7, persisted so a restarted agent keeps counting up.
+
+    `advance()` runs on paho's network thread right before each connection attempt, the
+    agent's thread reads `current`: hence the lock.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self._path = path
+        self._lock = threading.Lock()
+        self._current = self._read()
+        self._floor = self._current
+
+    def _read(self) -> int:
+        try:
+            return max(0, int(self._path.read_text(encoding="ascii").strip()))
+        except (OSError, ValueError):
+            return 0
+
+    @property
+    def current(self) -> int:
+        with self._lock:
+            return self._current
+
+    def observe(self, seq: int) -> None:
+        """A seq seen on the broker: the next connection must count past it."""
+        with self._lock:
+            self._floor = max(self._floor, seq)
+
+    def advance(self) -> int:
+        with self._lock:
+            self._current = max(self._current, self._floor) + 1
+            value = self._current
+        # Losing the file only weakens late-will detection after a restart; keep connecting.
+        with contextlib.suppress(OSError):
+            write_atomic(self._path, f"{value}\n".encode("ascii"), mode=0o644)
+        return value
+
+
+class WorkdirLock:
+    """One agent per work directory: a second one would take the first one's brain for an orphan."""
+
+    def __init__(self, workdir: Path) -> None:
+        self._path = workdir / LOCK_FILE
+        self._fd: int | None = None
+
+    def acquire(self) -> str | None:
+        """None when acquired, else why not."""
+        fd = os.open(self._path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            return f"another agent (pid {holder}) is using {self._path.parent}"
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        self._fd = fd
+        return None
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
