@@ -1,0 +1,301 @@
+"""The agent's own thread: takes events from the inbox, drives the supervisor, runs its effects.
+
+The only place where the state machine, the brain process and the broker link meet.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import queue
+import signal
+import time
+from types import FrameType
+
+from pydantic import ValidationError
+
+from agent import process, requests
+from agent.config import AgentConfig
+from agent.events import (
+    BrainExited,
+    Connected,
+    ConnectFailed,
+    Disconnected,
+    Event,
+    Inbox,
+    LaunchMessage,
+    Shutdown,
+    StatusMessage,
+)
+from agent.service import BrokerLink
+from agent.supervisor import Effect, Kill, Policy, Spawn, Supervisor, Terminate, describe_exit
+from agent.workdir import (
+    LOG_FILE,
+    PID_FILE,
+    REQUEST_FILE,
+    SEQ_FILE,
+    SeqStore,
+    write_atomic,
+)
+from configurator.launch import LaunchRequest
+from configurator.wire import AgentState, AgentStatus
+
+log = logging.getLogger("robotconf.agent")
+
+LOG_CHECK_INTERVAL = 2.0  # seconds between brain log size checks
+IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
+
+
+def policy_of(config: AgentConfig) -> Policy:
+    return Policy(
+        restart=config.restart.policy,
+        max_restarts=config.restart.max_restarts,
+        backoff_initial=config.restart.backoff_initial,
+        backoff_max=config.restart.backoff_max,
+        reset_after=config.restart.reset_after,
+        startsecs=config.startsecs,
+        stop_timeout=config.stop_timeout,
+    )
+
+
+class Agent:
+    def __init__(self, config: AgentConfig) -> None:
+        self.config = config
+        self.workdir = config.workdir
+        self.description = config.description.to_wire()
+        self.inbox: Inbox = queue.SimpleQueue()
+        self.seq = SeqStore(self.workdir / SEQ_FILE)
+        self.supervisor = Supervisor(config.robot_id, policy_of(config))
+        self.brain_log = process.BrainLog(
+            self.workdir / LOG_FILE, config.log.max_bytes, config.log.backups
+        )
+        self.link = BrokerLink(
+            config.connection(),
+            config.prefix,
+            config.robot_id,
+            config.keepalive,
+            self.inbox,
+            self.seq,
+        )
+        self.brain: process.Brain | None = None
+        self.connected = False
+        self.conn_seq = 0
+        self._last_published: AgentStatus | None = None
+        self._last_connect_problem: str | None = None
+        self._next_log_check = 0.0
+        self._recovery_note: str | None = None
+
+    # ------------------------------------------------------------ lifecycle
+
+    def install_signal_handlers(self) -> None:
+        def handler(signum: int, frame: FrameType | None) -> None:
+            # SimpleQueue.put is reentrant: safe even if the signal lands inside a get().
+            self.inbox.put(Shutdown(signal.Signals(signum).name))
+
+        signal.signal(signal.SIGTERM, handler)
+        signal.signal(signal.SIGINT, handler)
+
+    def run(self) -> int:
+        self._recovery_note = process.stop_orphan(
+            self.workdir / PID_FILE, self.config.stop_timeout
+        )
+        if self._recovery_note:
+            log.warning("%s", self._recovery_note)
+            self.supervisor.message = self._recovery_note
+        url = self.config.connection().address.url
+        log.info("agent for %s connecting to %s", self.config.robot_id, url)
+        self.link.start()
+        while not self.supervisor.finished:
+            event = self._next_event()
+            now = time.monotonic()
+            if event is not None:
+                self._handle(event, now)
+            self._apply(self.supervisor.tick(now))
+            self._maybe_rotate_log(now)
+            self._publish_if_changed()
+        final = self.supervisor.status().model_copy(
+            update={
+                "state": AgentState.OFFLINE,
+                "seq": self.conn_seq,
+                "message": "agent stopped",
+            }
+        )
+        self.link.close(final if self.connected else None)
+        log.info("agent stopped")
+        return 0
+
+    def _next_event(self) -> Event | None:
+        now = time.monotonic()
+        wake = now + IDLE_WAKEUP
+        if self.supervisor.deadline is not None:
+            wake = min(wake, self.supervisor.deadline)
+        if self.brain is not None:
+            wake = min(wake, self._next_log_check)
+        try:
+            return self.inbox.get(timeout=max(0.0, wake - now))
+        except queue.Empty:
+            return None
+
+    # ------------------------------------------------------------ events
+
+    def _handle(self, event: Event, now: float) -> None:
+        sup = self.supervisor
+        if isinstance(event, Connected):
+            self.connected = True
+            self.conn_seq = event.seq
+            self._last_connect_problem = None
+            log.info("connected (seq %d)", event.seq)
+            self.link.publish_description(self.description)
+            self._publish(force=True)
+        elif isinstance(event, Disconnected):
+            if self.connected:
+                log.warning("disconnected from the broker (%s); reconnecting", event.reason)
+            self.connected = False
+        elif isinstance(event, ConnectFailed):
+            self.connected = False
+            if event.reason != self._last_connect_problem:
+                log.warning("%s; retrying with backoff", event.reason)
+                self._last_connect_problem = event.reason
+        elif isinstance(event, LaunchMessage):
+            self._on_launch(event.payload, now)
+        elif isinstance(event, StatusMessage):
+            self._on_own_status(event.payload)
+        elif isinstance(event, BrainExited):
+            self._on_brain_exit(event, now)
+        elif isinstance(event, Shutdown):
+            log.info("%s received: stopping", event.signal_name)
+            self._apply(sup.shutdown(now))
+
+    def _on_launch(self, payload: bytes, now: float) -> None:
+        verdict = requests.interpret(payload, self.description)
+        sup = self.supervisor
+        if isinstance(verdict, requests.Clear):
+            log.info("launch request cleared")
+            self._apply(sup.clear(now))
+        elif isinstance(verdict, requests.Reject):
+            log.warning("launch request rejected: %s", verdict.reason)
+            self._apply(sup.reject(verdict.reason, now))
+        else:
+            for warning in verdict.warnings:
+                log.warning("%s", warning)
+            self._apply(sup.accept(verdict.request, verdict.warnings, now))
+
+    def _on_own_status(self, payload: bytes) -> None:
+        try:
+            seen = AgentStatus.model_validate_json(payload)
+        except ValidationError:
+            return
+        self.seq.observe(seen.seq)
+        if seen.state != AgentState.OFFLINE or not self.connected or self.supervisor.shutting_down:
+            return
+        # Alive and connected, yet the topic says offline: a Last Will from an older connection
+        # (or a previous agent's) arrived after this connection's status. Say again who is live.
+        log.warning(
+            "overwriting a stale offline status (seq %d; this connection is seq %d)",
+            seen.seq,
+            self.conn_seq,
+        )
+        self._publish(force=True)
+
+    def _on_brain_exit(self, event: BrainExited, now: float) -> None:
+        if self.brain is not None and self.brain.pid == event.pid:
+            self.brain = None
+            self._remove(PID_FILE)
+        how = describe_exit(event.code)
+        self.brain_log.note(f"brain pid {event.pid} {how}")
+        log.info("brain pid %d %s", event.pid, how)
+        self._apply(self.supervisor.exited(event.pid, event.code, now))
+
+    # ------------------------------------------------------------ effects
+
+    def _apply(self, effects: list[Effect]) -> None:
+        for effect in effects:
+            if isinstance(effect, Spawn):
+                self._spawn(effect.request)
+            elif isinstance(effect, Terminate):
+                log.info("stopping brain pid %d (SIGTERM to its process group)", effect.pid)
+                process.signal_group(effect.pid, signal.SIGTERM)
+            elif isinstance(effect, Kill):
+                log.warning("killing brain pid %d (SIGKILL to its process group)", effect.pid)
+                process.signal_group(effect.pid, signal.SIGKILL)
+
+    def _spawn(self, request: LaunchRequest) -> None:
+        now = time.monotonic()
+        path = self.workdir / REQUEST_FILE
+        argv = process.substitute(self.config.command, path)
+        try:
+            write_atomic(path, request.payload(), mode=0o600)
+            log_fd = self.brain_log.open_for_child()
+        except OSError as exc:
+            problem = f"cannot write {exc.filename}: {exc.strerror}"
+            self._apply(self.supervisor.spawn_failed(problem, now))
+            return
+        try:
+            brain = process.spawn(
+                argv,
+                cwd=self.workdir,
+                log_fd=log_fd,
+                env={
+                    "ROBOTCONF_LAUNCH_REQUEST": str(path),
+                    "ROBOTCONF_ROBOT_ID": self.config.robot_id,
+                    "ROBOTCONF_DIGEST": request.digest,
+                },
+                on_exit=lambda pid, code: self.inbox.put(BrainExited(pid, code)),
+            )
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            message = f"cannot start {argv[0]!r}: {reason}"
+            log.error("%s", message)
+            self.brain_log.note(message)
+            self._apply(self.supervisor.spawn_failed(message, now))
+            return
+        finally:
+            os.close(log_fd)
+        self.brain = brain
+        try:
+            process.write_pidfile(self.workdir / PID_FILE, brain.pid, request.digest)
+        except OSError as exc:
+            log.warning("cannot write the pidfile: %s", exc)
+        self.brain_log.note(f"started pid {brain.pid} for {request.digest} ({request.revision})")
+        log.info("started brain pid %d for %s", brain.pid, request.digest)
+        self._next_log_check = now + LOG_CHECK_INTERVAL
+        self._apply(self.supervisor.spawned(brain.pid, now))
+
+    def _maybe_rotate_log(self, now: float) -> None:
+        if self.brain is None or now < self._next_log_check:
+            return
+        self._next_log_check = now + LOG_CHECK_INTERVAL
+        if self.brain_log.rotate_if_needed():
+            log.info("rotated %s", self.brain_log.path)
+
+    def _remove(self, name: str) -> None:
+        try:
+            (self.workdir / name).unlink()
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            log.warning("cannot remove %s: %s", name, exc)
+
+    # ------------------------------------------------------------ status
+
+    def current_status(self) -> AgentStatus:
+        return self.supervisor.status().model_copy(update={"seq": self.conn_seq})
+
+    def _publish_if_changed(self) -> None:
+        self._publish(force=False)
+
+    def _publish(self, force: bool) -> None:
+        if not self.connected:
+            return
+        status = self.current_status()
+        if not force and status == self._last_published:
+            return
+        self.link.publish_status(status)
+        self._last_published = status
+
+
+def run_agent(config: AgentConfig) -> int:
+    agent = Agent(config)
+    agent.install_signal_handlers()
+    return agent.run()
+
