@@ -1,0 +1,95 @@
+"""A stand-in brain service for demos and tests: `python -m agent.standin_brain REQUEST.json`.
+
+It loads nothing real: it prints what a brain would load, then runs until signalled.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from types import FrameType
+
+from pydantic import ValidationError
+
+from configurator.launch import LaunchRequest
+
+
+def describe(request: LaunchRequest) -> list[str]:
+    scenario = request.scenario
+    capability = scenario.capability
+    lines = [
+        f"stand-in brain for {request.robot_id} ({request.robot_name}), "
+        f"scenario {scenario.name}, {request.digest} at {request.revision}",
+        f"platform module: {capability.platform} (mapping scheme {capability.mapping_scheme}, "
+        f"robot template {capability.robot_template or '-'})",
+        "logic modules:",
+    ]
+    lines += [f"  {action}: {logic}" for action, logic in sorted(capability.logics.items())]
+    lines.append("mappings:")
+    lines += [
+        f"  {name}: {b.kind} {b.name} ({b.type})" for name, b in sorted(capability.mappings.items())
+    ]
+    if scenario.goals:
+        lines.append("goals: " + ", ".join(goal.task for goal in scenario.goals))
+    return lines
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m agent.standin_brain",
+        description="Stand-in brain: prints the modules it would load, runs until signalled.",
+    )
+    parser.add_argument("request", type=Path, help="the launch request JSON file")
+    # Misbehaviour on demand, so that demos and tests can show crashes and stubborn brains.
+    parser.add_argument("--exit-after", type=float, metavar="S", help="exit by itself after S s")
+    parser.add_argument("--exit-code", type=int, default=0, help="code for --exit-after")
+    parser.add_argument("--ignore-sigterm", action="store_true", help="only SIGKILL stops it")
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        request = LaunchRequest.model_validate_json(args.request.read_bytes())
+    except OSError as exc:
+        print(f"stand-in brain: cannot read {args.request}: {exc.strerror}", file=sys.stderr)
+        return 2
+    except ValidationError as exc:
+        print(f"stand-in brain: malformed launch request {args.request}:", file=sys.stderr)
+        for error in exc.errors():
+            where = ".".join(str(p) for p in error["loc"]) or "(top level)"
+            print(f"  {where}: {error['msg']}", file=sys.stderr)
+        return 1
+    for line in describe(request):
+        print(line)
+    sys.stdout.flush()
+
+    stop = threading.Event()
+    received: list[str] = []
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        received.append(signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN if args.ignore_sigterm else on_signal)
+    deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
+    while not stop.is_set():
+        remaining = None if deadline is None else deadline - time.monotonic()
+        if remaining is not None and remaining <= 0:
+            print(f"stand-in brain: exiting with code {args.exit_code} as asked", flush=True)
+            return int(args.exit_code)
+        stop.wait(remaining if remaining is not None else 3600)
+    # The log may be gone; stopping matters more than saying so.
+    with contextlib.suppress(OSError):
+        print(f"stand-in brain: {received[0]} received, stopping", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
