@@ -1,0 +1,24 @@
+"""Fixtures shared by every test suite: a real Mosquitto broker per test."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.mosquitto import Mosquitto, find_mosquitto
+
+
+@pytest.fixture
+def mosquitto(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mosquitto]:
+    """A running broker on a free port (`.url`), killed at teardown; `stop()`/`start()` keep
+    the port so that tests can take the broker away and bring it back."""
+    if find_mosquitto() is None:
+        pytest.fail("mosquitto is not installed: run ./dev setup (tests never mock the broker)")
+    broker = Mosquitto(Path(tmp_path_factory.mktemp("mosquitto")))
+    broker.start()
+    try:
+        yield broker
+    finally:
+        broker.kill()
