@@ -15,6 +15,7 @@ from configurator.types import ROBOT_ID_PATTERN, JsonObject, MappingBinding
 
 API_VERSION = "robotconf/v1"
 DIGEST_PATTERN = r"^sha256:[0-9a-f]{64}$"
+_NOT_CONTENT = {"revision", "digest", "issued_at", "signature"}
 
 
 class _Wire(BaseModel):
@@ -58,14 +59,24 @@ class LaunchRequest(_Wire):
     revision: str = Field(description="the git commit it was rendered from")
     digest: str = Field(pattern=DIGEST_PATTERN, description="sha256 of the content")
     scenario: LaunchScenario
+    # Set when the reconciler signs the request (configurator/signing.py).
+    issued_at: float | None = Field(None, description="unix time the request was signed")
+    signature: str | None = Field(None, description="base64 Ed25519 over the signed fields")
 
     def content(self) -> dict[str, Any]:
-        """The request without `revision` and `digest`: what the digest covers."""
-        return self.model_dump(mode="json", exclude={"revision", "digest"})
+        """What the digest covers: everything but revision, digest and the signature fields."""
+        return self.model_dump(mode="json", exclude=_NOT_CONTENT)
+
+    def wire(self, *, signature: bool = True) -> dict[str, Any]:
+        """The JSON object published (signing fields only when set)."""
+        unset = {k for k in ("issued_at", "signature") if getattr(self, k) is None}
+        if not signature:
+            unset.add("signature")
+        return self.model_dump(mode="json", exclude=unset)
 
     def payload(self) -> bytes:
         """The canonical bytes published on the launch topic."""
-        return canonical_json(self.model_dump(mode="json"))
+        return canonical_json(self.wire())
 
     def digest_matches(self) -> bool:
         return self.digest == content_digest(self.content())

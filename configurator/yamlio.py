@@ -6,6 +6,7 @@ tabs in indentation, several documents, non-UTF-8 bytes, oversized files.
 
 from __future__ import annotations
 
+import codecs
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -22,6 +23,9 @@ except ImportError:  # pragma: no cover - depends on the PyYAML build
 
 MAX_FILE_BYTES = 8 * 1024 * 1024
 MAX_DEPTH = 64
+# Every list or mapping opens with one of these; a text with fewer of them cannot nest deeper.
+_NESTING_INDICATORS = "[{-:?"
+_SCAN_NESTING_ABOVE = 1000
 
 _STR = "tag:yaml.org,2002:str"
 _INT = "tag:yaml.org,2002:int"
@@ -101,8 +105,13 @@ def _problem(mark: Any, code: str, message: str) -> YamlProblem:
 
 
 def _position_of_byte(raw: bytes, offset: int) -> tuple[int, int]:
+    """Line and column (1-based) of a byte offset into UTF-8; columns count characters, as
+    YAML marks do (a leading BOM is not one)."""
     line = raw.count(b"\n", 0, offset) + 1
-    col = offset - (raw.rfind(b"\n", 0, offset) + 1) + 1
+    start = raw.rfind(b"\n", 0, offset) + 1
+    if start == 0 and raw.startswith(codecs.BOM_UTF8):
+        start = len(codecs.BOM_UTF8)
+    col = len(raw[start:offset].decode("utf-8", errors="replace")) + 1
     return line, col
 
 
@@ -141,10 +150,62 @@ def _tab_indents(text: str) -> list[YamlProblem]:
     return problems
 
 
-def _compose(text: str) -> Node | None:
+def _reader_problem(text: str, exc: yaml.reader.ReaderError) -> YamlProblem:
+    """A character YAML refuses (control characters): located, in one line."""
+    raw = text.encode("utf-8")
+    offset = exc.position
+    if not _Loader.__name__.startswith("C"):  # libyaml counts bytes, pure Python characters
+        offset = len(text[:offset].encode("utf-8"))
+    line, col = _position_of_byte(raw, offset)
+    char = exc.character if isinstance(exc.character, int) else ord(exc.character)
+    return YamlProblem(
+        line,
+        col,
+        "RC003",
+        f"YAML syntax error: {exc.reason} (character #x{char:04x})",
+    )
+
+
+def _refuse_runaway_nesting(text: str) -> None:
+    """RC009 before composing: libyaml's composer recurses once per level in C, so some tens of
+    thousands of nested brackets (a file of a few hundred kB) overflow the stack and crash.
+
+    Only a text that could nest deep is scanned, event by event, which is cheap next to
+    composing; syntax errors are left to the composer, which locates them."""
+    if sum(map(text.count, _NESTING_INDICATORS)) <= _SCAN_NESTING_ABOVE:
+        return
     loader = _Loader(text)
+    depth = 0
+    try:
+        while loader.check_event():
+            event = loader.get_event()
+            if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+                if depth > MAX_DEPTH:
+                    raise YamlReadError(
+                        [
+                            _problem(
+                                event.start_mark, "RC009", f"nested deeper than {MAX_DEPTH} levels"
+                            )
+                        ]
+                    )
+                depth += 1
+            elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+                depth -= 1
+    except yaml.YAMLError:
+        return
+    finally:
+        loader.dispose()
+
+
+def _compose(text: str) -> Node | None:
+    try:
+        loader = _Loader(text)  # the pure-Python reader checks every character here
+    except yaml.reader.ReaderError as exc:  # pragma: no cover - only without libyaml
+        raise YamlReadError([_reader_problem(text, exc)]) from None
     try:
         return loader.get_single_node()
+    except yaml.reader.ReaderError as exc:
+        raise YamlReadError([_reader_problem(text, exc)]) from None
     except yaml.composer.ComposerError as exc:
         if "single document" in f"{exc.context} {exc.problem}":
             raise YamlReadError(
@@ -175,7 +236,8 @@ def _yaml_message(exc: yaml.MarkedYAMLError) -> str:
 class _Builder:
     """Turns a node tree into plain data, refusing aliases and duplicate keys."""
 
-    def __init__(self) -> None:
+    def __init__(self, text: str) -> None:
+        self.text = text
         self.seen: set[int] = set()
         self.problems: list[YamlProblem] = []
 
@@ -185,7 +247,7 @@ class _Builder:
             raise YamlReadError(
                 [
                     _problem(
-                        where or node.start_mark,
+                        where or _first_alias_mark(self.text) or node.start_mark,
                         "RC005",
                         "YAML aliases (*name, <<: *name) are not supported; "
                         "write the value out in full",
@@ -260,6 +322,23 @@ class _Builder:
         return node.value
 
 
+def _first_alias_mark(text: str) -> Any:
+    """Where the first alias (*name) is: composed, it is only its anchor's node met again.
+
+    Read token by token, so even an alias bomb costs no more than its own text."""
+    loader = _Loader(text)
+    try:
+        while loader.check_token():
+            token = loader.get_token()
+            if isinstance(token, yaml.AliasToken):
+                return token.start_mark
+    except yaml.YAMLError:
+        pass
+    finally:
+        loader.dispose()
+    return None
+
+
 def _tag_message(node: Node) -> str:
     return f"YAML tag '{node.tag}' is not supported; use plain strings, numbers, lists, mappings"
 
@@ -283,6 +362,7 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
         tabs = _tab_indents(text)
         if tabs:
             raise YamlReadError(tabs)
+    _refuse_runaway_nesting(text)
     root = _compose(text)
     if root is None:
         raise YamlReadError(
@@ -300,7 +380,7 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
                 )
             ]
         )
-    builder = _Builder()
+    builder = _Builder(text)
     data = builder.build(root)
     if builder.problems:
         raise YamlReadError(builder.problems)

@@ -87,7 +87,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     except RenderError as exc:
         print(f"robotconf: {exc}", file=sys.stderr)
         return EXIT_FINDINGS
-    print(json.dumps(request.model_dump(mode="json"), indent=2, sort_keys=True, ensure_ascii=False))
+    print(json.dumps(request.wire(), indent=2, sort_keys=True, ensure_ascii=False))
     return EXIT_OK
 
 

@@ -54,7 +54,7 @@ def _broker_args(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from configurator.cli import authoring, inspect, server
+    from configurator.cli import authoring, inspect, security, server
 
     parser = argparse.ArgumentParser(
         prog="robotconf",
@@ -104,6 +104,32 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("schemas", authoring.cmd_schemas, "write the JSON Schemas under schemas/")
     _repo_args(p, rev=False)
     p.add_argument("--check", action="store_true", help="fail when schemas/ is stale")
+
+    p = add("keys", security.cmd_keys, "make the Ed25519 key pair that signs Launch Requests")
+    p.add_argument("action", choices=["generate"], help="generate a new key pair")
+    p.add_argument("--out", type=Path, default=Path("keys"), help="folder (default: keys/)")
+    p.add_argument("--force", action="store_true", help="replace an existing pair")
+
+    p = add(
+        "broker-config",
+        security.cmd_broker_config,
+        "write Mosquitto ACL, password file and TLS listener from configs/fleet.yaml",
+    )
+    _repo_args(p)
+    p.add_argument("--prefix", default=DEFAULT_PREFIX, help="topic prefix (default: %(default)s)")
+    p.add_argument("--out", type=Path, default=Path("broker"), help="folder (default: broker/)")
+    p.add_argument(
+        "--secrets", type=Path, default=None, help="password files (default: OUT/secrets)"
+    )
+    p.add_argument("--port", type=int, default=8883, help="listener port (default: %(default)s)")
+    p.add_argument("--bind", default=None, help="listener address (default: all)")
+    p.add_argument("--certfile", type=Path, default=None, help="server certificate (TLS)")
+    p.add_argument("--keyfile", type=Path, default=None, help="server key (TLS)")
+    p.add_argument("--cafile", type=Path, default=None, help="CA for client certificates")
+    p.add_argument("--require-certificate", action="store_true", help="clients must present one")
+    p.add_argument("--reconciler-user", default="reconciler")
+    p.add_argument("--viewer-user", default="viewer")
+    p.add_argument("--check", action="store_true", help="fail when the files are stale")
 
     server.add_commands(add, _repo_args, _broker_args)
     return parser

@@ -36,13 +36,23 @@ def add_commands(add: Add, repo_args: Callable[..., Any], broker_args: Callable[
     p.add_argument(
         "--interval", type=float, default=30.0, help="resync (and fetch) period in seconds"
     )
+    p.add_argument(
+        "--cache-dir",
+        default=None,
+        help="where --remote is cloned (default: ~/.cache/robotconf/remotes)",
+    )
 
     p = add("status", _status, "show the fleet: desired vs reported, worst first")
     repo_args(p)
     broker_args(p)
     p.add_argument("--watch", action="store_true", help="keep showing until interrupted")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--wait", type=float, default=1.0, help="seconds to collect retained messages")
+    p.add_argument(
+        "--wait",
+        type=float,
+        default=5.0,
+        help="give up when the broker's retained messages have not arrived after S seconds",
+    )
 
     p = add("up", _up, "the whole loop on this machine: broker, reconciler, agents, status")
     repo_args(p, rev=False)

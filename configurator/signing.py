@@ -1,0 +1,141 @@
+"""Signed Launch Requests: Ed25519 keys, signing by the reconciler, verification by the agent.
+
+The signature covers the canonical request with everything but the signature itself: robot id,
+revision, digest, issued_at and the content. `cryptography` is imported only here, and only
+when a key is used, so an agent without signing imports nothing more.
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from configurator.launch import LaunchRequest, canonical_json
+
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import (
+        Ed25519PrivateKey,
+        Ed25519PublicKey,
+    )
+
+PRIVATE_NAME = "launch-signing.key"
+PUBLIC_NAME = "launch-signing.pub"
+
+
+class SigningKeyError(Exception):
+    """A key file is missing, unreadable or not an Ed25519 key."""
+
+
+@dataclass(frozen=True)
+class KeyPair:
+    private: Path
+    public: Path
+
+
+def generate_keys(folder: Path, *, force: bool = False) -> KeyPair:
+    """Write a new Ed25519 pair: the private key 0600, the public key 0644."""
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    pair = KeyPair(folder / PRIVATE_NAME, folder / PUBLIC_NAME)
+    if not force and (pair.private.exists() or pair.public.exists()):
+        raise SigningKeyError(f"{folder} already holds a key pair; pass --force to replace it")
+    folder.mkdir(parents=True, exist_ok=True)
+    key = Ed25519PrivateKey.generate()
+    private_pem = key.private_bytes(
+        serialization.Encoding.PEM,
+        serialization.PrivateFormat.PKCS8,
+        serialization.NoEncryption(),
+    )
+    public_pem = key.public_key().public_bytes(
+        serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo
+    )
+    _write(pair.private, private_pem, 0o600)
+    _write(pair.public, public_pem, 0o644)
+    return pair
+
+
+def _write(path: Path, data: bytes, mode: int) -> None:
+    """Create with the final mode from the start, so a secret is never briefly world-readable."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
+    try:
+        os.write(fd, data)
+        os.fchmod(fd, mode)
+    finally:
+        os.close(fd)
+    os.replace(tmp, path)
+
+
+def load_private_key(path: Path) -> Ed25519PrivateKey:
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    try:
+        key = serialization.load_pem_private_key(path.read_bytes(), password=None)
+    except OSError as exc:
+        raise SigningKeyError(f"{path}: cannot read the signing key ({exc.strerror})") from None
+    except (ValueError, TypeError):
+        raise SigningKeyError(
+            f"{path}: not a PEM private key (make one: robotconf keys generate)"
+        ) from None
+    if not isinstance(key, Ed25519PrivateKey):
+        raise SigningKeyError(f"{path}: not an Ed25519 key (make one: robotconf keys generate)")
+    return key
+
+
+def load_public_key(path: Path) -> Ed25519PublicKey:
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+
+    try:
+        key = serialization.load_pem_public_key(path.read_bytes())
+    except OSError as exc:
+        raise SigningKeyError(f"{path}: cannot read the public key ({exc.strerror})") from None
+    except ValueError:
+        raise SigningKeyError(
+            f"{path}: not a PEM public key (robotconf keys generate writes one)"
+        ) from None
+    if not isinstance(key, Ed25519PublicKey):
+        raise SigningKeyError(f"{path}: not an Ed25519 public key")
+    return key
+
+
+def signed_bytes(request: LaunchRequest) -> bytes:
+    return canonical_json(request.wire(signature=False))
+
+
+def sign(
+    request: LaunchRequest, key: Ed25519PrivateKey, issued_at: float | None = None
+) -> LaunchRequest:
+    stamped = request.model_copy(
+        update={
+            "issued_at": round(time.time() if issued_at is None else issued_at, 6),
+            "signature": None,
+        }
+    )
+    signature = base64.b64encode(key.sign(signed_bytes(stamped))).decode("ascii")
+    return stamped.model_copy(update={"signature": signature})
+
+
+def verify(request: LaunchRequest, key: Ed25519PublicKey) -> str | None:
+    """None when the reconciler's key signed exactly this request, else why not."""
+    from cryptography.exceptions import InvalidSignature
+
+    if request.signature is None or request.issued_at is None:
+        return "request is not signed, and this agent requires signed requests"
+    try:
+        raw = base64.b64decode(request.signature, validate=True)
+    except ValueError:
+        return "signature is not valid base64"
+    try:
+        key.verify(raw, signed_bytes(request))
+    except InvalidSignature:
+        return "signature does not verify: the request was altered or signed by another key"
+    if not request.digest_matches():
+        return "digest does not match the request's content"
+    return None
