@@ -84,12 +84,16 @@ def _data_loc(data: Any, loc: Sequence[str | int]) -> tuple[str | int, ...]:
     out: list[str | int] = []
     current = data
     for part in loc:
-        if isinstance(current, dict) and part in current:
+        indexable = isinstance(current, dict) or (
+            isinstance(current, list) and isinstance(part, int) and part >= 0
+        )
+        if not indexable:
+            continue
+        try:
             current = current[part]
-            out.append(part)
-        elif isinstance(current, list) and isinstance(part, int) and 0 <= part < len(current):
-            current = current[part]
-            out.append(part)
+        except (KeyError, IndexError):
+            continue
+        out.append(part)
     return tuple(out)
 
 

@@ -107,7 +107,8 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
         if have != wanted_users:
             missing, extra = sorted(wanted_users - have), sorted(have - wanted_users)
             stale.append(
-                f"{passwd_file}: missing {', '.join(missing) or '-'}; extra {', '.join(extra) or '-'}"
+                f"{passwd_file}: missing {', '.join(missing) or '-'}; "
+                f"extra {', '.join(extra) or '-'}"
             )
         for line in stale:
             print(f"robotconf: {line}", file=sys.stderr)

@@ -238,7 +238,7 @@ def test_unverifiable_server_is_refused_unless_told_otherwise(broker: Broker) ->
         password_file=broker.secret("viewer"),
     )
     client = make_client(untrusted, "viewer-untrusted")
-    with pytest.raises(OSError, match="CERTIFICATE_VERIFY_FAILED|certificate verify failed"):
+    with pytest.raises(OSError, match=r"CERTIFICATE_VERIFY_FAILED|certificate verify failed"):
         client.connect("127.0.0.1", broker.server.port)
     insecure = Connection(
         url=untrusted.url, username="viewer", password_file=broker.secret("viewer"), insecure=True
