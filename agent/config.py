@@ -293,7 +293,10 @@ def _explain(error: Any) -> tuple[Loc, str]:
     message = str(error["msg"])
     if message.startswith("Value error, "):
         message = message[len("Value error, ") :]
-        return loc, message if loc == () else f"{where}: {message}"
+        # Our own messages usually name the field already ("broker URL ... must ...").
+        if loc == () or str(loc[-1]) in message.split()[:3]:
+            return loc, message
+        return loc, f"{where}: {message}"
     return loc, f"{where}: {message} (got {error.get('input')!r})"
 
 

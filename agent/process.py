@@ -57,16 +57,6 @@ def is_alive(pid: int) -> bool:
     return stat is not None and stat[0] not in ("Z", "X")
 
 
-def group_alive(pgid: int) -> bool:
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def signal_group(pgid: int, sig: signal.Signals) -> None:
     with contextlib.suppress(ProcessLookupError):
         os.killpg(pgid, sig)
@@ -140,12 +130,14 @@ def stop_orphan(
     while record.is_running() and time.monotonic() < deadline:
         sleep(0.05)
     how = "stopped"
-    if record.is_running() or group_alive(record.pid):
-        signal_group(record.pid, signal.SIGKILL)
+    if record.is_running():
         how = "killed"
+        signal_group(record.pid, signal.SIGKILL)
         deadline = time.monotonic() + 5
         while record.is_running() and time.monotonic() < deadline:
             sleep(0.05)
+    # What the brain started in its group goes with it, as when the agent watches it exit.
+    signal_group(record.pid, signal.SIGKILL)
     pidfile.unlink()
     return f"{how} brain pid {record.pid} left behind by a previous agent"
 

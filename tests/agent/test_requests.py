@@ -1,0 +1,84 @@
+"""What a launch-topic payload means for this robot, decided without a broker."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from agent.requests import Accept, Clear, Reject, interpret
+from configurator.wire import RobotDescription
+from tests.agent.harness import make_request
+
+ROBOT = RobotDescription(
+    id="tb3-01", name="Delivery bot", recommended_template="turtlebot3-camera", platform="ROS2"
+)
+
+
+@pytest.mark.parametrize("payload", [b"", b"  \n"])
+def test_empty_payload_clears(payload: bytes) -> None:
+    assert interpret(payload, ROBOT) == Clear()
+
+
+def test_valid_request_is_accepted_without_warnings() -> None:
+    request = make_request()
+    verdict = interpret(request.payload(), ROBOT)
+    assert verdict == Accept(request, [])
+
+
+def reason(payload: bytes, robot: RobotDescription = ROBOT) -> str:
+    verdict = interpret(payload, robot)
+    assert isinstance(verdict, Reject), verdict
+    return verdict.reason
+
+
+def test_another_robots_request_is_rejected() -> None:
+    assert "'tb3-02'" in reason(make_request(robot_id="tb3-02").payload())
+
+
+@pytest.mark.parametrize("payload", [b"{", b"\xff\xfe", b"[1, 2"])
+def test_malformed_json_is_rejected(payload: bytes) -> None:
+    assert reason(payload).startswith("malformed JSON")
+
+
+def test_non_object_is_rejected() -> None:
+    assert "JSON object" in reason(b"[1, 2]")
+
+
+@pytest.mark.parametrize("version", ["robotconf/v2", None])
+def test_unknown_api_version_is_rejected(version: str | None) -> None:
+    data = json.loads(make_request().payload())
+    data["apiVersion"] = version
+    assert "unknown apiVersion" in reason(json.dumps(data).encode())
+
+
+def test_schema_violations_are_rejected_with_the_field() -> None:
+    data = json.loads(make_request().payload())
+    del data["scenario"]["capability"]["platform"]
+    data["surprise"] = 1
+    text = reason(json.dumps(data).encode())
+    assert "scenario.capability.platform" in text and "surprise" in text
+
+
+def test_tampered_content_is_rejected_by_its_digest() -> None:
+    data = json.loads(make_request().payload())
+    data["scenario"]["robot_settings"]["max_linear_speed"] = 9.9
+    assert "does not match" in reason(json.dumps(data).encode())
+
+
+def test_other_platform_is_rejected_only_when_the_robot_declares_one() -> None:
+    ros1 = make_request(platform="ROS1").payload()
+    assert "platform 'ROS1'" in reason(ros1)
+    anything = ROBOT.model_copy(update={"platform": None})
+    assert isinstance(interpret(ros1, anything), Accept)
+
+
+def test_other_template_is_a_warning() -> None:
+    verdict = interpret(make_request(template="turtlebot3-burger").payload(), ROBOT)
+    assert isinstance(verdict, Accept)
+    assert len(verdict.warnings) == 1 and "turtlebot3-burger" in verdict.warnings[0]
+    verdict = interpret(make_request(template=None).payload(), ROBOT)
+    assert isinstance(verdict, Accept) and "names no robot template" in verdict.warnings[0]
+    no_preference = ROBOT.model_copy(update={"recommended_template": None})
+    verdict = interpret(make_request(template="turtlebot3-burger").payload(), no_preference)
+    assert verdict == Accept(make_request(template="turtlebot3-burger"), [])
