@@ -1,0 +1,252 @@
+"""configurator.yamlio on bytes: the data it yields and where every key and value came from."""
+
+from __future__ import annotations
+
+import pytest
+
+from configurator import yamlio
+from configurator.yamlio import MAX_DEPTH, YamlDocument, YamlReadError, parse_document
+
+SCENARIO = b"""\
+# yaml-language-server: $schema=../../schemas/scenario.schema.json
+capability: turtlebot3-camera
+robot_settings: {max_linear_speed: 0.2}
+logic_settings:
+  follow_with_poses:
+    move_speed: 0.1
+goals:
+  - {task: Delivery, location: BallContainer}
+  - task: Patrol
+    location: Dock
+"""
+
+
+def _doc(raw: bytes) -> YamlDocument:
+    return parse_document("configs/scenarios/x.yaml", raw)
+
+
+def _problems(raw: bytes) -> list[tuple[int, int, str]]:
+    with pytest.raises(YamlReadError) as caught:
+        parse_document("x.yaml", raw)
+    return [(p.line, p.col, p.code) for p in caught.value.problems]
+
+
+# ------------------------------------------------------------------ data
+
+
+def test_data_values() -> None:
+    doc = _doc(SCENARIO)
+    assert doc.path == "configs/scenarios/x.yaml"
+    assert doc.data == {
+        "capability": "turtlebot3-camera",
+        "robot_settings": {"max_linear_speed": 0.2},
+        "logic_settings": {"follow_with_poses": {"move_speed": 0.1}},
+        "goals": [
+            {"task": "Delivery", "location": "BallContainer"},
+            {"task": "Patrol", "location": "Dock"},
+        ],
+    }
+
+
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [
+        ("42", 42),
+        ("-7", -7),
+        ("0", 0),
+        ("1_000", 1000),
+        ("0.22", 0.22),
+        ("-1.5", -1.5),
+        ("2.0", 2.0),
+        ("true", True),
+        ("false", False),
+        ("True", True),
+        ("null", None),
+        ("~", None),
+        ("", None),
+        ('"42"', "42"),
+        ("'true'", "true"),
+        ("/cmd_vel", "/cmd_vel"),
+    ],
+)
+def test_scalars(text: str, value: object) -> None:
+    got = _doc(f"v: {text}\n".encode()).data["v"]
+    assert got == value
+    assert type(got) is type(value)
+
+
+@pytest.mark.parametrize(
+    "text", ["2024-05-01", "2024-05-01T10:00:00Z", "2024-05-01 10:00:00.5 +02:00"]
+)
+def test_dates_stay_strings(text: str) -> None:
+    assert _doc(f"when: {text}\n".encode()).data["when"] == text
+
+
+@pytest.mark.parametrize(
+    ("key", "name"),
+    [
+        ("yes", "yes"),
+        ("no", "no"),
+        ("on", "on"),
+        ("true", "true"),
+        ("1", "1"),
+        ("0.5", "0.5"),
+        ("2024-05-01", "2024-05-01"),
+        ('"quoted"', "quoted"),
+    ],
+)
+def test_keys_stay_strings(key: str, name: str) -> None:
+    data = _doc(f"{key}: value\n".encode()).data
+    assert data == {name: "value"}
+    assert all(type(k) is str for k in data)
+
+
+def test_utf8_bom_is_dropped_and_positions_ignore_it() -> None:
+    doc = _doc(b"\xef\xbb\xbfplatform: ROS2\nactions: {}\n")
+    assert doc.data == {"platform": "ROS2", "actions": {}}
+    assert doc.locate(["platform"]) == (1, 11)
+
+
+def test_crlf_line_ends() -> None:
+    doc = _doc(b"a: 1\r\nb:\r\n  c: two\r\n")
+    assert doc.data == {"a": 1, "b": {"c": "two"}}
+    assert doc.locate(["b", "c"]) == (3, 6)
+
+
+def test_tabs_inside_values_are_text() -> None:
+    assert _doc(b'd: "a\tb"\ne: x\ty\n').data == {"d": "a\tb", "e": "x\ty"}
+
+
+# ------------------------------------------------------------------ locate
+
+
+def test_locate_values_and_keys() -> None:
+    doc = _doc(SCENARIO)
+    assert doc.locate(["capability"]) == (2, 13)
+    assert doc.locate(["capability"], key=True) == (2, 1)
+    assert doc.locate(["robot_settings", "max_linear_speed"]) == (3, 36)
+    assert doc.locate(["robot_settings", "max_linear_speed"], key=True) == (3, 18)
+
+
+def test_locate_nested_paths_through_lists() -> None:
+    doc = _doc(SCENARIO)
+    assert doc.locate(["logic_settings", "follow_with_poses", "move_speed"]) == (6, 17)
+    assert doc.locate(["goals", 0]) == (8, 5)
+    assert doc.locate(["goals", 0, "location"]) == (8, 32)
+    assert doc.locate(["goals", 1, "location"], key=True) == (10, 5)
+    assert doc.locate(["goals", 1]) == (9, 5)
+    # a list item has no key: key=True points at the item itself
+    assert doc.locate(["goals", 1], key=True) == (9, 5)
+
+
+def test_locate_missing_path_falls_back_to_the_parent() -> None:
+    doc = _doc(SCENARIO)
+    assert doc.locate(["logic_settings", "follow_with_poses", "nope"]) == (6, 5)
+    assert doc.locate(["logic_settings", "nope", "deeper"]) == (5, 3)
+    assert doc.locate(["goals", 5, "task"]) == (8, 3)  # index out of range: the list
+    assert doc.locate(["capability", "inside a scalar"]) == (2, 13)
+    assert doc.locate(["nope"]) == (2, 1)  # the top mapping starts after the comment
+    assert doc.locate([]) == (2, 1)
+
+
+def test_locate_keys_that_are_not_strings_in_yaml() -> None:
+    doc = _doc(b"settings:\n  1: one\n  yes: two\n")
+    assert doc.locate(["settings", "1"]) == (2, 6)
+    assert doc.locate(["settings", "yes"], key=True) == (3, 3)
+
+
+# ------------------------------------------------------------------ refusals
+
+
+def test_every_duplicate_key_is_reported_at_once() -> None:
+    raw = b"a: 1\nb:\n  c: 1\n  c: 2\na: 3\n"
+    assert _problems(raw) == [(4, 3, "RC004"), (5, 1, "RC004")]
+
+
+def test_every_tab_indented_line_is_reported() -> None:
+    assert _problems(b"a:\n\tb: 1\n  \tc: 2\n") == [(2, 1, "RC002"), (3, 3, "RC002")]
+
+
+def test_non_utf8_column_counts_characters() -> None:
+    # 'ü' is two bytes: the bad byte is the 7th character of its line, and its 8th byte
+    assert _problems("a: x\nb: Mü ".encode() + b"\xe9\n") == [(2, 7, "RC001")]
+    assert _problems(b"\xef\xbb\xbfa: \xe9\n") == [(1, 4, "RC001")]
+
+
+def test_control_character_is_located_in_one_line() -> None:
+    with pytest.raises(YamlReadError) as caught:
+        parse_document("x.yaml", "a: x\nb: Mü\x07\n".encode())
+    (problem,) = caught.value.problems
+    assert (problem.line, problem.col, problem.code) == (2, 6, "RC003")
+    assert "\n" not in problem.message and "#x0007" in problem.message
+
+
+@pytest.mark.parametrize(
+    ("raw", "where"),
+    [
+        (b"a: &a [1, 2]\nb: [x, *a]\n", (2, 8)),  # in a list: the alias itself
+        (b"a: &a 1\nb:\n  - x\n  - *a\n", (4, 5)),
+        (b"a: &a {k: 1}\nb: *a\n", (2, 1)),  # a mapping value: its key
+        (b"a: &a {k: 1}\n<<: *a\n", (2, 1)),  # a merge key is an alias too
+        (b"a: &a [*a]\n", (1, 8)),  # recursive
+    ],
+)
+def test_aliases_are_refused_where_they_are(raw: bytes, where: tuple[int, int]) -> None:
+    assert _problems(raw) == [(*where, "RC005")]
+
+
+def test_nesting_limit_is_exact() -> None:
+    # the top mapping is level 0; `k`'s list is level 1
+    ok = b"k: " + b"[" * MAX_DEPTH + b"]" * MAX_DEPTH + b"\n"
+    value, levels = _doc(ok).data["k"], 1
+    while value:
+        value, levels = value[0], levels + 1
+    assert levels == MAX_DEPTH
+    deeper = b"k: " + b"[" * (MAX_DEPTH + 1) + b"]" * (MAX_DEPTH + 1) + b"\n"
+    assert _problems(deeper) == [(1, 4 + MAX_DEPTH, "RC009")]
+
+
+def test_runaway_nesting_is_refused_before_composing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """libyaml's composer recurses in C (tens of thousands of levels crash the process), so a
+    text that could nest deep is refused from its events, located as the builder would."""
+
+    def must_not_compose(text: str) -> None:
+        raise AssertionError("composed a runaway nesting")
+
+    monkeypatch.setattr(yamlio, "_compose", must_not_compose)
+    depth = 5000
+    raw = b"k: " + b"{a: " * depth + b"1" + b"}" * depth + b"\n"
+    assert _problems(raw) == [(1, 4 + 4 * MAX_DEPTH, "RC009")]
+
+
+@pytest.mark.parametrize("text", [".nan", ".NaN", ".inf", "-.inf", "+.Inf"])
+def test_non_finite_numbers_are_refused(text: str) -> None:
+    assert _problems(f"v: {text}\n".encode()) == [(1, 4, "RC009")]
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [
+        b"~: 1\n",
+        b"null: 1\n",
+        b"[a, b]: 1\n",
+        b"{a: 1}: 2\n",
+    ],
+)
+def test_keys_must_be_plain_names(raw: bytes) -> None:
+    assert _problems(raw) == [(1, 1, "RC009")]
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [
+        b"v: !!python/object/apply:os.system [echo]\n",
+        b"v: !!python/name:os.system\n",
+        b"v: !foo bar\n",
+        b"v: !!binary aGVsbG8=\n",
+        b"v: !!set {a, b}\n",
+        b"v: !!omap [a: 1]\n",
+    ],
+)
+def test_tags_are_refused(raw: bytes) -> None:
+    assert _problems(raw) == [(1, 4, "RC009")]
