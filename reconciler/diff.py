@@ -1,0 +1,61 @@
+"""Pure diff: desired requests vs the retained launch topics -> what to publish, clear, leave."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Set
+from dataclasses import dataclass, field
+from typing import Generic, Protocol, TypeVar
+
+
+class HasDigest(Protocol):
+    @property
+    def digest(self) -> str: ...
+
+
+R = TypeVar("R", bound=HasDigest)
+
+
+@dataclass
+class Actions(Generic[R]):
+    """One reconcile step. `refused` set: do nothing at all, and say why."""
+
+    publish: dict[str, R] = field(default_factory=dict)
+    clear: list[str] = field(default_factory=list)
+    held: list[str] = field(default_factory=list)  # suspended robots whose topic differs
+    unchanged: int = 0
+    refused: str | None = None
+
+    @property
+    def empty(self) -> bool:
+        return not self.publish and not self.clear
+
+
+def diff(
+    desired: Mapping[str, R],
+    observed: Mapping[str, str | None],
+    suspended: Set[str] = frozenset(),
+    allow_empty: bool = False,
+) -> Actions[R]:
+    """`observed`: robot -> digest of its retained launch (None: retained but unreadable).
+
+    Robots absent from `observed` have nothing retained. Suspended robots are left exactly as
+    they are, even when nothing is published for them yet.
+    """
+    actions: Actions[R] = Actions()
+    for robot_id in sorted(desired):
+        request = desired[robot_id]
+        if observed.get(robot_id) == request.digest:
+            actions.unchanged += 1
+        elif robot_id in suspended:
+            actions.held.append(robot_id)
+        else:
+            actions.publish[robot_id] = request
+    actions.clear = sorted(r for r in observed if r not in desired)
+    if not desired and actions.clear and not allow_empty:
+        return Actions(
+            refused=(
+                f"the commit assigns no robot and would stop all {len(actions.clear)} running; "
+                "refused (set 'allow_empty: true' in configs/fleet.yaml to really empty the fleet)"
+            )
+        )
+    return actions
