@@ -1,0 +1,318 @@
+"""Fleet status (DESIGN §10), pure: desired robots + retained topics -> one verdict per robot.
+
+Formatting for people (a table, worst first) and for machines (JSON) lives here too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from pydantic import ValidationError
+
+from configurator.launch import LaunchRequest
+from configurator.render import FleetRender
+from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+
+
+class Verdict(str, enum.Enum):
+    DEGRADED = "Degraded"  # assigned, but its brain failed, crashed or was refused
+    OFFLINE = "Offline"  # assigned, but its agent is not connected
+    PROGRESSING = "Progressing"  # on its way: not published yet, starting, stopping
+    SUSPENDED = "Suspended"  # fleet.yaml says leave it as it is
+    UNASSIGNED = "Unassigned"  # known to the broker, not in fleet.yaml
+    IN_SYNC = "InSync"  # running the desired request
+
+
+WORST_FIRST = list(Verdict)
+# Suspended and unassigned robots are not the reconciler's to converge: they do not fail status.
+SETTLED = {Verdict.IN_SYNC, Verdict.SUSPENDED, Verdict.UNASSIGNED}
+_ACTIVE = {AgentState.STARTING, AgentState.RUNNING, AgentState.STOPPING, AgentState.BACKOFF}
+
+
+@dataclass(frozen=True)
+class DesiredRobot:
+    """What the fleet asks of one robot."""
+
+    robot_id: str
+    scenario: str | None
+    digest: str
+    suspended: bool = False
+    template: str | None = None
+
+
+def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
+    return {
+        robot_id: DesiredRobot(
+            robot_id,
+            fleet.scenario_of.get(robot_id),
+            request.digest,
+            robot_id in fleet.suspended,
+            request.scenario.capability.robot_template,
+        )
+        for robot_id, request in fleet.requests.items()
+    }
+
+
+@dataclass
+class Observed:
+    """One robot as the retained topics show it."""
+
+    launch: LaunchRequest | None = None
+    launch_digest: str | None = None  # also set when the payload is not a valid request
+    status: AgentStatus | None = None
+    description: RobotDescription | None = None
+
+
+@dataclass
+class Retained:
+    robots: dict[str, Observed] = field(default_factory=dict)
+    reconciler: ReconcilerStatus | None = None
+
+
+def parse_retained(messages: Mapping[str, bytes], topics: Topics) -> Retained:
+    """Sorts retained messages by robot; unreadable ones are skipped, never fatal."""
+    out = Retained()
+    for topic, payload in messages.items():
+        if topic == topics.reconciler_status:
+            with contextlib.suppress(ValidationError):
+                out.reconciler = ReconcilerStatus.model_validate_json(payload)
+            continue
+        where = topics.robot_of(topic)
+        if where is None or not payload:
+            continue
+        robot_id, leaf = where
+        robot = out.robots.setdefault(robot_id, Observed())
+        try:
+            if leaf == "launch":
+                try:
+                    raw = json.loads(payload)
+                    robot.launch_digest = raw.get("digest") if isinstance(raw, dict) else None
+                except ValueError:
+                    robot.launch_digest = None
+                robot.launch = LaunchRequest.model_validate_json(payload)
+            elif leaf == "status":
+                robot.status = AgentStatus.model_validate_json(payload)
+            elif leaf == "description":
+                robot.description = RobotDescription.model_validate_json(payload)
+        except ValidationError:
+            continue
+    return out
+
+
+def desired_from_retained(retained: Retained) -> dict[str, DesiredRobot]:
+    """Without a repository, what is published is the best account of what is desired."""
+    return {
+        robot_id: DesiredRobot(
+            robot_id,
+            robot.launch.scenario.name,
+            robot.launch.digest,
+            template=robot.launch.scenario.capability.robot_template,
+        )
+        for robot_id, robot in retained.robots.items()
+        if robot.launch is not None
+    }
+
+
+@dataclass
+class RobotRow:
+    robot_id: str
+    verdict: Verdict
+    reason: str
+    online: bool
+    scenario: str | None
+    desired: str | None
+    published: str | None
+    reported: str | None
+    state: str
+    restarts: int
+    warnings: list[str] = field(default_factory=list)
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "robot_id": self.robot_id,
+            "verdict": self.verdict.value,
+            "reason": self.reason,
+            "online": self.online,
+            "scenario": self.scenario,
+            "desired_digest": self.desired,
+            "published_digest": self.published,
+            "reported_digest": self.reported,
+            "state": self.state,
+            "restarts": self.restarts,
+            "warnings": self.warnings,
+        }
+
+
+def verdict(desired: DesiredRobot | None, robot: Observed) -> tuple[Verdict, str]:
+    """The sync verdict of one robot, and a few words of why."""
+    status = robot.status
+    state = status.state if status is not None else AgentState.OFFLINE
+    if desired is None:
+        if state in _ACTIVE and robot.launch_digest is not None:
+            return Verdict.PROGRESSING, "not in fleet.yaml: its request is still published"
+        if state in _ACTIVE:
+            return Verdict.PROGRESSING, "not in fleet.yaml: its brain is being stopped"
+        return Verdict.UNASSIGNED, "not in fleet.yaml"
+    if desired.suspended:
+        return Verdict.SUSPENDED, "suspended in fleet.yaml: left as it is"
+    if status is None or state is AgentState.OFFLINE:
+        return Verdict.OFFLINE, (status.message if status else "") or "its agent has never reported"
+    if state in (AgentState.FAILED, AgentState.REJECTED, AgentState.BACKOFF, AgentState.EXITED):
+        return Verdict.DEGRADED, status.message or f"brain service {state.value}"
+    if robot.launch_digest != desired.digest:
+        return Verdict.PROGRESSING, "the desired request is not published yet"
+    if status.digest != desired.digest:
+        return Verdict.PROGRESSING, f"{state.value}, not yet on the desired request"
+    if state is AgentState.RUNNING:
+        return Verdict.IN_SYNC, "running the desired request"
+    return Verdict.PROGRESSING, state.value
+
+
+def template_warning(desired: DesiredRobot | None, robot: Observed) -> str | None:
+    recommended = robot.description.recommended_template if robot.description else None
+    if desired is None or not desired.template or not recommended:
+        return None
+    if desired.template == recommended:
+        return None
+    return (
+        f"assigned robot template '{desired.template}' differs from the robot's recommended "
+        f"'{recommended}'"
+    )
+
+
+def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[RobotRow]:
+    """Every robot that is desired or known to the broker, worst verdict first."""
+    rows = []
+    for robot_id in sorted(set(desired) | set(retained.robots)):
+        want = desired.get(robot_id)
+        robot = retained.robots.get(robot_id, Observed())
+        found, reason = verdict(want, robot)
+        status = robot.status
+        warnings = [w for w in [template_warning(want, robot)] if w]
+        if status is not None:
+            warnings += status.warnings
+        rows.append(
+            RobotRow(
+                robot_id=robot_id,
+                verdict=found,
+                reason=reason,
+                online=status is not None and status.state is not AgentState.OFFLINE,
+                scenario=want.scenario if want else None,
+                desired=want.digest if want and not want.suspended else None,
+                published=robot.launch_digest,
+                reported=status.digest if status else None,
+                state=status.state.value if status else AgentState.OFFLINE.value,
+                restarts=status.restarts if status else 0,
+                warnings=warnings,
+            )
+        )
+    rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), r.robot_id))
+    return rows
+
+
+@dataclass
+class FleetStatus:
+    rows: list[RobotRow]
+    reconciler: ReconcilerStatus | None
+    desired_from: str  # where the desired state came from, in words
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def in_sync(self) -> bool:
+        """Every robot settled and, when a reconciler reports, it has applied its branch."""
+        robots_ok = all(r.verdict in SETTLED for r in self.rows)
+        return robots_ok and (self.reconciler is None or self.reconciler.ready)
+
+    def counts(self) -> dict[str, int]:
+        found = {v.value: 0 for v in Verdict}
+        for row in self.rows:
+            found[row.verdict.value] += 1
+        return {k: n for k, n in found.items() if n}
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "in_sync": self.in_sync,
+            "desired_from": self.desired_from,
+            "counts": self.counts(),
+            "reconciler": self.reconciler.model_dump(mode="json") if self.reconciler else None,
+            "robots": [r.as_json() for r in self.rows],
+            "notes": self.notes,
+        }
+
+
+# ------------------------------------------------------------------ text
+
+
+def short_digest(digest: str | None) -> str:
+    if not digest:
+        return "-"
+    return digest.removeprefix("sha256:")[:12]
+
+
+def short_rev(revision: str | None) -> str:
+    return revision[:12] if revision else "-"
+
+
+def reconciler_lines(status: ReconcilerStatus | None) -> list[str]:
+    if status is None:
+        return ["reconciler: no status on the broker (is `robotconf reconcile` running?)"]
+    where = f" on {status.branch}" if status.branch else ""
+    line = (
+        f"reconciler: {status.state}{where}, applied {short_rev(status.last_applied_revision)}"
+        f", attempted {short_rev(status.last_attempted_revision)}, {status.robots} robots"
+    )
+    if status.message:
+        line += f" — {status.message}"
+    lines = [line]
+    shown = status.diagnostics[:10]
+    lines += [f"  {d}" for d in shown]
+    if len(status.diagnostics) > len(shown):
+        lines.append(f"  ... {len(status.diagnostics) - len(shown)} more")
+    return lines
+
+
+_COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
+
+
+def format_text(fleet: FleetStatus) -> str:
+    lines = reconciler_lines(fleet.reconciler)
+    lines.append(f"desired: {fleet.desired_from}")
+    lines += [f"note: {n}" for n in fleet.notes]
+    table = [
+        (
+            r.robot_id,
+            r.verdict.value,
+            "yes" if r.online else "no",
+            r.scenario or "-",
+            short_digest(r.desired),
+            short_digest(r.reported),
+            r.state,
+            str(r.restarts),
+        )
+        for r in fleet.rows
+    ]
+    widths = [max(len(c), *(len(row[i]) for row in table)) for i, c in enumerate(_COLUMNS)]
+    lines.append("")
+    lines.append("  ".join(c.ljust(w) for c, w in zip(_COLUMNS, widths, strict=True)).rstrip())
+    for row, r in zip(table, fleet.rows, strict=True):
+        text = "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True))
+        if r.verdict is not Verdict.IN_SYNC:
+            text += f"  {r.reason}"
+        lines.append(text.rstrip())
+    if not fleet.rows:
+        lines.append("(no robot is assigned or known to the broker)")
+    warnings = [f"warning: {r.robot_id}: {w}" for r in fleet.rows for w in r.warnings]
+    if warnings:
+        lines.append("")
+        lines += warnings
+    counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
+    lines.append("")
+    lines.append(
+        f"{len(fleet.rows)} robots: {counts}" + ("" if fleet.in_sync else " — not in sync")
+    )
+    return "\n".join(lines) + "\n"
