@@ -1,0 +1,144 @@
+"""The embedded broker of `robotconf up`: amqtt (pure Python, MQTT 3.1.1) on its own thread.
+
+Imported only by `up` when no `--broker` is given, so nothing else needs amqtt.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import logging
+import socket
+import threading
+from typing import Any
+
+DEFAULT_PORT = 1883
+START_TIMEOUT = 15.0
+
+
+class BrokerStartError(Exception):
+    """The embedded broker could not be started; the message says what to do."""
+
+
+def port_is_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        try:
+            sock.bind((host, port))
+        except OSError:
+            return False
+    return True
+
+
+def free_port(host: str) -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+class EmbeddedBroker:
+    """An amqtt broker on 127.0.0.1; the port is 1883 when free, else any free one."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int | None = None) -> None:
+        self.host = host
+        self.port = port or 0
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._broker: Any = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://{self.host}:{self.port}"
+
+    def start(self) -> None:
+        try:
+            import amqtt.broker  # noqa: F401 - imported here: only `up` needs it
+        except ImportError as exc:
+            raise BrokerStartError(
+                "the embedded broker needs amqtt: pip install 'robotconf[server]' "
+                "(or pass --broker mqtt://HOST:PORT to use a running broker)"
+            ) from exc
+        # amqtt logs every connection and any client that vanishes; keep that out of the screen.
+        logging.getLogger("amqtt").setLevel(logging.ERROR)
+        logging.getLogger("transitions").setLevel(logging.ERROR)
+        candidates = [self.port] if self.port else []
+        if not candidates:
+            if port_is_free(self.host, DEFAULT_PORT):
+                candidates.append(DEFAULT_PORT)
+            candidates += [free_port(self.host), free_port(self.host)]
+        last: BaseException | None = None
+        for port in candidates:
+            try:
+                self._start_on(port)
+                return
+            except BrokerStartError as exc:
+                last = exc
+        raise BrokerStartError(f"the embedded broker could not start: {last}")
+
+    def _start_on(self, port: int) -> None:
+        self.port = port
+        self._ready.clear()
+        self._error = None
+        self._thread = threading.Thread(target=self._run, name="robotconf-broker", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT):
+            raise BrokerStartError(f"no answer on port {port} after {START_TIMEOUT:g} s")
+        if self._error is not None:
+            self._thread.join(5)
+            raise BrokerStartError(f"port {port}: {_reason(self._error)}")
+
+    def _run(self) -> None:
+        from amqtt.broker import Broker
+
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        asyncio.set_event_loop(loop)
+        config = {
+            "listeners": {"default": {"type": "tcp", "bind": f"{self.host}:{self.port}"}},
+            # No logging or $SYS plugins: a quiet broker for one machine, anonymous on loopback.
+            "plugins": {
+                "amqtt.plugins.authentication.AnonymousAuthPlugin": {"allow_anonymous": True}
+            },
+        }
+
+        async def main() -> None:
+            self._broker = Broker(config, loop=loop)
+            await self._broker.start()
+
+        try:
+            loop.run_until_complete(main())
+        except BaseException as exc:
+            self._error = exc
+            self._ready.set()
+            loop.close()
+            return
+        self._ready.set()
+        try:
+            loop.run_forever()
+        finally:
+            with contextlib.suppress(Exception):
+                loop.run_until_complete(loop.shutdown_asyncgens())
+            loop.close()
+
+    def stop(self, timeout: float = 10.0) -> None:
+        loop, broker, thread = self._loop, self._broker, self._thread
+        if loop is None or thread is None or not thread.is_alive():
+            return
+        if broker is not None:
+            future = asyncio.run_coroutine_threadsafe(broker.shutdown(), loop)
+            with contextlib.suppress(Exception):
+                future.result(timeout)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(timeout)
+
+
+def _reason(exc: BaseException) -> str:
+    cause: BaseException | None = exc
+    while cause is not None:
+        if isinstance(cause, OSError) and cause.errno == errno.EADDRINUSE:
+            return "address already in use"
+        cause = cause.__cause__
+    return f"{type(exc).__name__}: {exc}"

@@ -1,0 +1,331 @@
+"""`robotconf up`: the whole loop on one machine — broker, reconciler, one agent per robot, status.
+
+Agents run as `robotconf agent` subprocesses with a stand-in brain; the reconciler runs in this
+process. Ctrl-C stops the agents (and their brains) first, then the reconciler, then the broker.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from configurator.render import FleetRender
+from configurator.source import SourceError
+from configurator.wire import Topics
+from reconciler.commands import UsageError, connection_from, open_view
+from reconciler.controller import Controller
+from reconciler.desired import load_desired
+from reconciler.retained import RetainedView
+from reconciler.source import LocalBranch
+from reconciler.status import (
+    FleetStatus,
+    build_rows,
+    desired_from_fleet,
+    format_text,
+    parse_retained,
+)
+
+log = logging.getLogger("robotconf.up")
+
+AGENT_STOP_TIMEOUT = 5.0  # the stand-in brain stops at once; this bounds a stubborn one
+RESYNC_INTERVAL = 10.0
+
+
+@dataclass
+class Plan:
+    """What `up` will run, decided before anything starts."""
+
+    root: Path
+    branch: str
+    head: str
+    fleet: FleetRender
+    workdir: Path
+    notes: list[str] = field(default_factory=list)
+
+
+def _git_repo(root: Path) -> Any:
+    import git
+
+    try:
+        return git.Repo(root, search_parent_directories=True)
+    except (git.InvalidGitRepositoryError, git.NoSuchPathError):
+        raise UsageError(
+            f"{root.absolute()} is not a git repository; robotconf up applies commits only: "
+            "git init && git add configs models && git commit -m 'lab'"
+        ) from None
+
+
+def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:
+    """Checks the repository and says what will be applied; raises UsageError."""
+    root = root.absolute()
+    if not (root / "configs").is_dir():
+        raise UsageError(f"{root} has no configs/ folder; run robotconf up in a lab repository")
+    repo = _git_repo(root)
+    notes: list[str] = []
+    try:
+        if branch is None:
+            if repo.head.is_detached:
+                raise UsageError("HEAD is detached; say which branch to apply: --branch BRANCH")
+            branch = str(repo.active_branch.name)
+        top = Path(repo.working_tree_dir or root)
+        rel = [os.path.relpath(root / part, top) for part in ("configs", "models")]
+        dirty = repo.git.status("--porcelain", "--", *rel).splitlines()
+    finally:
+        repo.close()
+    if dirty:
+        notes.append(
+            f"{len(dirty)} uncommitted change(s) in configs/ or models/ are NOT applied: "
+            f"robotconf up applies commits of '{branch}' only; commit them to roll them out"
+        )
+    try:
+        head = LocalBranch(root, branch).head()
+    except SourceError as exc:
+        raise UsageError(str(exc)) from None
+    desired = load_desired(root, head)
+    if desired.fleet is None:
+        shown = "\n  ".join(desired.errors[:20])
+        raise UsageError(
+            f"the head commit {head[:12]} of '{branch}' cannot be applied:\n  {shown}\n"
+            "fix it (robotconf validate), commit, and run robotconf up again"
+        )
+    folder = Path(workdir).absolute() if workdir else root / ".robotconf" / "up"
+    return Plan(root, branch, head, desired.fleet, folder, notes)
+
+
+def agent_yaml(plan: Plan, robot_id: str, broker: str, prefix: str) -> dict[str, Any]:
+    request = plan.fleet.requests[robot_id]
+    capability = request.scenario.capability
+    description: dict[str, Any] = {"id": robot_id, "name": request.robot_name}
+    if capability.robot_template:
+        description["recommended_template"] = capability.robot_template
+    description["platform"] = capability.platform
+    return {
+        "broker": broker,
+        "prefix": prefix,
+        "description": description,
+        "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+        "workdir": str(plan.workdir / robot_id),
+        "stop_timeout": AGENT_STOP_TIMEOUT,
+    }
+
+
+class Agents:
+    """One `robotconf agent` subprocess per robot, each in its own session so that Ctrl-C
+    reaches this process only and the agents are stopped in order."""
+
+    def __init__(self, plan: Plan, broker: str, prefix: str) -> None:
+        self.plan = plan
+        self.broker = broker
+        self.prefix = prefix
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, robot_ids: list[str], fleet: FleetRender) -> None:
+        for robot_id in robot_ids:
+            if robot_id in self.procs or robot_id not in fleet.requests:
+                continue
+            folder = self.plan.workdir / robot_id
+            folder.mkdir(parents=True, exist_ok=True)
+            config = folder / "agent.yaml"
+            plan = Plan(self.plan.root, self.plan.branch, self.plan.head, fleet, self.plan.workdir)
+            config.write_text(
+                yaml.safe_dump(
+                    agent_yaml(plan, robot_id, self.broker, self.prefix), sort_keys=False
+                ),
+                encoding="utf-8",
+            )
+            with (folder / "agent.log").open("ab") as out:
+                self.procs[robot_id] = subprocess.Popen(
+                    [sys.executable, "-m", "agent.cli", "--config", str(config)],
+                    stdin=subprocess.DEVNULL,
+                    stdout=out,
+                    stderr=out,
+                    start_new_session=True,
+                )
+
+    def died(self) -> list[tuple[str, int]]:
+        return [(r, p.returncode) for r, p in self.procs.items() if p.poll() is not None]
+
+    def stop(self, timeout: float = AGENT_STOP_TIMEOUT + 5.0) -> None:
+        """SIGTERM lets each agent stop its brain and say so; SIGKILL only what is left."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + timeout
+        for proc in self.procs.values():
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(max(0.1, deadline - time.monotonic()))
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def _log_to_file(path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    root = logging.getLogger()
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    logging.getLogger("watchfiles").setLevel(logging.WARNING)
+
+
+def run_up(args: argparse.Namespace) -> int:
+    try:
+        plan = prepare(args.repo, args.branch, args.workdir)
+        if args.broker:
+            connection_from(args)  # validates the URL and credentials now
+    except UsageError as exc:
+        print(f"robotconf: {exc}", file=sys.stderr)
+        return 2
+    _log_to_file(plan.workdir / "up.log")
+    say = _printer()
+    for note in plan.notes:
+        say(f"note: {note}")
+
+    broker: Any = None
+    if args.broker:
+        url = args.broker
+        say(f"broker: {url} (given)")
+    else:
+        from reconciler.broker import BrokerStartError, EmbeddedBroker
+
+        broker = EmbeddedBroker()
+        try:
+            broker.start()
+        except BrokerStartError as exc:
+            print(f"robotconf: {exc}; or pass --broker mqtt://HOST:PORT", file=sys.stderr)
+            return 2
+        url = broker.url
+        taken = "" if broker.port == 1883 else " (port 1883 is taken)"
+        say(f"broker: embedded amqtt at {url}{taken}")
+    connection = connection_from(args, url)
+
+    stop = threading.Event()
+    changed = threading.Event()
+    controller = Controller(
+        LocalBranch(plan.root, plan.branch),
+        connection,
+        args.prefix,
+        RESYNC_INTERVAL,
+        on_reconciled=lambda status: changed.set(),
+    )
+    agents = Agents(plan, url, args.prefix)
+    view = open_view(connection, args.prefix, changed.set)
+
+    def on_signal(signum: int, frame: object) -> None:
+        if stop.is_set():  # a second Ctrl-C: do not wait for anyone
+            for proc in agents.procs.values():
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+            os._exit(130)
+        stop.set()
+        changed.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+
+    say(
+        f"reconciling {plan.root} branch '{plan.branch}' (head {plan.head[:12]}), "
+        f"{len(plan.fleet.requests)} robot(s); agent files and logs in {plan.workdir}"
+    )
+    header = [
+        f"robotconf up: broker {url}, branch '{plan.branch}' of {plan.root}",
+        f"  another terminal: robotconf status --broker {url}    Ctrl-C stops everything",
+        *[f"  note: {n}" for n in plan.notes],
+        "",
+    ]
+    say(f"another terminal: robotconf status --broker {url}   Ctrl-C stops everything")
+    thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
+    thread.start()
+    view.start()
+    agents.start(sorted(plan.fleet.requests), plan.fleet)
+    try:
+        _live(controller, agents, view, Topics(args.prefix), stop, changed, say, header)
+    finally:
+        say("stopping: agents and their brains ...")
+        agents.stop()
+        view.stop()
+        controller.stop()
+        thread.join(10)
+        if broker is not None:
+            broker.stop()
+        say("stopped")
+    return 0
+
+
+def _printer() -> Any:
+    def say(line: str) -> None:
+        print(f"robotconf up: {line}" if not line.startswith("\x1b") else line, flush=True)
+
+    return say
+
+
+def _live(
+    controller: Controller,
+    agents: Agents,
+    view: RetainedView,
+    topics: Topics,
+    stop: threading.Event,
+    changed: threading.Event,
+    say: Any,
+    header: list[str],
+) -> None:
+    """Redraws the fleet while it changes; starts agents for robots that later commits add."""
+    tty = sys.stdout.isatty()
+    shown = ""
+    in_sync_at: str | None = None
+    reported_dead: set[str] = set()
+    while not stop.is_set():
+        changed.clear()
+        serving = controller.serving
+        if serving is not None and serving.fleet is not None:
+            agents.start(sorted(serving.fleet.requests), serving.fleet)
+        for robot_id, code in agents.died():
+            if robot_id not in reported_dead:
+                reported_dead.add(robot_id)
+                log_file = agents.plan.workdir / robot_id / "agent.log"
+                say(f"agent {robot_id} exited ({code}); see {log_file}")
+        if view.synced and serving is not None and serving.fleet is not None:
+            retained = parse_retained(view.snapshot(), topics)
+            fleet = FleetStatus(
+                build_rows(desired_from_fleet(serving.fleet), retained),
+                retained.reconciler,
+                f"{serving.revision[:12]} ({controller.source.branch})",
+            )
+            text = format_text(fleet)
+            if text != shown:
+                if tty:
+                    sys.stdout.write("\x1b[H\x1b[2J" + "\n".join(header) + "\n" + text)
+                    sys.stdout.flush()
+                shown = text
+                summary = _summary(fleet)
+                if fleet.in_sync and in_sync_at != serving.revision:
+                    in_sync_at = serving.revision
+                    say(
+                        f"all robots InSync with {serving.revision[:12]}; "
+                        f"watching '{controller.source.branch}' (Ctrl-C to stop)"
+                    )
+                elif not tty:
+                    say(summary)
+        changed.wait(5.0)
+        time.sleep(0.2)  # coalesce a burst of status messages into one redraw
+
+
+def _summary(fleet: FleetStatus) -> str:
+    counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
+    return f"{len(fleet.rows)} robots: {counts}"
