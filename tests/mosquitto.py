@@ -12,6 +12,7 @@ import signal
 import socket
 import subprocess
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 START_TIMEOUT = 10.0
@@ -37,7 +38,14 @@ def free_port() -> int:
 class Mosquitto:
     """`mosquitto -c <own config>` in `workdir`; `stop()` then `start()` keeps the port."""
 
-    def __init__(self, workdir: Path, binary: str | None = None, persistence: bool = False) -> None:
+    def __init__(
+        self,
+        workdir: Path,
+        binary: str | None = None,
+        persistence: bool = False,
+        listener_options: Sequence[str] = (),
+        allow_anonymous: bool = True,
+    ) -> None:
         found = binary or find_mosquitto()
         if found is None:
             raise RuntimeError(
@@ -46,6 +54,8 @@ class Mosquitto:
         self.binary = found
         self.workdir = workdir
         self.persistence = persistence
+        self.listener_options = list(listener_options)  # e.g. certfile, password_file lines
+        self.allow_anonymous = allow_anonymous
         self.host = "127.0.0.1"
         self.port = 0
         self.proc: subprocess.Popen[bytes] | None = None
@@ -63,7 +73,8 @@ class Mosquitto:
         conf = self.workdir / "mosquitto.conf"
         lines = [
             f"listener {self.port} {self.host}",
-            "allow_anonymous true",
+            *self.listener_options,
+            f"allow_anonymous {'true' if self.allow_anonymous else 'false'}",
             f"persistence {'true' if self.persistence else 'false'}",
             f"persistence_location {self.workdir}/",
             "log_dest stderr",
@@ -73,6 +84,10 @@ class Mosquitto:
             "log_type information",
             "connection_messages true",
         ]
+        if os.geteuid() == 0:
+            # As root Mosquitto would switch to the `mosquitto` user, who cannot read or write
+            # the test's private temporary folders.
+            lines.append("user root")
         conf.write_text("\n".join(lines) + "\n", encoding="utf-8")
         return conf
 
