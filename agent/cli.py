@@ -14,6 +14,7 @@ from pathlib import Path
 from agent.config import ConfigInvalid, load_config, with_broker
 from agent.runtime import Agent
 from agent.workdir import WorkdirLock
+from configurator.signing import SigningKeyError
 
 PROG = "robotconf agent"
 
@@ -61,9 +62,9 @@ def main(argv: list[str]) -> int:
     try:
         try:
             agent = Agent(config)
-        except (OSError, ssl.SSLError, ValueError) as exc:
-            # e.g. a TLS certificate that exists but cannot be loaded.
-            print(f"{PROG}: cannot set up the MQTT client: {exc}", file=sys.stderr)
+        except (OSError, ssl.SSLError, ValueError, SigningKeyError) as exc:
+            # e.g. a TLS certificate or key that exists but cannot be loaded.
+            print(f"{PROG}: cannot set up: {exc}", file=sys.stderr)
             return 2
         agent.install_signal_handlers()
         return agent.run()

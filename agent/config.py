@@ -91,6 +91,9 @@ class AgentConfig(_Strict):
     username: str | None = None
     password_file: Path | None = None
     tls: TlsConfig | None = None
+    # The reconciler's Ed25519 public key (`robotconf keys generate`): when set, only requests
+    # it signed are accepted.
+    public_key: Path | None = None
 
     @field_validator("broker")
     @classmethod
@@ -163,6 +166,7 @@ class AgentConfig(_Strict):
         update: dict[str, Any] = {
             "workdir": rel(self.workdir),
             "password_file": rel(self.password_file),
+            "public_key": rel(self.public_key),
         }
         if self.tls is not None:
             update["tls"] = self.tls.model_copy(
@@ -308,6 +312,13 @@ def _check_environment(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
             f"workdir {config.workdir} is not usable ({problem}); "
             "choose a directory the agent's user can create and write"
         )
+    if config.public_key is not None:
+        from configurator.signing import SigningKeyError, load_public_key
+
+        try:
+            load_public_key(config.public_key)
+        except SigningKeyError as exc:
+            yield ("public_key",), f"public_key: {exc}"
     files: list[tuple[Loc, Path | None]] = [(("password_file",), config.password_file)]
     if config.tls is not None:
         files += [

@@ -6,6 +6,7 @@ Pure: validated with the shared LaunchRequest type, checked against the robot's 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from pydantic import ValidationError
@@ -31,6 +32,7 @@ class Reject:
 
 
 Verdict = Clear | Accept | Reject
+Verifier = Callable[[LaunchRequest], "str | None"]  # None when the signature is good
 
 
 def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
@@ -42,7 +44,7 @@ def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
     return "; ".join(parts) + (f"; and {more} more" if more > 0 else "")
 
 
-def interpret(payload: bytes, robot: RobotDescription) -> Verdict:
+def interpret(payload: bytes, robot: RobotDescription, verify: Verifier | None = None) -> Verdict:
     if not payload.strip():
         return Clear()
     try:
@@ -61,6 +63,10 @@ def interpret(payload: bytes, robot: RobotDescription) -> Verdict:
         return Reject(f"not a valid launch request: {_validation_summary(exc)}")
     if request.robot_id != robot.id:
         return Reject(f"the request is for robot {request.robot_id!r}, this is {robot.id!r}")
+    if verify is not None:
+        problem = verify(request)
+        if problem is not None:
+            return Reject(problem)
     if not request.digest_matches():
         return Reject(f"digest {request.digest} does not match the request's content")
     capability = request.scenario.capability

@@ -77,6 +77,12 @@ class Agent:
             self.inbox,
             self.seq,
         )
+        self.verify: requests.Verifier | None = None
+        if config.public_key is not None:
+            from configurator.signing import load_public_key, verify
+
+            key = load_public_key(config.public_key)
+            self.verify = lambda request: verify(request, key)
         self.brain: process.Brain | None = None
         self.connected = False
         self.conn_seq = 0
@@ -167,7 +173,7 @@ class Agent:
             self._apply(sup.shutdown(now))
 
     def _on_launch(self, payload: bytes, now: float) -> None:
-        verdict = requests.interpret(payload, self.description)
+        verdict = requests.interpret(payload, self.description, self.verify)
         sup = self.supervisor
         if isinstance(verdict, requests.Clear):
             log.info("launch request cleared")

@@ -20,12 +20,12 @@ from typing import Any
 
 import paho.mqtt.client as paho
 import yaml
-from paho.mqtt.enums import CallbackAPIVersion
 
 from agent.process import is_alive, read_pidfile
 from configurator.launch import LaunchCapability, LaunchRequest, LaunchScenario, make_launch_request
+from configurator.mqtt import Connection, make_client
 from configurator.types import MappingBinding
-from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics, parse_broker_url
+from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 
 TIMEOUT = 20.0
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
@@ -79,18 +79,23 @@ def make_request(
     return make_launch_request(robot_id, "Delivery bot", revision, scenario)
 
 
-def _client(prefix: str) -> paho.Client:
-    client = paho.Client(
-        CallbackAPIVersion.VERSION2, client_id=f"{prefix}-{uuid.uuid4().hex[:10]}"
-    )
+Broker = str | Connection  # a plain URL, or a URL with credentials and TLS files
+
+
+def _connection(broker: Broker) -> Connection:
+    return broker if isinstance(broker, Connection) else Connection(url=broker)
+
+
+def _client(prefix: str, broker: Broker) -> paho.Client:
+    client = make_client(_connection(broker), client_id=f"{prefix}-{uuid.uuid4().hex[:10]}")
     client.reconnect_delay_set(min_delay=1, max_delay=2)
     return client
 
 
-def publish(url: str, topic: str, payload: bytes, retain: bool = True) -> None:
+def publish(broker: Broker, topic: str, payload: bytes, retain: bool = True) -> None:
     """Publish at QoS 1 and wait for the broker's acknowledgement."""
-    address = parse_broker_url(url)
-    client = _client("test-pub")
+    address = _connection(broker).address
+    client = _client("test-pub", broker)
     client.connect(address.host, address.port)
     client.loop_start()
     try:
@@ -102,11 +107,11 @@ def publish(url: str, topic: str, payload: bytes, retain: bool = True) -> None:
         client.loop_stop()
 
 
-def read_retained(url: str, topic: str) -> bytes:
+def read_retained(broker: Broker, topic: str) -> bytes:
     """What a newcomer sees on `topic` right now (the topic must hold a retained message)."""
-    address = parse_broker_url(url)
+    address = _connection(broker).address
     got: list[bytes] = []
-    client = _client("test-read")
+    client = _client("test-read", broker)
 
     def on_connect(c: paho.Client, u: Any, f: Any, rc: Any, p: Any) -> None:
         c.subscribe(topic, qos=1)
@@ -129,16 +134,15 @@ def read_retained(url: str, topic: str) -> bytes:
 class Observer:
     """Follows robots' status and description topics as `robotconf status` would."""
 
-    def __init__(self, url: str, prefix: str = "robotconf") -> None:
+    def __init__(self, broker: Broker, prefix: str = "robotconf") -> None:
         self.topics = Topics(prefix)
-        self.url = url
         self._cond = threading.Condition()
         self.statuses: dict[str, list[AgentStatus]] = {}
         self.descriptions: dict[str, RobotDescription] = {}
-        self.client = _client("test-observer")
+        self.client = _client("test-observer", broker)
         self.client.on_connect = self._on_connect
         self.client.on_message = self._on_message
-        address = parse_broker_url(url)
+        address = _connection(broker).address
         self.client.connect_async(address.host, address.port, keepalive=10)
         self.client.loop_start()
 

@@ -151,6 +151,12 @@ def test_credential_mistakes(tmp_path: Path) -> None:
     assert len(found) == 1 and "tls options need a TLS broker URL" in found[0]
 
 
+def test_public_key_must_be_an_ed25519_public_key(tmp_path: Path) -> None:
+    (tmp_path / "key.pub").write_text("not a key", encoding="utf-8")
+    found = problems(tmp_path, GOOD + "public_key: key.pub\n")
+    assert len(found) == 1 and found[0].startswith("8: public_key: ") and "PEM" in found[0]
+
+
 def test_yaml_problems(tmp_path: Path) -> None:
     twice = problems(tmp_path, GOOD + "workdir: other\n")
     assert twice == ["8: key 'workdir' appears twice; keep one"]

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
-from agent.requests import Accept, Clear, Reject, interpret
+from agent.requests import Accept, Clear, Reject, Verifier, interpret
+from configurator.launch import LaunchRequest
+from configurator.signing import generate_keys, load_private_key, load_public_key, sign, verify
 from configurator.wire import RobotDescription
 from tests.agent.harness import make_request
 
@@ -82,3 +85,24 @@ def test_other_template_is_a_warning() -> None:
     no_preference = ROBOT.model_copy(update={"recommended_template": None})
     verdict = interpret(make_request(template="turtlebot3-burger").payload(), no_preference)
     assert verdict == Accept(make_request(template="turtlebot3-burger"), [])
+
+
+def test_signatures_are_checked_when_the_agent_has_a_key(tmp_path: Path) -> None:
+    pair = generate_keys(tmp_path)
+    public = load_public_key(pair.public)
+
+    def check(request: LaunchRequest) -> str | None:
+        return verify(request, public)
+
+    signed = sign(make_request(), load_private_key(pair.private))
+    assert interpret(signed.payload(), ROBOT, check) == Accept(signed, [])
+    assert "not signed" in reason_with(make_request().payload(), check)
+    data = json.loads(signed.payload())
+    data["revision"] = "another-commit"  # outside the digest, inside the signature
+    assert "does not verify" in reason_with(json.dumps(data).encode(), check)
+
+
+def reason_with(payload: bytes, check: Verifier) -> str:
+    verdict = interpret(payload, ROBOT, check)
+    assert isinstance(verdict, Reject), verdict
+    return verdict.reason
