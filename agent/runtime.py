@@ -39,6 +39,7 @@ from agent.workdir import (
 )
 from configurator.launch import LaunchRequest
 from configurator.wire import AgentState, AgentStatus
+from configurator.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
 
@@ -123,6 +124,7 @@ class Agent:
             update={
                 "state": AgentState.OFFLINE,
                 "seq": self.conn_seq,
+                "since": now_wall(),
                 "message": "agent stopped",
             }
         )
