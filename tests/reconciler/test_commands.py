@@ -1,0 +1,111 @@
+"""The commands' edges: one clear line and exit 2 on trouble, `status --watch` following changes."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import threading
+from pathlib import Path
+
+from configurator.mqtt import Connection
+from configurator.wire import AgentState, AgentStatus, Topics
+from reconciler.controller import Controller
+from reconciler.retained import RetainedView
+from reconciler.source import LocalBranch
+from tests.mosquitto import Mosquitto, free_port
+from tests.reconciler.harness import GitLab, Proc, Watch, robotconf_argv, wait_for
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(robotconf_argv(*args), capture_output=True, text=True, timeout=60)
+
+
+def one_line_error(done: subprocess.CompletedProcess[str]) -> str:
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    return lines[0]
+
+
+def test_status_without_a_broker_says_so(lab: GitLab) -> None:
+    url = f"mqtt://127.0.0.1:{free_port()}"
+    line = one_line_error(run("status", "--repo", str(lab.root), "--broker", url, "--wait", "1"))
+    assert url in line and "is the broker running?" in line
+
+
+def test_reconcile_argument_problems(lab: GitLab) -> None:
+    line = one_line_error(run("reconcile", "--repo", str(lab.root), "--branch", "mian"))
+    assert "branch 'mian' does not exist" in line and "main" in line
+    line = one_line_error(
+        run("reconcile", "--repo", str(lab.root), "--branch", "main", "--broker", "http://x")
+    )
+    assert "mqtt://" in line
+    line = one_line_error(
+        run("reconcile", "--repo", str(lab.root), "--branch", "main", "--interval", "0")
+    )
+    assert "--interval" in line
+
+
+def test_reconcile_stops_on_sigterm(lab: GitLab, mosquitto: Mosquitto, tmp_path: Path) -> None:
+    proc = Proc(
+        robotconf_argv(
+            "reconcile", "--repo", str(lab.root), "--branch", "main", "--broker", mosquitto.url
+        ),
+        tmp_path / "reconciler.log",
+    )
+    wait_for(lambda: "in sync with" in proc.output(), "the reconciler in sync")
+    assert proc.stop(signal.SIGTERM) == 0
+    assert "Traceback" not in proc.output()
+
+
+def test_status_watch_follows_the_fleet(lab: GitLab, mosquitto: Mosquitto, tmp_path: Path) -> None:
+    controller = Controller(
+        LocalBranch(lab.root, "main"), Connection(mosquitto.url), "robotconf", 30
+    )
+    thread = threading.Thread(target=controller.run, daemon=True)
+    thread.start()
+    watch = Watch(mosquitto.url)
+    try:
+        watch.wait_reconciler(lambda s: s.ready, "ready")
+        proc = Proc(
+            robotconf_argv(
+                "status", "--repo", str(lab.root), "--broker", mosquitto.url, "--watch", "--json"
+            ),
+            tmp_path / "watch.out",
+        )
+
+        def reports() -> list[dict[str, object]]:
+            lines = [line for line in proc.output().splitlines() if line.startswith("{")]
+            return [json.loads(line) for line in lines]
+
+        def verdicts() -> dict[str, str] | None:
+            found = reports()
+            if not found:
+                return None
+            robots = found[-1]["robots"]
+            assert isinstance(robots, list)
+            return {r["robot_id"]: r["verdict"] for r in robots}
+
+        assert wait_for(verdicts, "a first report") == {f"tb3-0{i}": "Offline" for i in range(1, 6)}
+        request = lab.requests()["tb3-01"]
+        running = AgentStatus(
+            robot_id="tb3-01", state=AgentState.RUNNING, digest=request.digest, pid=1
+        )
+        publisher = RetainedView(Connection(mosquitto.url), [], "robotconf/sync", role="test-pub")
+        publisher.start()
+        try:
+            assert publisher.wait_synced(30)
+            assert publisher.publish_retained(
+                [(Topics().status("tb3-01"), running.model_dump_json().encode())], 30
+            )
+        finally:
+            publisher.stop()
+        wait_for(lambda: (verdicts() or {}).get("tb3-01") == "InSync", "tb3-01 InSync")
+        assert proc.stop(signal.SIGINT) == 1  # the others are still offline
+        assert "Traceback" not in proc.output()
+    finally:
+        watch.close()
+        controller.stop()
+        thread.join(20)

@@ -1,0 +1,139 @@
+"""Fleet status verdicts and formatting, pure: no broker."""
+
+from __future__ import annotations
+
+from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+from reconciler.status import (
+    DesiredRobot,
+    FleetStatus,
+    Observed,
+    Retained,
+    Verdict,
+    build_rows,
+    format_text,
+    parse_retained,
+    verdict,
+)
+
+D1 = "sha256:" + "1" * 64
+D2 = "sha256:" + "2" * 64
+
+
+def want(digest: str = D1, suspended: bool = False) -> DesiredRobot:
+    return DesiredRobot("r1", "delivery", digest, suspended)
+
+
+def seen(state: AgentState | None, digest: str | None = D1, published: str | None = D1) -> Observed:
+    status = None if state is None else AgentStatus(robot_id="r1", state=state, digest=digest)
+    return Observed(launch_digest=published, status=status)
+
+
+def test_running_the_desired_request_is_in_sync() -> None:
+    assert verdict(want(), seen(AgentState.RUNNING))[0] is Verdict.IN_SYNC
+
+
+def test_offline_and_never_seen_robots_are_offline() -> None:
+    assert verdict(want(), seen(AgentState.OFFLINE))[0] is Verdict.OFFLINE
+    assert verdict(want(), seen(None))[0] is Verdict.OFFLINE
+
+
+def test_failures_are_degraded() -> None:
+    for state in (AgentState.FAILED, AgentState.REJECTED, AgentState.BACKOFF, AgentState.EXITED):
+        assert verdict(want(), seen(state))[0] is Verdict.DEGRADED, state
+
+
+def test_on_the_way_is_progressing() -> None:
+    # Not published yet, an old digest still running, starting, idle.
+    assert verdict(want(), seen(AgentState.RUNNING, published=D2))[0] is Verdict.PROGRESSING
+    assert verdict(want(), seen(AgentState.RUNNING, digest=D2))[0] is Verdict.PROGRESSING
+    assert verdict(want(), seen(AgentState.STARTING))[0] is Verdict.PROGRESSING
+    assert verdict(want(), seen(AgentState.IDLE, digest=None))[0] is Verdict.PROGRESSING
+
+
+def test_suspended_wins_over_anything_observed() -> None:
+    assert verdict(want(suspended=True), seen(AgentState.FAILED))[0] is Verdict.SUSPENDED
+
+
+def test_not_in_the_fleet_is_unassigned_once_its_brain_stopped() -> None:
+    assert verdict(None, seen(AgentState.IDLE, digest=None, published=None))[0] is (
+        Verdict.UNASSIGNED
+    )
+    assert verdict(None, seen(AgentState.RUNNING))[0] is Verdict.PROGRESSING
+
+
+def test_rows_are_worst_first_and_warn_about_templates() -> None:
+    desired = {
+        "a-ok": DesiredRobot("a-ok", "s", D1, template="turtlebot3-camera"),
+        "b-off": DesiredRobot("b-off", "s", D1),
+        "c-bad": DesiredRobot("c-bad", "s", D1),
+    }
+    retained = Retained(
+        robots={
+            "a-ok": Observed(
+                launch_digest=D1,
+                status=AgentStatus(robot_id="a-ok", state=AgentState.RUNNING, digest=D1),
+                description=RobotDescription(id="a-ok", recommended_template="turtlebot3-burger"),
+            ),
+            "c-bad": Observed(
+                launch_digest=D1,
+                status=AgentStatus(robot_id="c-bad", state=AgentState.FAILED, restarts=5),
+            ),
+            "z-gone": Observed(
+                status=AgentStatus(robot_id="z-gone", state=AgentState.IDLE),
+            ),
+        }
+    )
+    rows = build_rows(desired, retained)
+    assert [(r.robot_id, r.verdict) for r in rows] == [
+        ("c-bad", Verdict.DEGRADED),
+        ("b-off", Verdict.OFFLINE),
+        ("z-gone", Verdict.UNASSIGNED),
+        ("a-ok", Verdict.IN_SYNC),
+    ]
+    assert rows[0].restarts == 5
+    assert rows[-1].warnings == [
+        "assigned robot template 'turtlebot3-camera' differs from the robot's recommended "
+        "'turtlebot3-burger'"
+    ]
+    fleet = FleetStatus(rows, None, "test")
+    assert not fleet.in_sync
+    text = format_text(fleet)
+    assert text.index("c-bad") < text.index("b-off") < text.index("a-ok")
+    assert "warning: a-ok: assigned robot template" in text
+    assert "no status on the broker" in text
+
+
+def test_in_sync_needs_every_assigned_robot_and_a_ready_reconciler() -> None:
+    rows = build_rows(
+        {"r1": want(), "r2": DesiredRobot("r2", "s", D2, suspended=True)},
+        Retained(robots={"r1": seen(AgentState.RUNNING)}),
+    )
+    ready = ReconcilerStatus(state="Ready", ready=True, last_applied_revision="a" * 40)
+    stalled = ReconcilerStatus(
+        state="Stalled", ready=False, diagnostics=["configs/fleet.yaml:1:1: error X bad"]
+    )
+    assert FleetStatus(rows, ready, "t").in_sync
+    assert FleetStatus(rows, None, "t").in_sync
+    assert not FleetStatus(rows, stalled, "t").in_sync
+    text = format_text(FleetStatus(rows, stalled, "t"))
+    assert "reconciler: Stalled" in text and "error X bad" in text
+
+
+def test_parse_retained_sorts_topics_and_skips_garbage() -> None:
+    topics = Topics("lab")
+    status = AgentStatus(robot_id="r1", state=AgentState.RUNNING, digest=D1)
+    messages = {
+        topics.status("r1"): status.model_dump_json().encode(),
+        topics.launch("r1"): b'{"digest": "' + D1.encode() + b'"}',  # not a full request
+        topics.status("r2"): b"not json",
+        topics.reconciler_status: ReconcilerStatus(state="Ready", ready=True)
+        .model_dump_json()
+        .encode(),
+        "elsewhere/robots/r3/status": status.model_dump_json().encode(),
+    }
+    parsed = parse_retained(messages, topics)
+    assert set(parsed.robots) == {"r1", "r2"}
+    assert parsed.robots["r1"].status == status
+    assert parsed.robots["r1"].launch_digest == D1 and parsed.robots["r1"].launch is None
+    assert parsed.robots["r2"].status is None
+    assert parsed.reconciler is not None and parsed.reconciler.ready
