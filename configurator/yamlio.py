@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import codecs
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -23,9 +24,7 @@ except ImportError:  # pragma: no cover - depends on the PyYAML build
 
 MAX_FILE_BYTES = 8 * 1024 * 1024
 MAX_DEPTH = 64
-# Every list or mapping opens with one of these; a text with fewer of them cannot nest deeper.
-_NESTING_INDICATORS = "[{-:?"
-_SCAN_NESTING_ABOVE = 1000
+_NOT_BRACKET = re.compile(r"[^\[\]{}]+")
 
 _STR = "tag:yaml.org,2002:str"
 _INT = "tag:yaml.org,2002:int"
@@ -166,13 +165,28 @@ def _reader_problem(text: str, exc: yaml.reader.ReaderError) -> YamlProblem:
     )
 
 
+def _flow_depth_bound(text: str) -> int:
+    """An upper bound of flow ([...], {...}) nesting: brackets inside quotes count too.
+
+    Block nesting needs indentation, so within MAX_FILE_BYTES it stays far below what the C
+    composer survives; only flow nesting can run away."""
+    depth = peak = 0
+    for bracket in "".join(_NOT_BRACKET.split(text)):
+        if bracket in "[{":
+            depth += 1
+            peak = max(peak, depth)
+        elif depth:
+            depth -= 1
+    return peak
+
+
 def _refuse_runaway_nesting(text: str) -> None:
     """RC009 before composing: libyaml's composer recurses once per level in C, so some tens of
     thousands of nested brackets (a file of a few hundred kB) overflow the stack and crash.
 
     Only a text that could nest deep is scanned, event by event, which is cheap next to
     composing; syntax errors are left to the composer, which locates them."""
-    if sum(map(text.count, _NESTING_INDICATORS)) <= _SCAN_NESTING_ABOVE:
+    if _flow_depth_bound(text) <= MAX_DEPTH:
         return
     loader = _Loader(text)
     depth = 0
@@ -215,6 +229,17 @@ def _compose(text: str) -> Node | None:
                         "RC006",
                         "a second YAML document starts here; one file holds one document "
                         "(remove the '---' line or split the file)",
+                    )
+                ]
+            ) from None
+        if "undefined alias" in f"{exc.problem}":
+            raise YamlReadError(
+                [
+                    _problem(
+                        exc.problem_mark,
+                        "RC005",
+                        "YAML aliases (*name) are not supported, and this one names no anchor; "
+                        "write the value out in full",
                     )
                 ]
             ) from None
@@ -364,7 +389,9 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
             raise YamlReadError(tabs)
     _refuse_runaway_nesting(text)
     root = _compose(text)
-    if root is None:
+    if root is None or (
+        isinstance(root, ScalarNode) and root.tag == _NULL and not root.value.strip()
+    ):
         raise YamlReadError(
             [YamlProblem(1, 1, "RC007", "file is empty; expected a mapping of fields (key: value)")]
         )
