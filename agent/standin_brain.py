@@ -13,10 +13,10 @@ import threading
 import time
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
-from pydantic import ValidationError
-
-from configurator.launch import LaunchRequest
+if TYPE_CHECKING:
+    from configurator.launch import LaunchRequest
 
 
 def describe(request: LaunchRequest) -> list[str]:
@@ -53,7 +53,23 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
+    stop = threading.Event()
+    received: list[str] = []
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        received.append(signal.Signals(signum).name)
+        stop.set()
+
+    # Before the slow imports: a brain stopped while it starts should still stop cleanly.
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     args = _parser().parse_args(argv)
+    if args.ignore_sigterm:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    from pydantic import ValidationError
+
+    from configurator.launch import LaunchRequest
+
     try:
         request = LaunchRequest.model_validate_json(args.request.read_bytes())
     except OSError as exc:
@@ -69,15 +85,6 @@ def main(argv: list[str]) -> int:
         print(line)
     sys.stdout.flush()
 
-    stop = threading.Event()
-    received: list[str] = []
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        received.append(signal.Signals(signum).name)
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN if args.ignore_sigterm else on_signal)
     deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
     while not stop.is_set():
         remaining = None if deadline is None else deadline - time.monotonic()

@@ -41,6 +41,9 @@ def start_running(
     status = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
     agent.note_brain(status.pid)
     assert status.pid is not None and is_alive(status.pid)
+    # `running` says the brain stayed up startsecs, not that it is done starting: wait until
+    # it has printed its modules (and so handles SIGTERM) before tests stop it.
+    wait_until(lambda: "platform module: ROS2" in agent.brain_log(), "the brain's output")
     return status
 
 
