@@ -93,7 +93,12 @@ class BrokerLink:
         self._inbox.put(Connected(self._conn_seq))
 
     def _on_connect_fail(self, client: paho.Client, userdata: Any) -> None:
-        self._inbox.put(ConnectFailed(f"cannot reach {self._connection.address.url}"))
+        # paho does not say why; name the usual suspects.
+        address = self._connection.address
+        why = "broker down or unreachable"
+        if address.tls:
+            why += ", or the TLS handshake failed"
+        self._inbox.put(ConnectFailed(f"cannot connect to {address.url} ({why})"))
 
     def _on_disconnect(
         self,

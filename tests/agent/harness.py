@@ -297,13 +297,12 @@ class AgentProc:
             self.proc.kill()
             self.proc.wait()
         record = read_pidfile(self.workdir / "brain.pid")
-        pids = set(self.brain_pids)
+        pids = {pid for pid in self.brain_pids if is_alive(pid) and _is_standin(pid)}
         if record is not None and record.is_running():
-            pids.add(record.pid)
+            pids.add(record.pid)  # its start time proves it is the brain, whatever it runs
         for pid in pids:
-            if is_alive(pid) and _is_standin(pid):
-                with contextlib.suppress(ProcessLookupError, PermissionError):
-                    os.killpg(pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pid, signal.SIGKILL)
 
 
 def _is_standin(pid: int) -> bool:

@@ -210,6 +210,26 @@ def test_missing_executable_fails_with_the_os_error(
     assert failed.pid is None
 
 
+CHATTY = "import sys, time\nwhile True:\n    print('x' * 999, flush=True)\n    time.sleep(0.002)\n"
+
+
+def test_brain_output_goes_to_a_capped_rotated_log(
+    mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+) -> None:
+    agent = make_agent(
+        command=[sys.executable, "-c", CHATTY, "{launch_request}"],
+        log={"max_bytes": 4096, "backups": 2},
+    ).start()
+    observer.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    publish(mosquitto.url, LAUNCH, make_request().payload())
+    observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent)
+
+    second = agent.workdir / "brain.log.2"
+    wait_until(second.exists, "two rotations of brain.log")
+    assert "x" * 999 in second.read_text(encoding="utf-8")
+    assert not (agent.workdir / "brain.log.3").exists()  # only `backups` old files are kept
+
+
 def test_stubborn_brain_is_killed_after_stop_timeout(
     mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
 ) -> None:
