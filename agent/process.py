@@ -210,12 +210,6 @@ class Brain:
         code = self.popen.wait()
         self._on_exit(self.pid, code)
 
-    def terminate(self) -> None:
-        signal_group(self.pid, signal.SIGTERM)
-
-    def kill(self) -> None:
-        signal_group(self.pid, signal.SIGKILL)
-
 
 def spawn(
     argv: Sequence[str],

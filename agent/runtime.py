@@ -60,6 +60,8 @@ def policy_of(config: AgentConfig) -> Policy:
 
 
 class Agent:
+    """One robot's agent; `run()` returns once a signal has stopped the brain and the link."""
+
     def __init__(self, config: AgentConfig) -> None:
         self.config = config
         self.workdir = config.workdir
@@ -90,7 +92,6 @@ class Agent:
         self._last_published: AgentStatus | None = None
         self._last_connect_problem: str | None = None
         self._next_log_check = 0.0
-        self._recovery_note: str | None = None
 
     # ------------------------------------------------------------ lifecycle
 
@@ -103,12 +104,11 @@ class Agent:
         signal.signal(signal.SIGINT, handler)
 
     def run(self) -> int:
-        self._recovery_note = process.stop_orphan(
-            self.workdir / PID_FILE, self.config.stop_timeout
-        )
-        if self._recovery_note:
-            log.warning("%s", self._recovery_note)
-            self.supervisor.message = self._recovery_note
+        # Before connecting: a request must never start a second brain next to an orphan.
+        recovered = process.stop_orphan(self.workdir / PID_FILE, self.config.stop_timeout)
+        if recovered:
+            log.warning("%s", recovered)
+            self.supervisor.message = recovered
         url = self.config.connection().address.url
         log.info("agent for %s connecting to %s", self.config.robot_id, url)
         self.link.start()
@@ -301,9 +301,4 @@ class Agent:
         self.link.publish_status(status)
         self._last_published = status
 
-
-def run_agent(config: AgentConfig) -> int:
-    agent = Agent(config)
-    agent.install_signal_handlers()
-    return agent.run()
 
