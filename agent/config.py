@@ -27,7 +27,6 @@ from configurator.wire import (
     validate_prefix,
 )
 
-PLACEHOLDER = "{launch_request}"
 COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 
 
