@@ -25,7 +25,9 @@ def _parser() -> argparse.ArgumentParser:
         description="Receive this robot's Launch Request over MQTT; supervise its brain service.",
     )
     parser.add_argument("--config", required=True, type=Path, metavar="PATH", help="agent.yaml")
-    parser.add_argument("--broker", metavar="URL", help="overrides the file's broker: mqtt[s]://host:port")
+    parser.add_argument(
+        "--broker", metavar="URL", help="overrides the file's broker: mqtt[s]://host:port"
+    )
     parser.add_argument("--check", action="store_true", help="validate the configuration and exit")
     parser.add_argument(
         "--log-level", default="info", choices=["debug", "info", "warning", "error"]

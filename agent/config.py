@@ -110,8 +110,7 @@ class AgentConfig(_Strict):
     def _command_is_a_list(cls, value: Any) -> Any:
         if isinstance(value, str):
             raise ValueError(
-                "command must be an argument list, never a shell string; "
-                f"e.g. {COMMAND_EXAMPLE}"
+                f"command must be an argument list, never a shell string; e.g. {COMMAND_EXAMPLE}"
             )
         return value
 
@@ -120,8 +119,7 @@ class AgentConfig(_Strict):
     def _command(cls, value: list[str]) -> list[str]:
         if not value or not value[0].strip():
             raise ValueError(
-                "command is empty; give the brain service's argument list, "
-                f"e.g. {COMMAND_EXAMPLE}"
+                f"command is empty; give the brain service's argument list, e.g. {COMMAND_EXAMPLE}"
             )
         return value
 
@@ -307,9 +305,12 @@ def _check_environment(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
     """What only the machine can tell: files readable, the work directory writable."""
     problem = _workdir_problem(config.workdir)
     if problem:
-        yield ("workdir",), (
-            f"workdir {config.workdir} is not usable ({problem}); "
-            "choose a directory the agent's user can create and write"
+        yield (
+            ("workdir",),
+            (
+                f"workdir {config.workdir} is not usable ({problem}); "
+                "choose a directory the agent's user can create and write"
+            ),
         )
     if config.public_key is not None:
         from configurator.signing import SigningKeyError, load_public_key

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 
 from pydantic import ValidationError
 
@@ -35,6 +36,32 @@ Verdict = Clear | Accept | Reject
 Verifier = Callable[[LaunchRequest], "str | None"]  # None when the signature is good
 
 
+@dataclass(frozen=True)
+class Freshness:
+    """What a signed request must not be older than: no rollback by replaying an old one."""
+
+    newest_issued_at: float | None  # of the newest signed request this robot accepted
+    running_digest: str | None  # the request it runs now: re-sending that one is harmless
+
+
+def _stale(request: LaunchRequest, freshness: Freshness | None) -> str | None:
+    if freshness is None or freshness.newest_issued_at is None or request.issued_at is None:
+        return None
+    if request.issued_at >= freshness.newest_issued_at:
+        return None
+    if request.digest == freshness.running_digest:
+        return None
+    return (
+        f"replayed request: issued at {_iso(request.issued_at)}, before the newest one this "
+        f"robot accepted ({_iso(freshness.newest_issued_at)}); a rollback must come as a new "
+        "commit"
+    )
+
+
+def _iso(stamp: float) -> str:
+    return datetime.fromtimestamp(stamp, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
 def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
     parts = []
     for error in exc.errors()[:limit]:
@@ -44,7 +71,12 @@ def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
     return "; ".join(parts) + (f"; and {more} more" if more > 0 else "")
 
 
-def interpret(payload: bytes, robot: RobotDescription, verify: Verifier | None = None) -> Verdict:
+def interpret(
+    payload: bytes,
+    robot: RobotDescription,
+    verify: Verifier | None = None,
+    freshness: Freshness | None = None,
+) -> Verdict:
     if not payload.strip():
         return Clear()
     try:
@@ -64,7 +96,7 @@ def interpret(payload: bytes, robot: RobotDescription, verify: Verifier | None =
     if request.robot_id != robot.id:
         return Reject(f"the request is for robot {request.robot_id!r}, this is {robot.id!r}")
     if verify is not None:
-        problem = verify(request)
+        problem = verify(request) or _stale(request, freshness)
         if problem is not None:
             return Reject(problem)
     if not request.digest_matches():

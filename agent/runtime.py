@@ -30,10 +30,12 @@ from agent.events import (
 from agent.service import BrokerLink
 from agent.supervisor import Effect, Kill, Policy, Spawn, Supervisor, Terminate, describe_exit
 from agent.workdir import (
+    ISSUED_FILE,
     LOG_FILE,
     PID_FILE,
     REQUEST_FILE,
     SEQ_FILE,
+    IssuedStore,
     SeqStore,
     write_atomic,
 )
@@ -68,6 +70,7 @@ class Agent:
         self.description = config.description.to_wire()
         self.inbox: Inbox = queue.SimpleQueue()
         self.seq = SeqStore(self.workdir / SEQ_FILE)
+        self.issued = IssuedStore(self.workdir / ISSUED_FILE)
         self.supervisor = Supervisor(config.robot_id, policy_of(config))
         self.brain_log = process.BrainLog(
             self.workdir / LOG_FILE, config.log.max_bytes, config.log.backups
@@ -175,7 +178,11 @@ class Agent:
             self._apply(sup.shutdown(now))
 
     def _on_launch(self, payload: bytes, now: float) -> None:
-        verdict = requests.interpret(payload, self.description, self.verify)
+        desired = self.supervisor.desired
+        freshness = requests.Freshness(
+            self.issued.newest, desired.request.digest if desired is not None else None
+        )
+        verdict = requests.interpret(payload, self.description, self.verify, freshness)
         sup = self.supervisor
         if isinstance(verdict, requests.Clear):
             log.info("launch request cleared")
@@ -186,6 +193,8 @@ class Agent:
         else:
             for warning in verdict.warnings:
                 log.warning("%s", warning)
+            if self.verify is not None:
+                self.issued.accepted(verdict.request.issued_at)
             self._apply(sup.accept(verdict.request, verdict.warnings, now))
 
     def _on_own_status(self, payload: bytes) -> None:
@@ -300,5 +309,3 @@ class Agent:
             return
         self.link.publish_status(status)
         self._last_published = status
-
-

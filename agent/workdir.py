@@ -17,6 +17,7 @@ LOG_FILE = "brain.log"
 PID_FILE = "brain.pid"
 SEQ_FILE = "agent.seq"
 LOCK_FILE = "agent.lock"
+ISSUED_FILE = "newest-issued-at"
 
 
 def write_atomic(path: Path, data: bytes, mode: int = 0o600) -> None:
@@ -78,6 +79,26 @@ class SeqStore:
         with contextlib.suppress(OSError):
             write_atomic(self._path, f"{value}\n".encode("ascii"), mode=0o644)
         return value
+
+
+class IssuedStore:
+    """The issue time of the newest signed request accepted, kept across agent restarts so that
+    an old, validly signed request replayed later cannot roll the robot back."""
+
+    def __init__(self, path: Path) -> None:
+        self._path = path
+        try:
+            self.newest: float | None = float(path.read_text(encoding="ascii").strip())
+        except (OSError, ValueError):
+            self.newest = None
+
+    def accepted(self, issued_at: float | None) -> None:
+        if issued_at is None or (self.newest is not None and issued_at <= self.newest):
+            return
+        self.newest = issued_at
+        # Losing the file weakens replay protection only across a restart; keep working.
+        with contextlib.suppress(OSError):
+            write_atomic(self._path, f"{issued_at!r}\n".encode("ascii"), mode=0o600)
 
 
 class WorkdirLock:

@@ -240,8 +240,12 @@ class AgentProc:
             "stop_timeout": 3,
             "startsecs": 0.3,
             "keepalive": 5,
-            "restart": {"policy": "on-failure", "max_restarts": 3, "backoff_initial": 0.1,
-                        "backoff_max": 0.4},
+            "restart": {
+                "policy": "on-failure",
+                "max_restarts": 3,
+                "backoff_initial": 0.1,
+                "backoff_max": 0.4,
+            },
         }
         config.update(settings)
         root.mkdir(parents=True, exist_ok=True)

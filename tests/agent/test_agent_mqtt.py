@@ -172,8 +172,12 @@ def test_crash_loop_backs_off_then_fails(
 ) -> None:
     agent = make_agent(
         command=[*STANDIN, "--exit-after", "0", "--exit-code", "3", "{launch_request}"],
-        restart={"policy": "on-failure", "max_restarts": 2, "backoff_initial": 0.1,
-                 "backoff_max": 0.2},
+        restart={
+            "policy": "on-failure",
+            "max_restarts": 2,
+            "backoff_initial": 0.1,
+            "backoff_max": 0.2,
+        },
     ).start()
     observer.wait_state(ROBOT, AgentState.IDLE, agent=agent)
     publish(mosquitto.url, LAUNCH, make_request().payload())
@@ -233,9 +237,7 @@ def test_brain_output_goes_to_a_capped_rotated_log(
 def test_stubborn_brain_is_killed_after_stop_timeout(
     mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
 ) -> None:
-    agent = make_agent(
-        command=[*STANDIN, "--ignore-sigterm", "{launch_request}"], stop_timeout=0.5
-    )
+    agent = make_agent(command=[*STANDIN, "--ignore-sigterm", "{launch_request}"], stop_timeout=0.5)
     first = start_running(agent, observer, mosquitto)
     second_request = make_request(variant=1)
     publish(mosquitto.url, LAUNCH, second_request.payload())
@@ -350,8 +352,15 @@ def test_late_last_will_from_an_older_connection_is_overwritten(
     # A connection that dies only now, carrying a will from before the live connection: what
     # the broker does when it notices a dead connection of the agent's previous run late.
     ghost = subprocess.Popen(
-        [sys.executable, "-c", GHOST, mosquitto.host, str(mosquitto.port),
-         TOPICS.status(ROBOT), stale.model_dump_json()],
+        [
+            sys.executable,
+            "-c",
+            GHOST,
+            mosquitto.host,
+            str(mosquitto.port),
+            TOPICS.status(ROBOT),
+            stale.model_dump_json(),
+        ],
         stdout=subprocess.PIPE,
     )
     try:

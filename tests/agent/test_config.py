@@ -50,9 +50,7 @@ def test_the_design_example_loads(tmp_path: Path) -> None:
 
 
 def test_defaults(tmp_path: Path) -> None:
-    config = load_config(
-        write(tmp_path, "description: {id: r1}\ncommand: [brain]\nworkdir: w\n")
-    )
+    config = load_config(write(tmp_path, "description: {id: r1}\ncommand: [brain]\nworkdir: w\n"))
     assert config.prefix == "robotconf"
     assert config.stop_timeout == 10 and config.startsecs == 1
     assert config.restart.backoff_max == 60 and config.log.backups == 3
@@ -208,4 +206,3 @@ def test_cli_never_shows_a_traceback(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
     assert len(result.stderr.splitlines()) == 2, result.stderr  # the id and the empty command
-

@@ -26,8 +26,10 @@ from agent.process import (
 from agent.workdir import SeqStore, WorkdirLock, write_atomic
 from tests.agent.harness import wait_until
 
-IGNORES_SIGTERM = "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); " \
+IGNORES_SIGTERM = (
+    "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
     "print('ready', flush=True); time.sleep(60)"
+)
 
 
 @pytest.fixture

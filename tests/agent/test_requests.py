@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from agent.requests import Accept, Clear, Reject, Verifier, interpret
+from agent.requests import Accept, Clear, Freshness, Reject, Verifier, interpret
+from agent.workdir import IssuedStore
 from configurator.launch import LaunchRequest
 from configurator.signing import generate_keys, load_private_key, load_public_key, sign, verify
 from configurator.wire import RobotDescription
@@ -106,3 +107,36 @@ def reason_with(payload: bytes, check: Verifier) -> str:
     verdict = interpret(payload, ROBOT, check)
     assert isinstance(verdict, Reject), verdict
     return verdict.reason
+
+
+def test_an_older_signed_request_is_a_replay_unless_it_is_the_running_one(tmp_path: Path) -> None:
+    pair = generate_keys(tmp_path)
+    public, private = load_public_key(pair.public), load_private_key(pair.private)
+
+    def check(request: LaunchRequest) -> str | None:
+        return verify(request, public)
+
+    old = sign(make_request(), private, issued_at=1000.0)
+    new = sign(make_request(template="turtlebot3-burger"), private, issued_at=2000.0)
+    assert old.digest != new.digest
+    running_new = Freshness(newest_issued_at=2000.0, running_digest=new.digest)
+    verdict = interpret(old.payload(), ROBOT, check, running_new)
+    assert isinstance(verdict, Reject) and "replayed request" in verdict.reason
+    # The request it runs, re-sent (a retained redelivery after a reconnect), is harmless.
+    assert isinstance(interpret(new.payload(), ROBOT, check, running_new), Accept)
+    # A newer one is accepted; so is anything when nothing was accepted yet.
+    newer = sign(make_request(), private, issued_at=3000.0)
+    assert isinstance(interpret(newer.payload(), ROBOT, check, running_new), Accept)
+    assert isinstance(interpret(old.payload(), ROBOT, check, Freshness(None, None)), Accept)
+    # Even after the robot was stopped, the old request cannot bring it back.
+    stopped = Freshness(newest_issued_at=2000.0, running_digest=None)
+    assert isinstance(interpret(old.payload(), ROBOT, check, stopped), Reject)
+
+
+def test_the_newest_issue_time_survives_an_agent_restart(tmp_path: Path) -> None:
+    store = IssuedStore(tmp_path / "newest")
+    assert store.newest is None
+    store.accepted(2000.5)
+    store.accepted(1000.0)  # never goes back
+    assert IssuedStore(tmp_path / "newest").newest == 2000.5
+    assert (tmp_path / "newest").stat().st_mode & 0o777 == 0o600

@@ -63,4 +63,3 @@ def test_crash_on_demand_for_demos(tmp_path: Path) -> None:
         timeout=TIMEOUT,
     )
     assert result.returncode == 7
-
