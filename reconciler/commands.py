@@ -89,6 +89,7 @@ def _log_to_stderr(name: str) -> None:
         format=f"%(asctime)s {name} %(levelname)s %(message)s",
         stream=sys.stderr,
     )
+    logging.getLogger("watchfiles").setLevel(logging.WARNING)  # it logs every change it sees
 
 
 # ------------------------------------------------------------------ reconcile

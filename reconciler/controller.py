@@ -181,6 +181,7 @@ class Controller:
                     errors=errors,
                 )
             )
+            started = time.monotonic()
             if not self._apply(actions):
                 self._publish_status(
                     self._status(
@@ -193,12 +194,13 @@ class Controller:
                 )
                 return Outcome.RETRY
             log.info(
-                "applied %s: %d published, %d cleared, %d unchanged%s",
+                "applied %s: %d published, %d cleared, %d unchanged%s (%.3f s)",
                 short(target.revision),
                 len(actions.publish),
                 len(actions.clear),
                 actions.unchanged,
                 f", {len(actions.held)} suspended left as they are" if actions.held else "",
+                time.monotonic() - started,
             )
         if target is not None:
             self.serving = target
@@ -230,7 +232,7 @@ class Controller:
         if built is None:
             started = time.monotonic()
             built = load_desired(self.source.root, revision)
-            log.debug("built %s in %.3f s", short(revision), time.monotonic() - started)
+            log.info("built %s in %.3f s", short(revision), time.monotonic() - started)
             self._built[revision] = built
             while len(self._built) > 4:
                 self._built.popitem(last=False)

@@ -46,7 +46,7 @@ class RetainedView:
         role: str = "view",
         on_change: Callable[[], None] | None = None,
         on_synced: Callable[[], None] | None = None,
-        max_inflight: int = 200,
+        max_inflight: int = 1000,
     ) -> None:
         self.connection = connection
         self.filters = list(filters)
@@ -165,7 +165,10 @@ class RetainedView:
             self._connected = True
             self.connections += 1
         self.last_error = None
-        topics = [(f, 1) for f in self.filters] + [(self.marker_topic, 1)]
+        # QoS 0: a snapshot is taken anew at every connection, so redelivery buys nothing,
+        # while a broker may drop queued QoS 1 messages beyond its per-client queue limit
+        # (Mosquitto: max_queued_messages 1000) and a large fleet's snapshot would be lossy.
+        topics = [(f, 0) for f in self.filters] + [(self.marker_topic, 0)]
         _, mid = client.subscribe(topics)
         self._subscribe_mid = mid
 
