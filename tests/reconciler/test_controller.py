@@ -10,6 +10,7 @@ import pytest
 
 from configurator.mqtt import Connection
 from reconciler.controller import Controller
+from reconciler.retained import RetainedView
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 from tests.mosquitto import Mosquitto
 from tests.reconciler.harness import GitLab, Watch, wait_for
@@ -143,3 +144,25 @@ def test_broker_down_at_start_is_waited_for(lab: GitLab, tmp_path: Path) -> None
     finally:
         running.stop()
         broker.kill()
+
+
+def test_a_snapshot_larger_than_the_broker_queue_is_complete(mosquitto: Mosquitto) -> None:
+    # Mosquitto drops queued QoS 1 messages past 1,000 per client (and with them the marker):
+    # a big fleet's retained launch topics must still all arrive, and the snapshot complete.
+    topics = [f"robotconf/robots/r{i:04d}/launch" for i in range(1500)]
+    publisher = RetainedView(Connection(mosquitto.url), [], "robotconf/sync", role="test-pub")
+    publisher.start()
+    try:
+        assert publisher.wait_synced(30)
+        assert publisher.publish_retained([(t, b'{"digest": "x"}') for t in topics], 60)
+    finally:
+        publisher.stop()
+    view = RetainedView(
+        Connection(mosquitto.url), ["robotconf/robots/+/launch"], "robotconf/sync", role="test"
+    )
+    view.start()
+    try:
+        assert view.wait_synced(60)
+        assert sorted(view.snapshot()) == topics
+    finally:
+        view.stop()
