@@ -1,0 +1,586 @@
+"""Rollout latency: from `git commit` until every robot reports `running` with its new digest.
+
+For each fleet size, on a fresh Mosquitto (its own port; default limits except a larger
+per-client queue, which the floor's single subscriber needs) and a fresh git repository
+holding the example lab with N robots spread over its five scenarios:
+
+  rollout    `robotconf reconcile` (a real subprocess) watches the repository; every round
+             commits a fleet.yaml that renames every robot (so that every digest changes) and
+             waits, on a status subscriber, until each robot's retained status says `running`
+             with its new digest. The clock starts right before `git commit`.
+  delivered  the same clock, until the last new request reached that subscriber: the
+             reconciler's share (notice, read, validate, render, diff, publish) plus the broker.
+  floor      the same broker delivering N request-sized QoS 1 messages (the payload of one
+             robot's request) from one publisher to one subscriber: first publish until the
+             N-th message arrives.
+
+Agents are the real agent (`agent.runtime.Agent`) with `startsecs: 0` (running = spawned) and
+a cheap brain (`sleep`). Up to --process-max robots, each agent is its own `robotconf agent`
+process; beyond that, worker processes host --per-worker agents each on threads. All of them
+share this machine's cores, unlike a real fleet, so the CPU seconds per round are shown for the
+broker, the reconciler and the agents. Work folders live on /dev/shm when it exists (each
+robot has its own disk). Targets: 100 robots p50 <= 1 s; 1,000 robots p50 <= 3 s and <= 10x
+the floor. Exit 0 when they are met, 1 when one is missed.
+
+    python bench/rollout.py [--sizes 10,100,1000] [--rounds 7] [--server-priority] [--json F]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import paho.mqtt.client as paho  # noqa: E402
+import yaml  # noqa: E402
+from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
+
+from configurator.render import render_fleet  # noqa: E402
+from configurator.workspace import check  # noqa: E402
+from tests.mosquitto import find_mosquitto, free_port  # noqa: E402
+
+SCENARIOS = [
+    "delivery-gazebo",
+    "guide-gazebo",
+    "delivery-bluetooth-gazebo",
+    "patrol-real",
+    "patrol-noetic-gazebo",
+]
+TIMEOUT = 120.0
+ROBOTCONF = [
+    sys.executable,
+    "-c",
+    "import sys; from configurator.cli import main; sys.exit(main())",
+]
+TARGETS = {100: (1.0, None), 1000: (3.0, 10.0)}  # size: (p50 seconds, ratio to the floor)
+
+
+# ------------------------------------------------------------------ infrastructure
+
+
+class Broker:
+    """A Mosquitto of the benchmark's own, on a free port."""
+
+    def __init__(self, folder: Path) -> None:
+        binary = find_mosquitto()
+        if binary is None:
+            raise SystemExit("mosquitto is not installed (./dev setup installs it)")
+        self.port = free_port()
+        conf = folder / "mosquitto.conf"
+        conf.write_text(
+            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+            # The floor's single subscriber gets N QoS 1 messages at once.
+            "max_queued_messages 100000\n",
+            encoding="utf-8",
+        )
+        self.log = (folder / "mosquitto.log").open("wb")
+        self.proc = subprocess.Popen(
+            [binary, "-c", str(conf)], stdout=self.log, stderr=self.log, start_new_session=True
+        )
+        time.sleep(0.3)
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://127.0.0.1:{self.port}"
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(10)
+        self.log.close()
+
+
+def client(name: str) -> paho.Client:
+    c = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"bench-{name}-{os.getpid()}")
+    c.max_inflight_messages_set(200)
+    return c
+
+
+def connect(c: paho.Client, port: int) -> None:
+    connected = threading.Event()
+    c.on_connect = lambda *a: connected.set()
+    c.connect("127.0.0.1", port)
+    c.loop_start()
+    if not connected.wait(10):
+        raise RuntimeError("cannot connect to the benchmark broker")
+
+
+class StatusWatch:
+    """Counts robots whose retained status is `running` with the digest they should have."""
+
+    def __init__(self, port: int) -> None:
+        self.lock = threading.Lock()
+        self.target: dict[str, str] = {}
+        self.done: set[str] = set()
+        self.latest: dict[str, tuple[str, str | None]] = {}
+        self.reached = threading.Event()
+        self.reached_at = 0.0
+        self.launches: list[float] = []  # arrival times of live launch messages
+        self.c = client("watch")
+        self.c.on_message = self._message
+        self.c.message_callback_add("robotconf/robots/+/launch", self._launch)
+        subscribed = threading.Event()
+        self.c.on_subscribe = lambda *a: subscribed.set()
+        connect(self.c, port)
+        self.c.subscribe([("robotconf/robots/+/status", 0), ("robotconf/robots/+/launch", 0)])
+        subscribed.wait(10)
+
+    def _launch(self, c: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
+        if not message.retain:
+            self.launches.append(time.perf_counter())
+
+    def expect(self, target: dict[str, str]) -> None:
+        with self.lock:
+            self.target = dict(target)
+            self.done = {r for r, d in self.target.items() if self.latest.get(r) == ("running", d)}
+            self.reached.clear()
+            self.launches = []
+            if len(self.done) == len(self.target):
+                self.reached_at = time.perf_counter()
+                self.reached.set()
+
+    def _message(self, c: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
+        now = time.perf_counter()
+        robot = message.topic.split("/")[-2]
+        try:
+            status = json.loads(message.payload)
+        except ValueError:
+            return
+        seen = (status.get("state"), status.get("digest"))
+        with self.lock:
+            self.latest[robot] = seen
+            want = self.target.get(robot)
+            if want is None:
+                return
+            if seen == ("running", want):
+                self.done.add(robot)
+            else:
+                self.done.discard(robot)
+            if len(self.done) == len(self.target) and not self.reached.is_set():
+                self.reached_at = now
+                self.reached.set()
+
+    def missing(self) -> str:
+        with self.lock:
+            late = sorted(set(self.target) - self.done)
+            shown = ", ".join(f"{r} {self.latest.get(r)}" for r in late[:5])
+        return f"{len(late)} of {len(self.target)} not running the new digest (e.g. {shown})"
+
+    def close(self) -> None:
+        self.c.disconnect()
+        self.c.loop_stop()
+
+
+# ------------------------------------------------------------------ the lab
+
+
+def git(root: Path, *args: str) -> str:
+    done = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=True)
+    return done.stdout.strip()
+
+
+def robot_ids(size: int) -> list[str]:
+    return [f"r{i:04d}" for i in range(1, size + 1)]
+
+
+def write_fleet(root: Path, size: int, generation: int) -> None:
+    lines = ["robots:"]
+    for index, robot in enumerate(robot_ids(size)):
+        scenario = SCENARIOS[index % len(SCENARIOS)]
+        lines.append(f"  {robot}: {{scenario: {scenario}, name: {robot} v{generation}}}")
+    (root / "configs" / "fleet.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def expected(root: Path) -> tuple[dict[str, str], bytes]:
+    """Each robot's digest in the work tree, and one request's payload (for the floor)."""
+    checked = check(root)
+    assert checked.ok, [str(d) for d in checked.errors[:5]]
+    fleet = render_fleet(checked.repo)
+    first = next(iter(fleet.requests.values()))
+    return {r: q.digest for r, q in fleet.requests.items()}, first.payload()
+
+
+def make_lab(folder: Path, size: int) -> Path:
+    root = folder / "lab"
+    root.mkdir()
+    for part in ("models", "configs"):
+        shutil.copytree(ROOT / part, root / part)
+    write_fleet(root, size, 0)
+    git(root, "init", "-q", "-b", "main")
+    git(root, "config", "user.email", "bench@example.org")
+    git(root, "config", "user.name", "bench")
+    git(root, "config", "commit.gpgsign", "false")
+    git(root, "add", "configs", "models")
+    git(root, "commit", "-q", "-m", "fleet v0")
+    return root
+
+
+# ------------------------------------------------------------------ agents
+
+
+def agent_config(folder: Path, robot: str, url: str) -> Path:
+    work = folder / "agents" / robot
+    work.mkdir(parents=True)
+    config = {
+        "broker": url,
+        "description": {"id": robot},
+        "command": ["sleep", "86400"],
+        "workdir": str(work),
+        "startsecs": 0,
+        "stop_timeout": 5,
+    }
+    path = work / "agent.yaml"
+    path.write_text(yaml.safe_dump(config), encoding="utf-8")
+    return path
+
+
+def start_agents(folder: Path, size: int, url: str, options: Options) -> subprocess.Popen[bytes]:
+    """The simulated fleet: one launcher process, in a session of its own, and its children."""
+    paths = [agent_config(folder, r, url) for r in robot_ids(size)]
+    if size <= options.process_max:
+        commands = [[sys.executable, "-m", "agent.cli", "--config", str(p)] for p in paths]
+    else:
+        step = options.per_worker
+        commands = [
+            [sys.executable, __file__, "worker", *map(str, paths[i : i + step])]
+            for i in range(0, len(paths), step)
+        ]
+    listing = folder / "fleet.json"
+    listing.write_text(json.dumps(commands), encoding="utf-8")
+    logs = folder / "agent-logs"
+    logs.mkdir()
+    with (logs / "launcher.log").open("wb") as out:
+        # One launcher to start and stop the whole simulated fleet.
+        return subprocess.Popen(
+            [sys.executable, __file__, "fleet", str(listing), str(logs)],
+            cwd=ROOT,
+            stdout=out,
+            stderr=out,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+
+
+def launcher(listing: str, logs: str) -> int:
+    """Starts every agent command as a child and stops them all on SIGTERM."""
+    commands = json.loads(Path(listing).read_text(encoding="utf-8"))
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    children = []
+    for n, argv in enumerate(commands):
+        with (Path(logs) / f"{n}.log").open("wb") as out:
+            children.append(
+                subprocess.Popen(
+                    argv,
+                    cwd=ROOT,
+                    stdout=out,
+                    stderr=out,
+                    stdin=subprocess.DEVNULL,
+                    # Each its own session, as separately started programs would be.
+                    start_new_session=True,
+                )
+            )
+    stop.wait()
+    for child in children:
+        with contextlib.suppress(ProcessLookupError):
+            child.send_signal(signal.SIGTERM)
+    for child in children:
+        try:
+            child.wait(30)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+    return 0
+
+
+def stop_fleet(proc: subprocess.Popen[bytes] | None) -> None:
+    if proc is None:
+        return
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(60)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def worker(paths: list[str]) -> int:
+    """Many agents in one process: each an `Agent` on its own thread, stopped by SIGTERM."""
+    import logging
+
+    from agent.config import load_config
+    from agent.events import Shutdown
+    from agent.runtime import Agent
+
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
+    agents = [Agent(load_config(Path(p))) for p in paths]
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    threads = [threading.Thread(target=a.run, daemon=True) for a in agents]
+    for t in threads:
+        t.start()
+    stop.wait()
+    for a in agents:
+        a.inbox.put(Shutdown("SIGTERM"))
+    for t in threads:
+        t.join(20)
+    return 0
+
+
+# ------------------------------------------------------------------ measurements
+
+
+def descendants(pid: int) -> list[int]:
+    """The fleet launcher and its children (the agents or workers)."""
+    found = [pid]
+    with contextlib.suppress(OSError):
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            text = (task / "children").read_text().split()
+            found += [int(c) for c in text]
+    return found
+
+
+def cpu_times(broker: Broker, reconciler: Any, fleet: Any) -> dict[str, float]:
+    """CPU seconds (user + system, children included) per participant, from /proc."""
+    tick = os.sysconf("SC_CLK_TCK")
+
+    def of(pid: int) -> float:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            return 0.0
+        return sum(int(f) for f in fields[11:15]) / tick
+
+    return {
+        "broker": of(broker.proc.pid),
+        "reconciler": of(reconciler.pid) if reconciler else 0.0,
+        "agents": sum(of(pid) for pid in descendants(fleet.pid)) if fleet else 0.0,
+    }
+
+
+def floor(port: int, size: int, payload: bytes) -> float:
+    """One publisher, one subscriber, `size` QoS 1 messages of `payload`'s size."""
+    got = 0
+    done = threading.Event()
+    finished = 0.0
+
+    def on_message(c: paho.Client, u: Any, m: paho.MQTTMessage) -> None:
+        nonlocal got, finished
+        got += 1
+        if got == size:
+            finished = time.perf_counter()
+            done.set()
+
+    sub = client("floor-sub")
+    sub.on_message = on_message
+    subscribed = threading.Event()
+    sub.on_subscribe = lambda *a: subscribed.set()
+    connect(sub, port)
+    sub.subscribe("bench/floor/+", qos=1)
+    subscribed.wait(10)
+    pub = client("floor-pub")
+    connect(pub, port)
+    started = time.perf_counter()
+    for i in range(size):
+        pub.publish(f"bench/floor/{i}", payload, qos=1)
+    if not done.wait(TIMEOUT):
+        raise RuntimeError(f"floor: only {got} of {size} messages arrived")
+    for c in (pub, sub):
+        c.disconnect()
+        c.loop_stop()
+    return finished - started
+
+
+@dataclass
+class Options:
+    rounds: int
+    process_max: int
+    per_worker: int
+    server_priority: bool
+    verbose: bool
+
+
+@dataclass
+class Result:
+    robots: int
+    agents: str
+    rounds: list[float]
+    p50: float
+    max: float
+    delivered_p50: float  # commit until the last request reached a subscriber
+    floor_p50: float
+    ratio: float  # p50 / floor
+    delivered_ratio: float
+    initial: float  # agents and reconciler started until the first convergence
+    cpu: dict[str, float]  # CPU seconds per round (median) of broker, reconciler, agents
+
+
+def prioritise(pids: Sequence[int]) -> bool:
+    """Linux autogroup nice -10 for the server side; False when not allowed (not root)."""
+    try:
+        for pid in pids:
+            Path(f"/proc/{pid}/autogroup").write_text("-10")
+    except OSError:
+        return False
+    return True
+
+
+def measure(size: int, options: Options) -> Result:
+    base = Path("/dev/shm") if Path("/dev/shm").is_dir() else None
+    with tempfile.TemporaryDirectory(prefix=f"rollout-{size}-", dir=base) as tmp:
+        folder = Path(tmp)
+        lab = make_lab(folder, size)
+        broker = Broker(folder)
+        fleet: subprocess.Popen[bytes] | None = None
+        reconciler: subprocess.Popen[bytes] | None = None
+        watch = StatusWatch(broker.port)
+        times: list[float] = []
+        delivered: list[float] = []
+        cpu: list[dict[str, float]] = []
+        try:
+            digests, payload = expected(lab)
+            watch.expect(digests)
+            started = time.perf_counter()
+            fleet = start_agents(folder, size, broker.url, options)
+            with (folder / "reconciler.log").open("wb") as log:
+                reconciler = subprocess.Popen(
+                    [*ROBOTCONF, "reconcile", "--repo", str(lab), "--branch", "main",
+                     "--broker", broker.url, "--interval", "60"],
+                    cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+                )  # fmt: skip
+            if options.server_priority and not prioritise(
+                [broker.proc.pid, reconciler.pid, os.getpid()]
+            ):
+                print("  (--server-priority needs root: running without it)", flush=True)
+            if not watch.reached.wait(TIMEOUT * 2):
+                raise RuntimeError(f"{size} robots never converged: {watch.missing()}")
+            initial = watch.reached_at - started
+            for generation in range(1, options.rounds + 1):
+                time.sleep(1.0)  # let the previous round's last messages settle
+                write_fleet(lab, size, generation)
+                digests, _ = expected(lab)
+                watch.expect(digests)
+                git(lab, "add", "configs")
+                before = cpu_times(broker, reconciler, fleet)
+                t0 = time.perf_counter()
+                git(lab, "commit", "-q", "-m", f"fleet v{generation}")
+                if not watch.reached.wait(TIMEOUT):
+                    raise RuntimeError(f"round {generation}: not converged: {watch.missing()}")
+                times.append(watch.reached_at - t0)
+                delivered.append(max(watch.launches, default=t0) - t0)
+                time.sleep(0.5)  # the agents' last status messages, for the CPU figures
+                after = cpu_times(broker, reconciler, fleet)
+                cpu.append({k: after[k] - before[k] for k in before})
+                if options.verbose:
+                    print(
+                        f"  round {generation}: {times[-1]:.3f} s; requests delivered "
+                        f"{delivered[-1]:.3f} s; CPU s "
+                        + ", ".join(f"{k} {v:.2f}" for k, v in cpu[-1].items()),
+                        flush=True,
+                    )
+        finally:
+            if reconciler is not None:
+                reconciler.terminate()
+                reconciler.wait(30)
+            stop_fleet(fleet)
+            watch.close()
+            if options.verbose:
+                print((folder / "reconciler.log").read_text(errors="replace")[-2000:])
+        try:
+            floors = [floor(broker.port, size, payload) for _ in range(5)]
+        finally:
+            broker.stop()
+    p50 = statistics.median(times)
+    floor_p50 = statistics.median(floors)
+    delivered_p50 = statistics.median(delivered)
+    workers = -(-size // options.per_worker)
+    agents = "processes" if size <= options.process_max else f"{workers} worker processes"
+    cpu_p50 = {k: round(statistics.median(c[k] for c in cpu), 3) for k in cpu[0]}
+    return Result(
+        size, agents, times, p50, max(times), delivered_p50, floor_p50,
+        p50 / floor_p50, delivered_p50 / floor_p50, initial, cpu_p50,
+    )  # fmt: skip
+
+
+def verdicts(results: list[Result]) -> Iterator[tuple[str, bool]]:
+    for r in results:
+        target = TARGETS.get(r.robots)
+        if target is None:
+            continue
+        seconds, ratio = target
+        yield f"{r.robots} robots p50 {r.p50:.3f} s <= {seconds:g} s", r.p50 <= seconds
+        if ratio is not None:
+            yield f"{r.robots} robots p50 {r.ratio:.1f}x the floor <= {ratio:g}x", r.ratio <= ratio
+
+
+def main(argv: list[str]) -> int:
+    if argv[:1] == ["worker"]:
+        return worker(argv[1:])
+    if argv[:1] == ["fleet"]:
+        return launcher(argv[1], argv[2])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    parser.add_argument("--sizes", default="10,100,1000", help="fleet sizes (default: %(default)s)")
+    parser.add_argument("--rounds", type=int, default=7, help="commits per size")
+    parser.add_argument(
+        "--process-max", type=int, default=100, help="up to this size, one process per agent"
+    )
+    parser.add_argument("--per-worker", type=int, default=50, help="agents per worker beyond")
+    parser.add_argument(
+        "--server-priority",
+        action="store_true",
+        help="run broker, reconciler and this measuring process at autogroup nice -10 (root)",
+    )
+    parser.add_argument("--verbose", action="store_true", help="per round details, logs")
+    parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    args = parser.parse_args(argv)
+    options = Options(
+        args.rounds, args.process_max, args.per_worker, args.server_priority, args.verbose
+    )
+    results = []
+    for size in (int(s) for s in args.sizes.split(",")):
+        print(f"{size} robots ...", flush=True)
+        results.append(measure(size, options))
+        r = results[-1]
+        print(f"  rounds: {', '.join(f'{t:.3f}' for t in r.rounds)} s", flush=True)
+    print()
+    print(
+        f"{'robots':>7} {'agents':<20} {'p50 s':>7} {'max s':>7} {'delivered s':>11} "
+        f"{'floor s':>8} {'p50/floor':>9} {'delivered/floor':>15}   CPU s per round"
+    )
+    for r in results:
+        cpu = ", ".join(f"{k} {v:.2f}" for k, v in r.cpu.items())
+        print(
+            f"{r.robots:>7} {r.agents:<20} {r.p50:>7.3f} {r.max:>7.3f} {r.delivered_p50:>11.3f} "
+            f"{r.floor_p50:>8.3f} {r.ratio:>9.1f} {r.delivered_ratio:>15.1f}   {cpu}"
+        )
+    print()
+    ok = True
+    for text, met in verdicts(results):
+        print(f"{'met   ' if met else 'MISSED'} {text}")
+        ok &= met
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps([asdict(r) for r in results], indent=2) + "\n")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
