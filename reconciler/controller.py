@@ -91,6 +91,7 @@ class Controller:
         self._last_log: str | None = None
         self._waiting_logged = False
         self._recovered = False
+        self._fetch_error: str | None = None
 
     # ------------------------------------------------------------------ loop
 
@@ -136,18 +137,23 @@ class Controller:
 
     def reconcile_once(self, *, fetch: bool = False) -> Outcome:
         """Source -> build -> diff -> apply -> status, once."""
-        try:
-            if fetch:
+        if fetch:
+            try:
                 self.source.refresh()
-            head = self.source.head()
+                self._fetch_error = None
+            except SourceError as exc:
+                # Keep going with what the cache holds; the status says it is stale.
+                self._fetch_error = str(exc)
+                self._say(f"source: {exc}", logging.WARNING)
+        head: str | None = None
+        try:
+            resolved = self.source.head()
         except SourceError as exc:
             self._say(f"source: {exc}", logging.WARNING)
-            if self.view.synced:
-                self._publish_status(
-                    self._status("Stalled", attempted=None, message=f"source unavailable: {exc}")
-                )
-            return Outcome.RETRY
-        desired = self._build(head)
+            desired = Desired("", None, [f"source unavailable: {exc}"])
+        else:
+            head = resolved
+            desired = self._build(resolved)
         if not self.view.synced:
             if not self._waiting_logged:
                 log.info("waiting for the broker at %s", self.connection.address.url)
@@ -206,14 +212,21 @@ class Controller:
             self.serving = target
         if errors:
             serving = f"; serving {short(self.serving.revision)}" if self.serving else ""
-            self._say(
-                f"{short(head)} is not applied ({len(errors)} error(s)){serving}", logging.WARNING
-            )
+            what = f"revision {short(head)}" if head else "the branch"
+            self._say(f"{what} is not applied ({len(errors)} error(s)){serving}", logging.WARNING)
             status = self._status(
                 "Stalled",
                 attempted=head,
-                message=f"revision {short(head)} is not applied{serving}",
+                message=f"{what} is not applied{serving}",
                 errors=errors,
+                actions=actions,
+            )
+        elif self._fetch_error:
+            status = self._status(
+                "Stalled",
+                attempted=head,
+                message=f"applied {short(head)}, but the last fetch failed: it may be stale",
+                errors=[self._fetch_error],
                 actions=actions,
             )
         else:
@@ -222,7 +235,7 @@ class Controller:
                 "Ready", attempted=head, message=f"applied {short(head)}", actions=actions
             )
         self._publish_status(status)
-        return Outcome.DONE
+        return Outcome.RETRY if head is None else Outcome.DONE
 
     # ------------------------------------------------------------------ helpers
 
@@ -238,7 +251,7 @@ class Controller:
                 self._built.popitem(last=False)
         return built
 
-    def _recover_serving(self, head: str) -> None:
+    def _recover_serving(self, head: str | None) -> None:
         """After a restart, the last good revision is the one the retained status names."""
         if self._recovered:
             return

@@ -21,6 +21,7 @@ from typing import Any
 
 import yaml
 
+from configurator.mqtt import Connection
 from configurator.render import FleetRender
 from configurator.source import SourceError
 from configurator.wire import Topics
@@ -104,30 +105,46 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:
     return Plan(root, branch, head, desired.fleet, folder, notes)
 
 
-def agent_yaml(plan: Plan, robot_id: str, broker: str, prefix: str) -> dict[str, Any]:
-    request = plan.fleet.requests[robot_id]
+def agent_yaml(
+    fleet: FleetRender, robot_id: str, workdir: Path, connection: Connection, prefix: str
+) -> dict[str, Any]:
+    """The agent.yaml of one robot: it recommends the template it is assigned (no warning)."""
+    request = fleet.requests[robot_id]
     capability = request.scenario.capability
     description: dict[str, Any] = {"id": robot_id, "name": request.robot_name}
     if capability.robot_template:
         description["recommended_template"] = capability.robot_template
     description["platform"] = capability.platform
-    return {
-        "broker": broker,
+    config: dict[str, Any] = {
+        "broker": connection.url,
         "prefix": prefix,
         "description": description,
         "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
-        "workdir": str(plan.workdir / robot_id),
+        "workdir": str(workdir / robot_id),
         "stop_timeout": AGENT_STOP_TIMEOUT,
     }
+    # A given broker may need the same credentials and TLS settings as `up` itself.
+    if connection.username:
+        config["username"] = connection.username
+    if connection.password_file:
+        config["password_file"] = str(connection.password_file.absolute())
+    if connection.address.tls:
+        tls: dict[str, Any] = {"insecure": connection.insecure}
+        for key in ("ca_file", "cert_file", "key_file"):
+            value = getattr(connection, key)
+            if value is not None:
+                tls[key] = str(Path(value).absolute())
+        config["tls"] = tls
+    return config
 
 
 class Agents:
     """One `robotconf agent` subprocess per robot, each in its own session so that Ctrl-C
     reaches this process only and the agents are stopped in order."""
 
-    def __init__(self, plan: Plan, broker: str, prefix: str) -> None:
-        self.plan = plan
-        self.broker = broker
+    def __init__(self, workdir: Path, connection: Connection, prefix: str) -> None:
+        self.workdir = workdir
+        self.connection = connection
         self.prefix = prefix
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 
@@ -135,16 +152,11 @@ class Agents:
         for robot_id in robot_ids:
             if robot_id in self.procs or robot_id not in fleet.requests:
                 continue
-            folder = self.plan.workdir / robot_id
+            folder = self.workdir / robot_id
             folder.mkdir(parents=True, exist_ok=True)
             config = folder / "agent.yaml"
-            plan = Plan(self.plan.root, self.plan.branch, self.plan.head, fleet, self.plan.workdir)
-            config.write_text(
-                yaml.safe_dump(
-                    agent_yaml(plan, robot_id, self.broker, self.prefix), sort_keys=False
-                ),
-                encoding="utf-8",
-            )
+            settings = agent_yaml(fleet, robot_id, self.workdir, self.connection, self.prefix)
+            config.write_text(yaml.safe_dump(settings, sort_keys=False), encoding="utf-8")
             with (folder / "agent.log").open("ab") as out:
                 self.procs[robot_id] = subprocess.Popen(
                     [sys.executable, "-m", "agent.cli", "--config", str(config)],
@@ -224,7 +236,7 @@ def run_up(args: argparse.Namespace) -> int:
         RESYNC_INTERVAL,
         on_reconciled=lambda status: changed.set(),
     )
-    agents = Agents(plan, url, args.prefix)
+    agents = Agents(plan.workdir, connection, args.prefix)
     view = open_view(connection, args.prefix, changed.set)
 
     def on_signal(signum: int, frame: object) -> None:
@@ -290,6 +302,8 @@ def _live(
     shown = ""
     in_sync_at: str | None = None
     reported_dead: set[str] = set()
+    started = time.monotonic()
+    waiting_said = False
     while not stop.is_set():
         changed.clear()
         serving = controller.serving
@@ -298,8 +312,11 @@ def _live(
         for robot_id, code in agents.died():
             if robot_id not in reported_dead:
                 reported_dead.add(robot_id)
-                log_file = agents.plan.workdir / robot_id / "agent.log"
+                log_file = agents.workdir / robot_id / "agent.log"
                 say(f"agent {robot_id} exited ({code}); see {log_file}")
+        if not view.synced and not waiting_said and time.monotonic() - started > 5:
+            waiting_said = True
+            say(f"waiting for the broker at {view.connection.address.url} ({view.last_error})")
         if view.synced and serving is not None and serving.fleet is not None:
             retained = parse_retained(view.snapshot(), topics)
             fleet = FleetStatus(

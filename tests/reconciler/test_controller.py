@@ -124,6 +124,18 @@ def test_remote_repository_is_polled(lab: GitLab, mosquitto: Mosquitto, watch: W
         assert published(watch, lab, head)
         status = watch.reconciler()
         assert status is not None and status.source == f"file://{lab.root}"
+
+        # The remote goes away: the fleet stays as it is and the status says why.
+        hidden = lab.root.with_name("hidden")
+        lab.root.rename(hidden)
+        try:
+            status = watch.wait_reconciler(lambda s: not s.ready, "the fetch failure reported")
+            assert status.state == "Stalled" and status.last_applied_revision == head
+            assert any("fetching" in d for d in status.diagnostics)
+        finally:
+            hidden.rename(lab.root)
+        watch.wait_reconciler(lambda s: s.ready, "ready again once the remote is back")
+        assert published(watch, lab, head)
     finally:
         running.stop()
 

@@ -11,7 +11,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import yaml
 
+from agent.config import parse_config
+from configurator.mqtt import Connection
+from reconciler.desired import load_desired
+from reconciler.up import agent_yaml
 from tests.mosquitto import Mosquitto
 from tests.reconciler.harness import GitLab, Proc, Watch, robotconf_argv, wait_for
 
@@ -126,3 +131,32 @@ def test_up_names_a_missing_branch(lab: GitLab, branch: str) -> None:
     )
     assert done.returncode == 2
     assert f"branch '{branch}' does not exist" in done.stderr
+
+
+def test_the_generated_agent_yaml_is_valid_with_credentials_and_tls(
+    lab: GitLab, tmp_path: Path
+) -> None:
+    secrets = {}
+    for name in ("password", "ca.crt", "client.crt", "client.key"):
+        secrets[name] = tmp_path / name
+        secrets[name].write_text("x\n", encoding="utf-8")
+    connection = Connection(
+        url="mqtts://broker.lab:8883",
+        username="lab",
+        password_file=secrets["password"],
+        ca_file=secrets["ca.crt"],
+        cert_file=secrets["client.crt"],
+        key_file=secrets["client.key"],
+    )
+    fleet = lab.requests()
+
+    render = load_desired(lab.root, lab.head()).fleet
+    assert render is not None
+    settings = agent_yaml(render, "tb3-01", tmp_path / "work", connection, "robotconf")
+    config = parse_config(yaml.safe_dump(settings), "agent.yaml", base=tmp_path)
+    assert config.robot_id == "tb3-01"
+    assert config.description.recommended_template == (
+        fleet["tb3-01"].scenario.capability.robot_template
+    )
+    assert config.connection().address.tls and config.username == "lab"
+    assert config.tls is not None and config.tls.ca_file == secrets["ca.crt"]
