@@ -31,6 +31,10 @@ pattern read {prefix}/robots/%u/launch
 pattern readwrite {prefix}/robots/%u/status
 pattern write {prefix}/robots/%u/description
 
+# Every client may use its own private marker topic: the reconciler and `robotconf status` know
+# a snapshot of the retained topics is complete when their marker comes back.
+pattern readwrite {prefix}/sync/%c
+
 # The reconciler writes every launch topic (and reads them back: what is published is its only
 # memory), writes its own status, and reads what the robots report.
 user {users.reconciler}

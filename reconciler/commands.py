@@ -13,8 +13,10 @@ from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 
+from configurator.launch import LaunchRequest
 from configurator.mqtt import Connection
 from configurator.render import RenderError, render_fleet
+from configurator.signing import SigningKeyError
 from configurator.source import SourceError
 from configurator.wire import DEFAULT_BROKER, ReconcilerStatus, Topics, validate_prefix
 from configurator.workspace import check
@@ -104,6 +106,16 @@ def make_source(args: argparse.Namespace) -> BranchSource:
     return source
 
 
+def make_signer(key_path: Path | None) -> Callable[[LaunchRequest], LaunchRequest] | None:
+    """A function that signs requests with the key, or None when signing is off."""
+    if key_path is None:
+        return None
+    from configurator.signing import load_private_key, sign
+
+    key = load_private_key(key_path)
+    return lambda request: sign(request, key)
+
+
 def cmd_reconcile(args: argparse.Namespace) -> int:
     from reconciler.controller import Controller
 
@@ -114,8 +126,12 @@ def cmd_reconcile(args: argparse.Namespace) -> int:
         source = make_source(args)
     except (UsageError, SourceError) as exc:
         return _fail(str(exc))
+    try:
+        signer = make_signer(args.signing_key)
+    except SigningKeyError as exc:
+        return _fail(str(exc))
     _log_to_stderr("reconciler")
-    controller = Controller(source, connection, args.prefix, args.interval)
+    controller = Controller(source, connection, args.prefix, args.interval, signer=signer)
     on_stop_signals(callback=controller.stop)
     logging.getLogger("robotconf.reconciler").info(
         "reconciling %s (branch %s) to %s, prefix %s",

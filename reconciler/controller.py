@@ -69,6 +69,7 @@ class Controller:
         *,
         publish_timeout: float = 60.0,
         on_reconciled: Callable[[ReconcilerStatus], None] | None = None,
+        signer: Callable[[LaunchRequest], LaunchRequest] | None = None,
     ) -> None:
         self.source = source
         self.connection = connection
@@ -76,6 +77,7 @@ class Controller:
         self.interval = interval
         self.publish_timeout = publish_timeout
         self._on_reconciled = on_reconciled
+        self._sign = signer
         self._wake = threading.Event()
         self._stop = threading.Event()
         self.view = RetainedView(
@@ -277,7 +279,11 @@ class Controller:
             return None
 
     def _apply(self, actions: Actions[LaunchRequest]) -> bool:
-        items = [(self.topics.launch(r), req.payload()) for r, req in actions.publish.items()]
+        # Signed at publish time: issued_at is when the robot was told, not when it was built.
+        sign = self._sign or (lambda request: request)
+        items = [
+            (self.topics.launch(r), sign(req).payload()) for r, req in actions.publish.items()
+        ]
         items += [(self.topics.launch(r), b"") for r in actions.clear]
         return self.view.publish_retained(items, self.publish_timeout)
 

@@ -23,9 +23,10 @@ import yaml
 
 from configurator.mqtt import Connection
 from configurator.render import FleetRender
+from configurator.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from configurator.source import SourceError
 from configurator.wire import Topics
-from reconciler.commands import UsageError, connection_from, open_view
+from reconciler.commands import UsageError, connection_from, make_signer, open_view
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
 from reconciler.retained import RetainedView
@@ -106,7 +107,12 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:
 
 
 def agent_yaml(
-    fleet: FleetRender, robot_id: str, workdir: Path, connection: Connection, prefix: str
+    fleet: FleetRender,
+    robot_id: str,
+    workdir: Path,
+    connection: Connection,
+    prefix: str,
+    public_key: Path | None = None,
 ) -> dict[str, Any]:
     """The agent.yaml of one robot: it recommends the template it is assigned (no warning)."""
     request = fleet.requests[robot_id]
@@ -135,6 +141,8 @@ def agent_yaml(
             if value is not None:
                 tls[key] = str(Path(value).absolute())
         config["tls"] = tls
+    if public_key is not None:
+        config["public_key"] = str(public_key.absolute())
     return config
 
 
@@ -142,10 +150,13 @@ class Agents:
     """One `robotconf agent` subprocess per robot, each in its own session so that Ctrl-C
     reaches this process only and the agents are stopped in order."""
 
-    def __init__(self, workdir: Path, connection: Connection, prefix: str) -> None:
+    def __init__(
+        self, workdir: Path, connection: Connection, prefix: str, public_key: Path | None = None
+    ) -> None:
         self.workdir = workdir
         self.connection = connection
         self.prefix = prefix
+        self.public_key = public_key
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(self, robot_ids: list[str], fleet: FleetRender) -> None:
@@ -155,7 +166,9 @@ class Agents:
             folder = self.workdir / robot_id
             folder.mkdir(parents=True, exist_ok=True)
             config = folder / "agent.yaml"
-            settings = agent_yaml(fleet, robot_id, self.workdir, self.connection, self.prefix)
+            settings = agent_yaml(
+                fleet, robot_id, self.workdir, self.connection, self.prefix, self.public_key
+            )
             config.write_text(yaml.safe_dump(settings, sort_keys=False), encoding="utf-8")
             with (folder / "agent.log").open("ab") as out:
                 self.procs[robot_id] = subprocess.Popen(
@@ -196,6 +209,14 @@ def _log_to_file(path: Path) -> None:
     logging.getLogger("watchfiles").setLevel(logging.WARNING)
 
 
+def _demo_keys(folder: Path) -> KeyPair:
+    """The key pair of this up folder: made once, reused, so restarted agents still verify."""
+    pair = KeyPair(folder / PRIVATE_NAME, folder / PUBLIC_NAME)
+    if pair.private.is_file() and pair.public.is_file():
+        return pair
+    return generate_keys(folder, force=True)
+
+
 def run_up(args: argparse.Namespace) -> int:
     try:
         plan = prepare(args.repo, args.branch, args.workdir)
@@ -226,6 +247,11 @@ def run_up(args: argparse.Namespace) -> int:
         taken = "" if broker.port == 1883 else " (port 1883 is taken)"
         say(f"broker: embedded amqtt at {url}{taken}")
     connection = connection_from(args, url)
+    signer, public_key = None, None
+    if not args.no_signing:
+        keys = _demo_keys(plan.workdir / "keys")
+        signer, public_key = make_signer(keys.private), keys.public
+        say(f"signing: every request is signed; agents verify with {public_key}")
 
     stop = threading.Event()
     changed = threading.Event()
@@ -235,8 +261,9 @@ def run_up(args: argparse.Namespace) -> int:
         args.prefix,
         RESYNC_INTERVAL,
         on_reconciled=lambda status: changed.set(),
+        signer=signer,
     )
-    agents = Agents(plan.workdir, connection, args.prefix)
+    agents = Agents(plan.workdir, connection, args.prefix, public_key)
     view = open_view(connection, args.prefix, changed.set)
 
     def on_signal(signum: int, frame: object) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 Add = Callable[[str, Callable[[argparse.Namespace], int], str], argparse.ArgumentParser]
@@ -37,6 +38,12 @@ def add_commands(add: Add, repo_args: Callable[..., Any], broker_args: Callable[
         "--interval", type=float, default=30.0, help="resync (and fetch) period in seconds"
     )
     p.add_argument(
+        "--signing-key",
+        type=Path,
+        default=None,
+        help="Ed25519 private key (robotconf keys generate): sign every Launch Request",
+    )
+    p.add_argument(
         "--cache-dir",
         default=None,
         help="where --remote is cloned (default: ~/.cache/robotconf/remotes)",
@@ -59,3 +66,8 @@ def add_commands(add: Add, repo_args: Callable[..., Any], broker_args: Callable[
     broker_args(p)
     p.add_argument("--branch", default=None, help="branch to reconcile (default: the current)")
     p.add_argument("--workdir", default=None, help="where agents keep their files")
+    p.add_argument(
+        "--no-signing",
+        action="store_true",
+        help="do not sign requests (by default up signs them with a key kept in its workdir)",
+    )

@@ -15,86 +15,18 @@ import pytest
 
 from configurator.mqtt import Connection, make_client
 from tests.lab import ROBOTCONF, ROOT
-from tests.mosquitto import Mosquitto
-from tests.tlsutil import Pki, make_pki
+from tests.security.secure import Secured, start_secured
 
 WAIT = 10.0
 
 
-class SecuredMosquitto(Mosquitto):
-    """Mosquitto run with the configuration `robotconf broker-config` generated."""
-
-    def __init__(self, workdir: Path, generated: Path) -> None:
-        super().__init__(workdir)
-        self.generated = generated
-
-    def _write_config(self) -> Path:
-        conf = self.workdir / "mosquitto.conf"
-        lines = []
-        for line in self.generated.read_text(encoding="utf-8").splitlines():
-            if line.startswith("listener "):
-                line = f"listener {self.port} {self.host}"
-            lines.append(line)
-        # Started as root, Mosquitto would drop to the `mosquitto` user, which cannot read the
-        # test's 0600 files; a real deployment chowns them to that user instead.
-        lines += ["user root", "persistence false", "log_dest stderr", "log_type all"]
-        conf.write_text("\n".join(lines) + "\n", encoding="utf-8")
-        return conf
-
-
-@dataclass
-class Broker:
-    server: SecuredMosquitto
-    out: Path
-    pki: Pki
-
-    def secret(self, user: str) -> Path:
-        return self.out / "secrets" / f"{user}.password"
-
-    def connection(self, user: str | None, *, password_file: Path | None = None) -> Connection:
-        return Connection(
-            url=f"mqtts://127.0.0.1:{self.server.port}",
-            username=user,
-            password_file=password_file or (self.secret(user) if user else None),
-            ca_file=self.pki.ca_cert,
-        )
-
-
 @pytest.fixture(scope="module")
-def broker(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Broker]:
-    base = tmp_path_factory.mktemp("secured")
-    pki = make_pki(base / "pki")
-    out = base / "broker"
-    done = subprocess.run(
-        [
-            ROBOTCONF,
-            "broker-config",
-            "--repo",
-            str(ROOT),
-            "--out",
-            str(out),
-            "--certfile",
-            str(pki.server_cert),
-            "--keyfile",
-            str(pki.server_key),
-            "--bind",
-            "127.0.0.1",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert done.returncode == 0, done.stderr
-    # Secrets are never printed.
-    for secret in (out / "secrets").iterdir():
-        assert secret.read_text().strip() not in done.stdout + done.stderr
-        assert secret.stat().st_mode & 0o077 == 0
-    server = SecuredMosquitto(base / "run", out / "mosquitto.conf")
-    server.start()
+def broker(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Secured]:
+    secured = start_secured(tmp_path_factory.mktemp("secured"), ROOT)
     try:
-        yield Broker(server, out, pki)
+        yield secured
     finally:
-        server.kill()
+        secured.server.kill()
 
 
 @dataclass
@@ -142,7 +74,7 @@ def publish(session: Session, topic: str, payload: bytes, *, retain: bool = True
     info.wait_for_publish(WAIT)
 
 
-def test_anonymous_client_is_refused(broker: Broker) -> None:
+def test_anonymous_client_is_refused(broker: Secured) -> None:
     session = connect(broker.connection(None), "anon")
     try:
         assert session.reason != "Success" and "authori" in session.reason.lower()
@@ -150,7 +82,7 @@ def test_anonymous_client_is_refused(broker: Broker) -> None:
         session.close()
 
 
-def test_wrong_password_is_refused(broker: Broker, tmp_path: Path) -> None:
+def test_wrong_password_is_refused(broker: Secured, tmp_path: Path) -> None:
     wrong = tmp_path / "wrong.password"
     wrong.write_text("not-the-password\n")
     session = connect(broker.connection("tb3-01", password_file=wrong), "tb3-01")
@@ -165,7 +97,7 @@ def test_wrong_password_is_refused(broker: Broker, tmp_path: Path) -> None:
         right.close()
 
 
-def test_robot_reads_only_its_own_launch_topic(broker: Broker) -> None:
+def test_robot_reads_only_its_own_launch_topic(broker: Secured) -> None:
     reconciler = connect(broker.connection("reconciler"), "reconciler")
     a = connect(broker.connection("tb3-01"), "tb3-01")
     b = connect(broker.connection("tb3-02"), "tb3-02")
@@ -190,7 +122,7 @@ def test_robot_reads_only_its_own_launch_topic(broker: Broker) -> None:
             session.close()
 
 
-def test_robot_cannot_overwrite_another_robots_status(broker: Broker) -> None:
+def test_robot_cannot_overwrite_another_robots_status(broker: Secured) -> None:
     a = connect(broker.connection("tb3-01"), "tb3-01")
     b = connect(broker.connection("tb3-02"), "tb3-02")
     try:
@@ -215,7 +147,7 @@ def test_robot_cannot_overwrite_another_robots_status(broker: Broker) -> None:
         viewer.close()
 
 
-def test_viewer_cannot_publish_a_launch_request(broker: Broker) -> None:
+def test_viewer_cannot_publish_a_launch_request(broker: Secured) -> None:
     viewer = connect(broker.connection("viewer"), "viewer")
     robot = connect(broker.connection("tb3-03"), "tb3-03")
     try:
@@ -231,7 +163,7 @@ def test_viewer_cannot_publish_a_launch_request(broker: Broker) -> None:
         robot.close()
 
 
-def test_unverifiable_server_is_refused_unless_told_otherwise(broker: Broker) -> None:
+def test_unverifiable_server_is_refused_unless_told_otherwise(broker: Secured) -> None:
     untrusted = Connection(
         url=f"mqtts://127.0.0.1:{broker.server.port}",
         username="viewer",
@@ -250,7 +182,7 @@ def test_unverifiable_server_is_refused_unless_told_otherwise(broker: Broker) ->
         session.close()
 
 
-def test_plain_text_listener_is_not_offered(broker: Broker) -> None:
+def test_plain_text_listener_is_not_offered(broker: Secured) -> None:
     """The listener speaks TLS only: a plain MQTT client gets no CONNACK."""
     plain = Connection(
         url=f"mqtt://127.0.0.1:{broker.server.port}",
