@@ -42,6 +42,25 @@ def short(revision: str | None) -> str:
     return revision[:12] if revision else "none"
 
 
+_BRAIN_STATES = {"starting", "running", "backoff", "stopping"}
+
+
+def running_robots(retained: dict[str, bytes], topics: Topics) -> set[str]:
+    """Robots whose retained status says a brain is up or about to be (online agents only)."""
+    found = set()
+    for topic, payload in retained.items():
+        where = topics.robot_of(topic)
+        if where is None or where[1] != "status" or not payload:
+            continue
+        try:
+            state = json.loads(payload).get("state")
+        except (ValueError, AttributeError):
+            continue
+        if state in _BRAIN_STATES:
+            found.add(where[0])
+    return found
+
+
 def observed_digests(retained: dict[str, bytes], topics: Topics) -> dict[str, str | None]:
     """robot -> digest of its retained launch request (None: retained but unreadable)."""
     found: dict[str, str | None] = {}
@@ -82,7 +101,7 @@ class Controller:
         self._stop = threading.Event()
         self.view = RetainedView(
             connection,
-            [self.topics.all_launch, self.topics.reconciler_status],
+            [self.topics.all_launch, self.topics.all_status, self.topics.reconciler_status],
             f"{prefix}/sync",
             role="reconciler",
             on_synced=self._wake.set,
@@ -164,12 +183,18 @@ class Controller:
         self._waiting_logged = False
         self._recover_serving(head)
 
-        observed = observed_digests(self.view.snapshot(), self.topics)
+        snapshot = self.view.snapshot()
+        observed = observed_digests(snapshot, self.topics)
+        running = running_robots(snapshot, self.topics)
         errors = list(desired.errors)
         actions: Actions[LaunchRequest] | None = None
         if desired.fleet is not None:
             actions = diff(
-                desired.fleet.requests, observed, desired.fleet.suspended, desired.fleet.allow_empty
+                desired.fleet.requests,
+                observed,
+                desired.fleet.suspended,
+                desired.fleet.allow_empty,
+                running,
             )
             if actions.refused:
                 errors = [actions.refused]
@@ -178,7 +203,7 @@ class Controller:
         if actions is None and target is not None and target.fleet is not None:
             # The head cannot be applied: keep serving (and refilling) the last good revision.
             actions = diff(
-                target.fleet.requests, observed, target.fleet.suspended, allow_empty=True
+                target.fleet.requests, observed, target.fleet.suspended, True, running
             )
         if actions is not None and target is not None and not actions.empty:
             self._publish_status(

@@ -35,11 +35,15 @@ def diff(
     observed: Mapping[str, str | None],
     suspended: Set[str] = frozenset(),
     allow_empty: bool = False,
+    running: Set[str] = frozenset(),
 ) -> Actions[R]:
     """`observed`: robot -> digest of its retained launch (None: retained but unreadable).
 
     Robots absent from `observed` have nothing retained. Suspended robots are left exactly as
-    they are, even when nothing is published for them yet.
+    they are, even when nothing is published for them yet. `running`: robots whose agent says
+    it runs a brain; one that is no longer assigned is cleared again, because a clear (an
+    empty retained message) is not kept by the broker and an agent that was offline then
+    never saw it.
     """
     actions: Actions[R] = Actions()
     for robot_id in sorted(desired):
@@ -50,7 +54,7 @@ def diff(
             actions.held.append(robot_id)
         else:
             actions.publish[robot_id] = request
-    actions.clear = sorted(r for r in observed if r not in desired)
+    actions.clear = sorted(r for r in set(observed) | set(running) if r not in desired)
     if not desired and actions.clear and not allow_empty:
         return Actions(
             refused=(

@@ -69,3 +69,12 @@ def test_an_empty_fleet_with_nothing_published_is_not_a_refusal() -> None:
 def test_removing_some_robots_is_not_an_empty_fleet() -> None:
     actions = diff({"a": Req("d1")}, {"a": "d1", "b": "d2"})
     assert actions.refused is None and actions.clear == ["b"]
+
+
+def test_a_robot_still_running_without_an_assignment_is_cleared_again() -> None:
+    """A clear is not retained: an agent that was away when it was sent still runs its brain."""
+    desired = {"a": Req("d1")}
+    actions = diff(desired, {"a": "d1"}, running={"a", "gone"})
+    assert actions.clear == ["gone"] and actions.publish == {}
+    # A suspended or assigned robot that runs is not touched.
+    assert diff(desired, {"a": "d1"}, running={"a"}).empty

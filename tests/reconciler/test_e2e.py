@@ -174,3 +174,25 @@ def test_broker_restart_refills_the_retained_topics(fleet: Fleet) -> None:
     after = fleet.watch.wait_running(fleet.requests(head))
     assert after["tb3-04"].pid != fleet.converged["tb3-04"].pid
     assert after["tb3-01"].pid == fleet.converged["tb3-01"].pid
+
+
+def test_a_robot_removed_while_cut_off_is_stopped_when_it_comes_back(fleet: Fleet) -> None:
+    """The broker loses its retained messages while tb3-05 is removed: no retained clear
+    can reach it, yet its brain must stop once it reports running again."""
+    before = fleet.converged["tb3-05"]
+    fleet.broker.stop()
+    text = fleet.lab.read("configs/fleet.yaml")
+    fleet.lab.write(
+        "configs/fleet.yaml",
+        "".join(line for line in text.splitlines(True) if "tb3-05" not in line),
+    )
+    head = fleet.lab.commit("tb3-05 leaves while the broker is down")
+    fleet.broker.start()
+    fleet.watch.wait_running(fleet.requests(head))
+
+    def stopped() -> bool:
+        status = fleet.watch.status("tb3-05")
+        return status is not None and status.state is AgentState.IDLE
+
+    wait_for(stopped, "tb3-05 idle")
+    assert before.pid is not None and not pid_alive(before.pid)
