@@ -339,7 +339,9 @@ def _check_environment(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
 
 def _workdir_problem(path: Path) -> str | None:
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        path.mkdir(mode=0o700, parents=True, exist_ok=True)
+        # The request may carry a lab's knowledge and goals: only the agent's user reads it.
+        path.chmod(0o700)
         # A real write, because permission bits say nothing when running as root.
         with tempfile.NamedTemporaryFile(dir=path, prefix=".probe-"):
             pass

@@ -206,3 +206,12 @@ def test_cli_never_shows_a_traceback(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
     assert len(result.stderr.splitlines()) == 2, result.stderr  # the id and the empty command
+
+
+def test_workdir_is_made_private(tmp_path: Path) -> None:
+    loose = tmp_path / "work"
+    loose.mkdir(mode=0o755)
+    loose.chmod(0o755)
+    config = load_config(write(tmp_path, GOOD))
+    assert config.workdir == loose
+    assert loose.stat().st_mode & 0o777 == 0o700

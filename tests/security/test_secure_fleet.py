@@ -144,6 +144,27 @@ def test_fleet_converges_over_tls_with_signed_requests(secure: SecureFleet) -> N
     assert json.loads(done.stdout)["in_sync"] is True
 
 
+def test_secrets_are_never_logged_or_published(secure: SecureFleet) -> None:
+    secure.wait_running(secure.lab.requests())
+    secrets = [p.read_text().strip() for p in (secure.broker.out / "secrets").iterdir()]
+    private_key = (secure.keys / "launch-signing.key").read_text()
+    key_body = "".join(line for line in private_key.splitlines() if "PRIVATE KEY" not in line)
+    published = b"".join(secure.view.snapshot().values()).decode("utf-8", "replace")
+    texts = [published, *(proc.output() for proc in secure.agents.values())]
+    assert secure.reconciler is not None
+    texts.append(secure.reconciler.output())
+    for work in secure.agents.values():
+        texts.append(work.log.with_name("brain.log").read_text(errors="replace"))
+    for text in texts:
+        assert key_body not in text
+        for secret in secrets:
+            assert secret not in text
+    # The robot's files: the workdir is private, the request readable by the agent's user only.
+    for proc in secure.agents.values():
+        assert proc.log.parent.stat().st_mode & 0o777 == 0o700
+        assert (proc.log.parent / "launch-request.json").stat().st_mode & 0o777 == 0o600
+
+
 def _brain_untouched(secure: SecureFleet, robot_id: str, before: AgentStatus) -> None:
     after = secure.status(robot_id)
     assert after is not None
