@@ -58,7 +58,7 @@ def _git() -> Any:
     return git
 
 
-def _open(path: Path) -> Any:
+def open_repo(path: Path) -> Any:
     git = _git()
     try:
         return git.Repo(path, search_parent_directories=True)
@@ -88,7 +88,7 @@ class LocalBranch:
     def __init__(self, root: Path, branch: str) -> None:
         self.branch = branch
         self._root = root.absolute()
-        repo = _open(self._root)
+        repo = open_repo(self._root)
         try:
             self._git_dir = Path(repo.common_dir).absolute()
             self._head_dir = Path(repo.git_dir).absolute()
@@ -104,7 +104,7 @@ class LocalBranch:
         return str(self._root)
 
     def head(self) -> str:
-        repo = _open(self._root)  # fresh each time: GitPython may cache packed refs
+        repo = open_repo(self._root)  # fresh each time: GitPython may cache packed refs
         try:
             return _resolve(repo, self.branch, str(self._root))
         finally:
@@ -188,7 +188,7 @@ class RemoteBranch:
 
     def refresh(self) -> None:
         git = _git()
-        repo = _open(self._cache)
+        repo = open_repo(self._cache)
         try:
             repo.git.fetch(
                 "--quiet",
@@ -204,7 +204,7 @@ class RemoteBranch:
             repo.close()
 
     def head(self) -> str:
-        repo = _open(self._cache)
+        repo = open_repo(self._cache)
         try:
             return _resolve(repo, self.branch, self.description)
         finally:

@@ -30,7 +30,7 @@ from reconciler.commands import UsageError, connection_from, make_signer, open_v
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
 from reconciler.retained import RetainedView
-from reconciler.source import LocalBranch
+from reconciler.source import LocalBranch, open_repo
 from reconciler.status import (
     FleetStatus,
     build_rows,
@@ -58,15 +58,10 @@ class Plan:
 
 
 def _git_repo(root: Path) -> Any:
-    import git
-
     try:
-        return git.Repo(root, search_parent_directories=True)
-    except (git.InvalidGitRepositoryError, git.NoSuchPathError):
-        raise UsageError(
-            f"{root.absolute()} is not a git repository; robotconf up applies commits only: "
-            "git init && git add configs models && git commit -m 'lab'"
-        ) from None
+        return open_repo(root)
+    except SourceError as exc:
+        raise UsageError(str(exc).replace("the reconciler", "robotconf up")) from None
 
 
 def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:

@@ -155,10 +155,10 @@ def start_reconciler(lab: GitLab, url: str, log: Path, *extra: str) -> Proc:
 class Watch:
     """Every retained robot and reconciler topic, plus a log of live (non-retained) launches."""
 
-    def __init__(self, url: str, prefix: str = "robotconf") -> None:
+    def __init__(self, url: str | Connection, prefix: str = "robotconf") -> None:
         self.topics = Topics(prefix)
         self.view = RetainedView(
-            Connection(url),
+            url if isinstance(url, Connection) else Connection(url),
             [
                 self.topics.all_launch,
                 self.topics.all_status,

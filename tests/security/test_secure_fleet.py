@@ -18,7 +18,7 @@ from configurator.signing import generate_keys, load_private_key, sign
 from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.retained import RetainedView
 from tests.lab import ROBOTCONF
-from tests.reconciler.harness import TIMEOUT, GitLab, Proc, pid_alive, wait_for
+from tests.reconciler.harness import TIMEOUT, GitLab, Proc, Watch, pid_alive, wait_for
 from tests.security.secure import Secured, start_secured
 
 TOPICS = Topics()
@@ -29,31 +29,19 @@ class SecureFleet:
     lab: GitLab
     broker: Secured
     keys: Path
-    view: RetainedView  # the viewer user: reads everything, writes nothing
+    view: Watch  # as the viewer user: reads everything, writes nothing
     writer: RetainedView  # the reconciler's user, to play an attacker who stole nothing else
     agents: dict[str, Proc] = field(default_factory=dict)
     reconciler: Proc | None = None
 
     def status(self, robot_id: str) -> AgentStatus | None:
-        payload = self.view.snapshot().get(TOPICS.status(robot_id))
-        return AgentStatus.model_validate_json(payload) if payload else None
+        return self.view.status(robot_id)
 
     def launch(self, robot_id: str) -> bytes:
-        return self.view.snapshot().get(TOPICS.launch(robot_id), b"")
+        return self.view.retained().get(TOPICS.launch(robot_id), b"")
 
     def wait_running(self, requests: dict[str, LaunchRequest]) -> dict[str, AgentStatus]:
-        def probe() -> dict[str, AgentStatus] | None:
-            found = {}
-            for robot_id, request in requests.items():
-                status = self.status(robot_id)
-                if status is None or status.state is not AgentState.RUNNING:
-                    return None
-                if status.digest != request.digest or status.pid is None:
-                    return None
-                found[robot_id] = status
-            return found
-
-        return wait_for(probe, f"{sorted(requests)} running")
+        return self.view.wait_running(requests)
 
     def send(self, robot_id: str, payload: bytes) -> None:
         assert self.writer.publish_retained([(TOPICS.launch(robot_id), payload)], TIMEOUT)
@@ -95,16 +83,14 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
     broker = start_secured(base, lab.root)
     keys = base / "keys"
     assert subprocess.run([ROBOTCONF, "keys", "generate", "--out", str(keys)]).returncode == 0
-    topics = [TOPICS.all_launch, TOPICS.all_status, TOPICS.reconciler_status]
-    view = RetainedView(broker.connection("viewer"), topics, "robotconf/sync", role="viewer")
+    view = Watch(broker.connection("viewer"))
     writer = RetainedView(
         broker.connection("reconciler"), [TOPICS.all_launch], "robotconf/sync", role="attacker"
     )
     fleet = SecureFleet(lab, broker, keys, view, writer)
     try:
-        view.start()
         writer.start()
-        assert view.wait_synced(TIMEOUT) and writer.wait_synced(TIMEOUT)
+        assert writer.wait_synced(TIMEOUT)
         for robot_id in lab.robots():
             fleet.agents[robot_id] = _agent(fleet, robot_id, base / "agents")
         fleet.reconciler = Proc(
@@ -122,7 +108,7 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
             fleet.reconciler.stop()
         for proc in fleet.agents.values():
             proc.stop()
-        view.stop()
+        view.close()
         writer.stop()
         broker.server.kill()
 
@@ -149,7 +135,7 @@ def test_secrets_are_never_logged_or_published(secure: SecureFleet) -> None:
     secrets = [p.read_text().strip() for p in (secure.broker.out / "secrets").iterdir()]
     private_key = (secure.keys / "launch-signing.key").read_text()
     key_body = "".join(line for line in private_key.splitlines() if "PRIVATE KEY" not in line)
-    published = b"".join(secure.view.snapshot().values()).decode("utf-8", "replace")
+    published = b"".join(secure.view.retained().values()).decode("utf-8", "replace")
     texts = [published, *(proc.output() for proc in secure.agents.values())]
     assert secure.reconciler is not None
     texts.append(secure.reconciler.output())
