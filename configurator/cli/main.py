@@ -119,6 +119,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="topic prefix (default: %(default)s)")
     p.add_argument("--out", type=Path, default=Path("broker"), help="folder (default: broker/)")
     p.add_argument(
+        "--install-dir",
+        type=Path,
+        default=None,
+        help="where the broker host keeps acl and passwd (default: OUT)",
+    )
+    p.add_argument(
         "--secrets", type=Path, default=None, help="password files (default: OUT/secrets)"
     )
     p.add_argument("--port", type=int, default=8883, help="listener port (default: %(default)s)")

@@ -96,7 +96,9 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
         require_certificate=args.require_certificate,
     )
     acl = render_acl(prefix, robots, users)
-    conf = render_conf(listener, passwd_file.resolve(), acl_file.resolve())
+    # The broker host may keep the files elsewhere than where they are written now.
+    installed = args.install_dir or out.resolve()
+    conf = render_conf(listener, installed / "passwd", installed / "acl")
     wanted_users = set(robots) | users.names()
 
     if args.check:
