@@ -9,6 +9,7 @@ import contextlib
 import json
 import logging
 import os
+import select
 import shutil
 import signal
 import subprocess
@@ -33,11 +34,19 @@ def substitute(command: Sequence[str], request_path: Path) -> list[str]:
 # ---------------------------------------------------------------- /proc
 
 
+_boot_id_cache: list[str] = []
+
+
 def _boot_id() -> str | None:
+    # Constant while this process lives (a reboot ends it): read once, not at every spawn.
+    if _boot_id_cache:
+        return _boot_id_cache[0]
     try:
-        return Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
+        boot = Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
     except OSError:
         return None
+    _boot_id_cache.append(boot)
+    return boot
 
 
 def proc_stat(pid: int) -> tuple[str, int] | None:
@@ -192,23 +201,75 @@ class BrainLog:
 
 
 class Brain:
-    """One started brain process; `on_exit(pid, code)` fires once, from a waiter thread."""
+    """One started brain process; `on_exit(pid, code)` fires once, from a waiter thread.
+
+    The waiter is the process-wide exit watcher when pidfds are available (Linux >= 5.3), so
+    that an agent process starts no thread per spawn; else a thread of the brain's own.
+    """
 
     def __init__(self, popen: subprocess.Popen[bytes], on_exit: Callable[[int, int], None]) -> None:
         self.popen = popen
         self.pid = popen.pid
         self._on_exit = on_exit
-        self._thread = threading.Thread(target=self._wait, name=f"brain-{self.pid}", daemon=True)
-        self._thread.start()
+        if not _WATCHER.watch(self):
+            thread = threading.Thread(target=self._wait, name=f"brain-{self.pid}", daemon=True)
+            thread.start()
 
     def _wait(self) -> None:
-        # Wait without reaping first: while the leader is a zombie its pid (= the group id)
-        # cannot be reused, so killing leftover group members cannot hit a stranger.
         with contextlib.suppress(ChildProcessError):
             os.waitid(os.P_PID, self.pid, os.WEXITED | os.WNOWAIT)
+        self._exited()
+
+    def _exited(self) -> None:
+        # Called once the leader has exited but before it is reaped: while it is a zombie its
+        # pid (= the group id) cannot be reused, so killing leftover group members cannot hit
+        # a stranger.
         signal_group(self.pid, signal.SIGKILL)
         code = self.popen.wait()
         self._on_exit(self.pid, code)
+
+
+class _ExitWatcher:
+    """One thread waiting for the exits of all the brains of this process: each brain's pidfd
+    in one epoll. It becomes readable when the process exits, before anyone reaps it."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._epoll: select.epoll | None = None
+        self._brains: dict[int, Brain] = {}
+
+    def watch(self, brain: Brain) -> bool:
+        """False when this system cannot watch a pid (no pidfd): the caller waits itself."""
+        try:
+            fd = os.pidfd_open(brain.pid)
+        except (AttributeError, OSError):
+            return False
+        with self._lock:
+            if self._epoll is None:
+                epoll = select.epoll()
+                thread = threading.Thread(
+                    target=self._run, args=(epoll,), name="brain-exits", daemon=True
+                )
+                thread.start()
+                self._epoll = epoll
+            self._brains[fd] = brain
+            self._epoll.register(fd, select.EPOLLIN)
+        return True
+
+    def _run(self, epoll: select.epoll) -> None:
+        while True:
+            for fd, _ in epoll.poll():
+                with self._lock:
+                    epoll.unregister(fd)
+                    brain = self._brains.pop(fd)
+                os.close(fd)
+                try:
+                    brain._exited()
+                except Exception:  # one brain's trouble must not stop watching the others
+                    log.exception("reporting the exit of brain pid %d", brain.pid)
+
+
+_WATCHER = _ExitWatcher()  # holds no descriptor and no thread until the first brain
 
 
 def spawn(
