@@ -5,7 +5,6 @@ Loading never raises a traceback at the user: every problem becomes one `ConfigE
 
 from __future__ import annotations
 
-import difflib
 import os
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
@@ -13,9 +12,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from configurator.diagnostics import did_you_mean
 from configurator.mqtt import Connection
 from configurator.types import ROBOT_ID_PATTERN
 from configurator.wire import (
@@ -26,6 +25,7 @@ from configurator.wire import (
     parse_broker_url,
     validate_prefix,
 )
+from configurator.yamlio import YamlDocument, YamlProblem, YamlReadError, parse_document
 
 COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 
@@ -195,56 +195,7 @@ class ConfigInvalid(Exception):
         self.errors = list(errors)
 
 
-# ---------------------------------------------------------------- YAML with line numbers
-
 Loc = tuple[str | int, ...]
-
-
-class _LineMap:
-    """Finds the line of a key path in a composed YAML tree (1-based)."""
-
-    def __init__(self, root: yaml.Node | None) -> None:
-        self.root = root
-
-    def line(self, loc: Loc) -> int | None:
-        node = self.root
-        if node is None:
-            return None
-        best = node.start_mark.line + 1
-        for part in loc:
-            child: yaml.Node | None = None
-            if isinstance(node, yaml.MappingNode):
-                for key, value in node.value:
-                    if isinstance(key, yaml.ScalarNode) and key.value == str(part):
-                        # Unknown keys are reported on the key itself, values on their own line.
-                        best = key.start_mark.line + 1
-                        child = value
-                        break
-            elif (
-                isinstance(node, yaml.SequenceNode)
-                and isinstance(part, int)
-                and 0 <= part < len(node.value)
-            ):
-                child = node.value[part]
-            if child is None:
-                return best
-            node = child
-            best = node.start_mark.line + 1
-        return best
-
-
-def _duplicate_keys(node: yaml.Node | None) -> Iterator[tuple[int, str]]:
-    if isinstance(node, yaml.MappingNode):
-        seen: set[str] = set()
-        for key, value in node.value:
-            if isinstance(key, yaml.ScalarNode):
-                if key.value in seen:
-                    yield key.start_mark.line + 1, key.value
-                seen.add(key.value)
-            yield from _duplicate_keys(value)
-    elif isinstance(node, yaml.SequenceNode):
-        for item in node.value:
-            yield from _duplicate_keys(item)
 
 
 _SECTIONS: dict[Loc, type[BaseModel]] = {
@@ -278,8 +229,8 @@ def _explain(error: Any) -> tuple[Loc, str]:
         parent, key = loc[:-1], str(loc[-1])
         model = _SECTIONS.get(parent)
         allowed = sorted(model.model_fields) if model else []
-        near = difflib.get_close_matches(key, allowed, n=1)
-        hint = f"did you mean '{near[0]}'?" if near else f"allowed here: {', '.join(allowed)}"
+        near = did_you_mean(key, allowed)
+        hint = near[2:] if "did you mean" in near else f"allowed here: {', '.join(allowed)}"
         return loc, f"unknown key '{where}'; {hint}"
     if kind == "missing":
         hint = _HINTS.get(str(loc[-1]), "")
@@ -352,38 +303,36 @@ def _workdir_problem(path: Path) -> str | None:
 
 def parse_config(text: str, filename: str, base: Path | None = None) -> AgentConfig:
     """Validate agent.yaml text; raises ConfigInvalid listing every problem with its line."""
+    # The repository's strict reader: duplicate keys, aliases, tabs refused, positions kept.
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigInvalid([ConfigError(filename, line, f"not valid YAML: {problem}")]) from None
-    lines = _LineMap(root)
-    dups = [
-        ConfigError(filename, line, f"key '{key}' appears twice; keep one")
-        for line, key in _duplicate_keys(root)
-    ]
-    if dups:
-        raise ConfigInvalid(dups)
-    if not isinstance(data, dict):
-        message = "must be a mapping of agent settings (broker, description, command, workdir...)"
-        raise ConfigInvalid([ConfigError(filename, lines.line(()), message)])
+        doc = parse_document(filename, text.encode("utf-8"))
+    except YamlReadError as exc:
+        raise ConfigInvalid([_yaml_error(filename, p) for p in exc.problems]) from None
     try:
-        config = AgentConfig.model_validate(data)
+        config = AgentConfig.model_validate(doc.data)
     except ValidationError as exc:
-        raise ConfigInvalid(_errors(filename, lines, (_explain(e) for e in exc.errors()))) from None
+        raise ConfigInvalid(_errors(filename, doc, (_explain(e) for e in exc.errors()))) from None
     if base is not None:
         config = config.resolved(base)
     problems = list(_check_environment(config))
     if problems:
-        raise ConfigInvalid(_errors(filename, lines, problems))
+        raise ConfigInvalid(_errors(filename, doc, problems))
     return config
 
 
-def _errors(filename: str, lines: _LineMap, found: Iterable[tuple[Loc, str]]) -> list[ConfigError]:
-    out = [ConfigError(filename, lines.line(loc), message) for loc, message in found]
+def _yaml_error(filename: str, problem: YamlProblem) -> ConfigError:
+    message = problem.message
+    if problem.code == "RC003":
+        message = "not valid YAML: " + message.removeprefix("YAML syntax error: ")
+    elif problem.code == "RC007" and "top of the file" in message:
+        message = "must be a mapping of agent settings (broker, description, command, workdir...)"
+    return ConfigError(filename, problem.line, message)
+
+
+def _errors(
+    filename: str, doc: YamlDocument, found: Iterable[tuple[Loc, str]]
+) -> list[ConfigError]:
+    out = [ConfigError(filename, doc.locate(loc)[0], message) for loc, message in found]
     return sorted(out, key=lambda e: (e.line or 0, e.message))
 
 

@@ -130,10 +130,6 @@ def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
         doc, model = _load_one(source, path, kind, diagnostics)
         if model is None or doc is None:
             repo.broken.setdefault(kind.name, set()).add(_qualified(groups))
-            if kind.name == "robot-template":
-                repo.platforms[groups[0]].broken_templates.add(name)
-            elif kind.name == "mapping-scheme":
-                repo.platforms[groups[0]].broken_schemes.add(name)
             continue
         declared = getattr(model, "name", None)
         if kind.name != "fleet" and declared is not None and declared != name:

@@ -44,9 +44,6 @@ class Platform:
     info: Entry[PlatformInfo] | None = None
     templates: dict[str, Entry[RobotTemplate]] = field(default_factory=dict)
     schemes: dict[str, Entry[MappingScheme]] = field(default_factory=dict)
-    # Files present but unreadable: references to them are not reported a second time.
-    broken_templates: set[str] = field(default_factory=set)
-    broken_schemes: set[str] = field(default_factory=set)
 
 
 @dataclass
@@ -62,6 +59,8 @@ class Repository:
     capabilities: dict[str, Entry[CapabilityConfiguration]] = field(default_factory=dict)
     scenarios: dict[str, Entry[ScenarioConfiguration]] = field(default_factory=dict)
     fleet: Entry[Fleet] | None = None
+    # Files present but unreadable, by kind ("robot-template": {"ROS2/burger"}): references to
+    # them are not reported a second time.
     broken: dict[str, set[str]] = field(default_factory=dict)
     files_read: int = 0
 

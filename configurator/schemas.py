@@ -15,6 +15,7 @@ from pydantic import BaseModel
 from configurator.launch import LaunchRequest
 from configurator.loader import KIND_BY_NAME
 from configurator.repository import Repository
+from configurator.types import ROBOT_ID_PATTERN
 
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
@@ -185,9 +186,7 @@ def _fleet_schema(repo: Repository) -> dict[str, Any]:
     schema["$defs"]["RobotAssignment"]["properties"]["scenario"] = _enum_or_nothing(
         scenarios, "the scenario this robot runs"
     )
-    schema["properties"]["robots"]["propertyNames"] = {
-        "pattern": r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
-    }
+    schema["properties"]["robots"]["propertyNames"] = {"pattern": ROBOT_ID_PATTERN}
     return schema
 
 

@@ -8,12 +8,12 @@ when a key is used, so an agent without signing imports nothing more.
 from __future__ import annotations
 
 import base64
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from configurator.files import write_atomic
 from configurator.launch import LaunchRequest, canonical_json
 
 if TYPE_CHECKING:
@@ -54,21 +54,10 @@ def generate_keys(folder: Path, *, force: bool = False) -> KeyPair:
     public_pem = key.public_key().public_bytes(
         serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo
     )
-    _write(pair.private, private_pem, 0o600)
-    _write(pair.public, public_pem, 0o644)
+    # Created with its final mode: a secret is never briefly world-readable.
+    write_atomic(pair.private, private_pem, 0o600)
+    write_atomic(pair.public, public_pem, 0o644)
     return pair
-
-
-def _write(path: Path, data: bytes, mode: int) -> None:
-    """Create with the final mode from the start, so a secret is never briefly world-readable."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, mode)
-    try:
-        os.write(fd, data)
-        os.fchmod(fd, mode)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
 
 
 def load_private_key(path: Path) -> Ed25519PrivateKey:
@@ -136,6 +125,4 @@ def verify(request: LaunchRequest, key: Ed25519PublicKey) -> str | None:
         key.verify(raw, signed_bytes(request))
     except InvalidSignature:
         return "signature does not verify: the request was altered or signed by another key"
-    if not request.digest_matches():
-        return "digest does not match the request's content"
     return None

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from configurator.brokerconf import Listener, ServiceUsers, clashes, render_acl, render_conf
 from configurator.diagnostics import format_text
+from configurator.files import write_atomic
 from configurator.signing import SigningKeyError, generate_keys
 from configurator.wire import validate_prefix
 from configurator.workspace import check
@@ -30,24 +31,13 @@ def cmd_keys(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _write_private(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    try:
-        os.write(fd, text.encode("utf-8"))
-        os.fchmod(fd, 0o600)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
-
-
 def _password_for(secrets_dir: Path, user: str) -> str:
     """The user's password from its file, made (random, 0600) when there is none yet."""
     path = secrets_dir / f"{user}.password"
     if path.is_file():
         return path.read_text(encoding="utf-8").strip()
     password = secrets.token_urlsafe(24)
-    _write_private(path, password + "\n")
+    write_atomic(path, (password + "\n").encode("utf-8"), 0o600)
     return password
 
 
@@ -135,7 +125,7 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
     # appears on a command line or in a log.
     plain = "".join(f"{u}:{_password_for(secrets_dir, u)}\n" for u in sorted(wanted_users))
     staging = out / ".passwd.staging"
-    _write_private(staging, plain)
+    write_atomic(staging, plain.encode("utf-8"), 0o600)
     done = subprocess.run([tool, "-U", str(staging)], capture_output=True, text=True)
     if done.returncode != 0:
         staging.unlink(missing_ok=True)

@@ -18,13 +18,14 @@ from configurator.repository import Entry, Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
 from configurator.types import (
+    ROBOT_ID_PATTERN,
     CapabilityConfiguration,
     JsonScalar,
     ScenarioConfiguration,
     SettingDefinition,
 )
 
-ROBOT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+ROBOT_ID = re.compile(ROBOT_ID_PATTERN)
 
 
 def check_capability(
@@ -41,7 +42,9 @@ def check_capability(
             f"unknown platform '{config.platform}'{did_you_mean(config.platform, repo.platforms)}",
         )
         return resolved
-    if resolved.scheme is None and config.mapping_scheme not in platform.broken_schemes:
+    if resolved.scheme is None and not repo.is_broken(
+        "mapping-scheme", f"{platform.name}/{config.mapping_scheme}"
+    ):
         report.error(
             entry,
             ["mapping_scheme"],
@@ -53,7 +56,7 @@ def check_capability(
     if (
         template_name is not None
         and resolved.template is None
-        and template_name not in platform.broken_templates
+        and not repo.is_broken("robot-template", f"{platform.name}/{template_name}")
     ):
         report.error(
             entry,
@@ -244,7 +247,6 @@ def check_scenario(
                 )
         else:
             environment = env_entry.model
-    env_known = environment is not None or scenario.environment is None
 
     for i, set_name in enumerate(scenario.knowledge_sets):
         if scenario.environment is None:
@@ -296,7 +298,7 @@ def check_scenario(
                 "RC306",
                 f"goal location '{goal.location}' needs an environment; set 'environment'",
             )
-        elif environment is not None and env_known:
+        elif environment is not None:
             matches = find_location(environment, goal.location)
             locations = [o for o in environment.objects if o.type == "Location"]
             if not matches:

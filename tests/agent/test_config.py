@@ -157,7 +157,7 @@ def test_public_key_must_be_an_ed25519_public_key(tmp_path: Path) -> None:
 
 def test_yaml_problems(tmp_path: Path) -> None:
     twice = problems(tmp_path, GOOD + "workdir: other\n")
-    assert twice == ["8: key 'workdir' appears twice; keep one"]
+    assert twice == ["8: duplicate key 'workdir' (first at line 5); each key may appear once"]
     found = problems(tmp_path, "broker: [unclosed\n")
     assert len(found) == 1 and found[0].startswith("2: not valid YAML")
     assert problems(tmp_path, "- a list\n")[0].startswith("1: must be a mapping")

@@ -363,3 +363,8 @@ def test_broken_file_is_not_reported_again_through_references(lab: Lab) -> None:
     lab.write(CAMERA, "platform: [\n")
     found = lab.check().diagnostics
     assert [d.code for d in found] == ["RC003"]
+
+
+def test_broken_template_is_not_reported_again_through_its_capabilities(lab: Lab) -> None:
+    lab.write("models/platforms/ROS2/robot-templates/turtlebot3-burger.yaml", "mappings: [\n")
+    assert [d.code for d in lab.check().diagnostics] == ["RC003"]
