@@ -1,12 +1,14 @@
 """What arrives in the agent's inbox: the only way other threads and signal handlers reach it.
 
-All work happens on the agent's own thread; the network thread and the brain's waiter
-thread only put one of these into a `queue.SimpleQueue` (safe even from a signal handler).
+All work happens on the agent's own thread; the brain's exit watcher, a connection attempt and
+signal handlers only put one of these into the `Inbox`, which wakes the agent's loop.
 """
 
 from __future__ import annotations
 
-import queue
+import contextlib
+import os
+from collections import deque
 from dataclasses import dataclass
 
 
@@ -55,4 +57,49 @@ Event = (
     | BrainExited
     | Shutdown
 )
-Inbox = queue.SimpleQueue[Event]
+
+
+class Inbox:
+    """Events for the agent's thread, plus a pipe its loop waits on (with the MQTT socket).
+
+    `put` may be called from any thread and from a signal handler: a deque append and a
+    one-byte write, both atomic. The agent's own thread uses `put_local`, which needs no wake-up.
+    """
+
+    def __init__(self) -> None:
+        self._events: deque[Event] = deque()
+        self._read_fd, self._write_fd = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+
+    def put(self, event: Event) -> None:
+        self._events.append(event)
+        self.wake()
+
+    def put_local(self, event: Event) -> None:
+        self._events.append(event)
+
+    def wake(self) -> None:
+        # A full pipe already wakes the loop: a lost byte loses nothing.
+        with contextlib.suppress(BlockingIOError, OSError):
+            os.write(self._write_fd, b"!")
+
+    def fileno(self) -> int:
+        return self._read_fd
+
+    def clear_wakeups(self) -> None:
+        with contextlib.suppress(BlockingIOError, OSError):
+            while os.read(self._read_fd, 4096):
+                pass
+
+    def pop(self) -> Event | None:
+        try:
+            return self._events.popleft()
+        except IndexError:
+            return None
+
+    def __bool__(self) -> bool:
+        return bool(self._events)
+
+    def close(self) -> None:
+        for fd in (self._read_fd, self._write_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)

@@ -9,7 +9,6 @@ import contextlib
 import json
 import logging
 import os
-import select
 import shutil
 import signal
 import subprocess
@@ -201,75 +200,40 @@ class BrainLog:
 
 
 class Brain:
-    """One started brain process; `on_exit(pid, code)` fires once, from a waiter thread.
+    """One started brain process, and how its exit is noticed.
 
-    The waiter is the process-wide exit watcher when pidfds are available (Linux >= 5.3), so
-    that an agent process starts no thread per spawn; else a thread of the brain's own.
+    With pidfds (Linux >= 5.3) `exit_fd` becomes readable when the brain exits: the owner
+    waits on it beside its other descriptors and calls `reap()`, with no thread at all.
+    Without, a waiter thread of the brain's own reaps it and calls `on_exit(pid, code)`.
     """
 
     def __init__(self, popen: subprocess.Popen[bytes], on_exit: Callable[[int, int], None]) -> None:
         self.popen = popen
         self.pid = popen.pid
         self._on_exit = on_exit
-        if not _WATCHER.watch(self):
+        self.exit_fd: int | None = None
+        try:
+            self.exit_fd = os.pidfd_open(self.pid)
+        except (AttributeError, OSError):
             thread = threading.Thread(target=self._wait, name=f"brain-{self.pid}", daemon=True)
             thread.start()
 
     def _wait(self) -> None:
         with contextlib.suppress(ChildProcessError):
             os.waitid(os.P_PID, self.pid, os.WEXITED | os.WNOWAIT)
-        self._exited()
+        self._on_exit(self.pid, self.reap())
 
-    def _exited(self) -> None:
-        # Called once the leader has exited but before it is reaped: while it is a zombie its
-        # pid (= the group id) cannot be reused, so killing leftover group members cannot hit
-        # a stranger.
+    def reap(self) -> int:
+        """The exit code, once the brain has exited (blocks until then)."""
+        # The leader has exited but is not reaped yet: while it is a zombie its pid (= the
+        # group id) cannot be reused, so killing leftover group members cannot hit a stranger.
         signal_group(self.pid, signal.SIGKILL)
         code = self.popen.wait()
-        self._on_exit(self.pid, code)
-
-
-class _ExitWatcher:
-    """One thread waiting for the exits of all the brains of this process: each brain's pidfd
-    in one epoll. It becomes readable when the process exits, before anyone reaps it."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._epoll: select.epoll | None = None
-        self._brains: dict[int, Brain] = {}
-
-    def watch(self, brain: Brain) -> bool:
-        """False when this system cannot watch a pid (no pidfd): the caller waits itself."""
-        try:
-            fd = os.pidfd_open(brain.pid)
-        except (AttributeError, OSError):
-            return False
-        with self._lock:
-            if self._epoll is None:
-                epoll = select.epoll()
-                thread = threading.Thread(
-                    target=self._run, args=(epoll,), name="brain-exits", daemon=True
-                )
-                thread.start()
-                self._epoll = epoll
-            self._brains[fd] = brain
-            self._epoll.register(fd, select.EPOLLIN)
-        return True
-
-    def _run(self, epoll: select.epoll) -> None:
-        while True:
-            for fd, _ in epoll.poll():
-                with self._lock:
-                    epoll.unregister(fd)
-                    brain = self._brains.pop(fd)
-                os.close(fd)
-                try:
-                    brain._exited()
-                except Exception:  # one brain's trouble must not stop watching the others
-                    log.exception("reporting the exit of brain pid %d", brain.pid)
-
-
-_WATCHER = _ExitWatcher()  # holds no descriptor and no thread until the first brain
+        if self.exit_fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(self.exit_fd)
+            self.exit_fd = None
+        return code
 
 
 def spawn(
@@ -279,14 +243,17 @@ def spawn(
     env: Mapping[str, str],
     on_exit: Callable[[int, int], None],
 ) -> Brain:
-    """Start the brain as the leader of a new session; raises OSError (e.g. no such file)."""
+    """Start the brain as the leader of a new session; raises OSError (e.g. no such file).
+
+    `on_exit` is called from a waiter thread, and only when the brain has no `exit_fd`."""
     popen = subprocess.Popen(
         list(argv),
         cwd=cwd,
         stdin=subprocess.DEVNULL,
         stdout=log_fd,
         stderr=log_fd,
-        env={**os.environ, **env},
+        # Bytes: os.environb is not decoded and Popen need not encode it again, at every spawn.
+        env={**os.environb, **{os.fsencode(k): os.fsencode(v) for k, v in env.items()}},
         start_new_session=True,
         close_fds=True,
     )
@@ -296,4 +263,5 @@ def spawn(
 def write_pidfile(path: Path, pid: int, digest: str | None) -> None:
     record = PidRecord.of(pid, digest)
     if record is not None:
-        write_atomic(path, record.to_json(), mode=0o644)
+        # Not durable: after a power cut the boot id tells that the recorded pid is stale.
+        write_atomic(path, record.to_json(), mode=0o644, durable=False)

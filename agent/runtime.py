@@ -5,11 +5,14 @@ The only place where the state machine, the brain process and the broker link me
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import logging
 import os
-import queue
+import selectors
 import signal
 import time
+from collections.abc import Mapping, Sequence
 from types import FrameType
 
 from pydantic import ValidationError
@@ -68,7 +71,7 @@ class Agent:
         self.config = config
         self.workdir = config.workdir
         self.description = config.description.to_wire()
-        self.inbox: Inbox = queue.SimpleQueue()
+        self.inbox = Inbox()
         self.seq = SeqStore(self.workdir / SEQ_FILE)
         self.issued = IssuedStore(self.workdir / ISSUED_FILE)
         self.supervisor = Supervisor(config.robot_id, policy_of(config))
@@ -90,6 +93,8 @@ class Agent:
             key = load_public_key(config.public_key)
             self.verify = lambda request: verify(request, key)
         self.brain: process.Brain | None = None
+        self._exit_fds: dict[int, process.Brain] = {}  # exit descriptors watched, until reaped
+        self._accepted_payload: tuple[str, bytes] = ("", b"")  # digest, bytes as received
         self.connected = False
         self.conn_seq = 0
         self._last_published: AgentStatus | None = None
@@ -100,13 +105,21 @@ class Agent:
 
     def install_signal_handlers(self) -> None:
         def handler(signum: int, frame: FrameType | None) -> None:
-            # SimpleQueue.put is reentrant: safe even if the signal lands inside a get().
+            # A deque append and a pipe write: safe wherever the signal lands.
             self.inbox.put(Shutdown(signal.Signals(signum).name))
 
         signal.signal(signal.SIGTERM, handler)
         signal.signal(signal.SIGINT, handler)
 
     def run(self) -> int:
+        """Runs until a signal (or a Shutdown event) has stopped the brain and the link."""
+        run_agents([self])
+        return 0
+
+    # ------------------------------------------------------------ the loop, in steps
+    # `run_agents` drives these: one agent in production, many in one benchmark process.
+
+    def begin(self) -> None:
         # Before connecting: a request must never start a second brain next to an orphan.
         recovered = process.stop_orphan(self.workdir / PID_FILE, self.config.stop_timeout)
         if recovered:
@@ -115,37 +128,81 @@ class Agent:
         url = self.config.connection().address.url
         log.info("agent for %s connecting to %s", self.config.robot_id, url)
         self.link.start()
-        while not self.supervisor.finished:
-            event = self._next_event()
-            now = time.monotonic()
-            if event is not None:
-                self._handle(event, now)
+
+    @property
+    def finished(self) -> bool:
+        return self.supervisor.finished
+
+    def step(self, ready: Mapping[int, int]) -> None:
+        """One pass: what became ready (fd -> selector events), then events, deadlines, status."""
+        readable = writable = False
+        for fd, mask in ready.items():
+            if fd == self.inbox.fileno():
+                self.inbox.clear_wakeups()
+            elif fd in self._exit_fds:
+                brain = self._exit_fds.pop(fd)
+                self.inbox.put_local(BrainExited(brain.pid, brain.reap()))
+            else:
+                readable = bool(mask & selectors.EVENT_READ)
+                writable = bool(mask & selectors.EVENT_WRITE)
+        self.link.service(readable, writable, time.monotonic())
+        # Everything that arrived together is handled before one status goes out.
+        handled = False
+        while (event := self.inbox.pop()) is not None:
+            self._handle(event, time.monotonic())
+            handled = True
+        now = time.monotonic()
+        deadline = self.supervisor.deadline
+        if deadline is not None and now >= deadline:
             self._apply(self.supervisor.tick(now))
-            self._maybe_rotate_log(now)
+            handled = True
+        self._maybe_rotate_log(now)
+        if handled:  # the status changes with events and deadlines, nothing else
             self._publish_if_changed()
-        final = self.supervisor.status().model_copy(
+
+    def watches(self) -> dict[int, tuple[int, object]]:
+        """fd -> (selector events, identity): the inbox, the broker socket, the brain's exit.
+
+        A closed descriptor's number may come back for a new socket or brain at once: the
+        identity (socket generation, brain pid) tells them apart."""
+        wanted: dict[int, tuple[int, object]] = {
+            self.inbox.fileno(): (selectors.EVENT_READ, "inbox")
+        }
+        link = self.link.watch()
+        if link is not None:
+            generation, fd, writing = link
+            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if writing else 0)
+            wanted[fd] = (events, ("link", generation))
+        for fd, exiting in self._exit_fds.items():
+            wanted[fd] = (selectors.EVENT_READ, ("brain", exiting.pid))
+        return wanted
+
+    def due(self) -> float:
+        """The monotonic time by which `step` must run even if nothing becomes ready."""
+        if self.inbox:
+            return 0.0
+        now = time.monotonic()
+        due = now + IDLE_WAKEUP
+        if self.supervisor.deadline is not None:
+            due = min(due, self.supervisor.deadline)
+        if self.brain is not None:
+            due = min(due, self._next_log_check)
+        link = self.link.wait_limit(now)
+        if link is not None:
+            due = min(due, now + link)
+        return due
+
+    def end(self) -> None:
+        final = self.supervisor.status(self.conn_seq).model_copy(
             update={
                 "state": AgentState.OFFLINE,
-                "seq": self.conn_seq,
                 "since": now_wall(),
                 "message": "agent stopped",
             }
         )
         self.link.close(final if self.connected else None)
+        self.inbox.close()
         log.info("agent stopped")
-        return 0
-
-    def _next_event(self) -> Event | None:
-        now = time.monotonic()
-        wake = now + IDLE_WAKEUP
-        if self.supervisor.deadline is not None:
-            wake = min(wake, self.supervisor.deadline)
-        if self.brain is not None:
-            wake = min(wake, self._next_log_check)
-        try:
-            return self.inbox.get(timeout=max(0.0, wake - now))
-        except queue.Empty:
-            return None
 
     # ------------------------------------------------------------ events
 
@@ -195,6 +252,8 @@ class Agent:
                 log.warning("%s", warning)
             if self.verify is not None:
                 self.issued.accepted(verdict.request.issued_at)
+            # The brain gets the bytes as published (validated above), not a re-serialisation.
+            self._accepted_payload = (verdict.request.digest, payload)
             self._apply(sup.accept(verdict.request, verdict.warnings, now))
 
     def _on_own_status(self, payload: bytes) -> None:
@@ -241,7 +300,11 @@ class Agent:
         path = self.workdir / REQUEST_FILE
         argv = process.substitute(self.config.command, path)
         try:
-            write_atomic(path, request.payload(), mode=0o600)
+            digest, payload = self._accepted_payload
+            if digest != request.digest:
+                payload = request.payload()
+            # Not durable: after a power cut the retained request arrives again.
+            write_atomic(path, payload, mode=0o600, durable=False)
             log_fd = self.brain_log.open_for_child()
         except OSError as exc:
             problem = f"cannot write {exc.filename}: {exc.strerror}"
@@ -269,6 +332,8 @@ class Agent:
         finally:
             os.close(log_fd)
         self.brain = brain
+        if brain.exit_fd is not None:
+            self._exit_fds[brain.exit_fd] = brain
         try:
             process.write_pidfile(self.workdir / PID_FILE, brain.pid, request.digest)
         except OSError as exc:
@@ -296,7 +361,7 @@ class Agent:
     # ------------------------------------------------------------ status
 
     def current_status(self) -> AgentStatus:
-        return self.supervisor.status().model_copy(update={"seq": self.conn_seq})
+        return self.supervisor.status(self.conn_seq)
 
     def _publish_if_changed(self) -> None:
         self._publish(force=False)
@@ -309,3 +374,61 @@ class Agent:
             return
         self.link.publish_status(status)
         self._last_published = status
+
+
+def run_agents(agents: Sequence[Agent]) -> None:
+    """Drives agents on this thread, all their descriptors in one selector, until each has
+    finished. A robot runs one; a benchmark hosts many in one process without a thread each."""
+    # What is loaded by now (modules, schemas, the configuration) lives as long as the
+    # process: frozen, the cyclic collector stops walking it at every collection, which
+    # otherwise costs a large share of the CPU of each restart.
+    gc.freeze()
+    selector = selectors.DefaultSelector()
+    registered: dict[Agent, dict[int, tuple[int, object]]] = {}
+    due: dict[Agent, float] = {}
+    try:
+        for agent in agents:
+            agent.begin()
+            registered[agent] = {}
+            _sync(selector, agent, registered)
+            due[agent] = agent.due()
+        while due:
+            timeout = max(0.0, min(due.values()) - time.monotonic())
+            ready: dict[Agent, dict[int, int]] = {}
+            for key, mask in selector.select(timeout):
+                ready.setdefault(key.data, {})[key.fd] = mask
+            now = time.monotonic()
+            for agent in [a for a, when in due.items() if when <= now or a in ready]:
+                agent.step(ready.get(agent, {}))
+                if agent.finished:
+                    _sync(selector, agent, registered, stop=True)
+                    del due[agent]
+                    agent.end()
+                else:
+                    _sync(selector, agent, registered)
+                    due[agent] = agent.due()
+    finally:
+        selector.close()
+
+
+def _sync(
+    selector: selectors.BaseSelector,
+    agent: Agent,
+    registered: dict[Agent, dict[int, tuple[int, object]]],
+    stop: bool = False,
+) -> None:
+    """Makes the selector watch exactly what the agent wants now (only a step changes that)."""
+    wanted = {} if stop else agent.watches()
+    have = registered[agent]
+    if wanted == have:
+        return
+    for fd, watch in list(have.items()):
+        if wanted.get(fd) != watch:
+            # Already gone from the kernel's set if the descriptor was closed.
+            with contextlib.suppress(KeyError, ValueError, OSError):
+                selector.unregister(fd)
+            del have[fd]
+    for fd, (events, identity) in wanted.items():
+        if fd not in have:
+            selector.register(fd, events, agent)
+            have[fd] = (events, identity)

@@ -1,14 +1,22 @@
-"""The agent's MQTT edge: one paho client, a Last Will per connection, callbacks that only enqueue.
+"""The agent's MQTT edge: one paho client driven by the agent's loop; a Last Will per connection.
 
-Nothing here decides anything: every callback hands an event to the agent's thread.
+No network thread: the agent's loop waits on the client's socket and calls `service()`, so that
+a message, its handling and the status it causes take no thread hand-off. Only the blocking
+TCP/TLS connect runs on a short-lived thread. Callbacks decide nothing: they queue events.
 """
 
 from __future__ import annotations
 
 import logging
+import select
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import paho.mqtt.client as paho
+from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.reasoncodes import ReasonCode
 
 from agent.events import (
@@ -26,6 +34,10 @@ from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 log = logging.getLogger(__name__)
 
 QOS = 1
+ECHOES = 8  # own status payloads remembered: a restart publishes three in quick succession
+RECONNECT_MIN, RECONNECT_MAX = 1.0, 30.0  # seconds between connection attempts, doubling
+MISC_INTERVAL = 1.0  # keepalive bookkeeping (pings, a silent broker) at least this often
+MAX_READS = 32  # packets read in one pass before the agent handles what they brought
 
 
 def will_payload(robot_id: str, seq: int) -> bytes:
@@ -39,7 +51,7 @@ def will_payload(robot_id: str, seq: int) -> bytes:
 
 
 class BrokerLink:
-    """Connects, reconnects with paho's backoff, and forwards what arrives to the inbox."""
+    """Connects, reconnects with backoff, and turns what arrives into inbox events."""
 
     def __init__(
         self,
@@ -60,14 +72,28 @@ class BrokerLink:
         self._inbox = inbox
         self._seq = seq
         self._conn_seq = 0
+        # What this link published on its status topic, so that their echoes are dropped here
+        # instead of reaching the agent: only someone else's status (a late Last Will) matters.
+        self._echoes: deque[bytes] = deque(maxlen=ECHOES)
+        self._started = False
+        self._attempt: threading.Thread | None = None
+        self._attempt_error: str | None = None
+        self._attempt_over = threading.Event()  # set by the attempt right before it wakes us
+        self._socket_open = False
+        self._generation = 0
+        self._poller: select.poll | None = None  # readiness of the current socket, no waiting
+        self._retry_at = 0.0
+        self._delay = RECONNECT_MIN
+        self._next_misc = 0.0
         self.client = make_client(connection, client_id=f"robotconf-agent-{robot_id}")
         self.client.on_pre_connect = self._on_pre_connect
         self.client.on_connect = self._on_connect
-        self.client.on_connect_fail = self._on_connect_fail
         self.client.on_disconnect = self._on_disconnect
         self.client.on_message = self._on_message
 
-    # ------------------------------------------------------------ network thread
+    # ------------------------------------------------------------ paho callbacks
+    # They run inside `service()` or `publish_*()`, on the agent's thread (on_pre_connect on
+    # the connect thread): queue an event, nothing more.
 
     def _on_pre_connect(self, client: paho.Client, userdata: Any) -> None:
         # A new connection gets a new seq, and its Last Will carries that seq: a will that
@@ -86,19 +112,14 @@ class BrokerLink:
         properties: Any,
     ) -> None:
         if reason_code.is_failure:
-            self._inbox.put(ConnectFailed(f"broker refused the connection: {reason_code}"))
+            self._inbox.put_local(ConnectFailed(f"broker refused the connection: {reason_code}"))
             return
+        self._delay = RECONNECT_MIN
         # Subscribing here, not once at start-up, restores the subscriptions after a reconnect.
-        client.subscribe([(self.launch_topic, QOS), (self.status_topic, QOS)])
-        self._inbox.put(Connected(self._conn_seq))
-
-    def _on_connect_fail(self, client: paho.Client, userdata: Any) -> None:
-        # paho does not say why; name the usual suspects.
-        address = self._connection.address
-        why = "broker down or unreachable"
-        if address.tls:
-            why += ", or the TLS handshake failed"
-        self._inbox.put(ConnectFailed(f"cannot connect to {address.url} ({why})"))
+        # The own status topic is watched for a late Last Will; QoS 0 is enough, since every
+        # reconnection delivers the retained status anew, and spares a PUBACK per echo.
+        client.subscribe([(self.launch_topic, QOS), (self.status_topic, 0)])
+        self._inbox.put_local(Connected(self._conn_seq))
 
     def _on_disconnect(
         self,
@@ -108,25 +129,125 @@ class BrokerLink:
         reason_code: ReasonCode,
         properties: Any,
     ) -> None:
-        self._inbox.put(Disconnected(str(reason_code)))
+        self._inbox.put_local(Disconnected(str(reason_code)))
 
     def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
         if message.topic == self.launch_topic:
-            self._inbox.put(LaunchMessage(bytes(message.payload)))
+            self._inbox.put_local(LaunchMessage(bytes(message.payload)))
         elif message.topic == self.status_topic:
-            self._inbox.put(StatusMessage(bytes(message.payload)))
+            payload = bytes(message.payload)
+            if payload not in self._echoes:
+                self._inbox.put_local(StatusMessage(payload))
 
-    # ------------------------------------------------------------ agent thread
+    # ------------------------------------------------------------ the agent's loop
 
     def start(self) -> None:
         address = self._connection.address
         self.client.connect_async(address.host, address.port, keepalive=self._keepalive)
-        self.client.loop_start()
+        self._started = True
+        self._retry_at = 0.0
+
+    def watch(self) -> tuple[int, int, bool] | None:
+        """What to wait on: (socket generation, fd, wants to write); None without a socket.
+
+        The generation tells a new socket from a closed one that had the same number."""
+        if not self._socket_open:
+            return None
+        sock = self.client.socket()
+        if sock is None:
+            return None
+        return self._generation, sock.fileno(), self.client.want_write()
+
+    def wait_limit(self, now: float) -> float | None:
+        """Seconds until `service()` has work without any readiness; None: nothing planned."""
+        if not self._started or self._attempt is not None:
+            return None
+        if not self._socket_open:
+            return max(0.0, self._retry_at - now)
+        sock = self.client.socket()
+        if sock is not None and getattr(sock, "pending", lambda: 0)() > 0:
+            return 0.0  # TLS holds decrypted bytes that select() cannot see
+        return max(0.0, self._next_misc - now)
+
+    def service(self, readable: bool, writable: bool, now: float) -> None:
+        """Reads, writes, keeps alive; notices a closed socket; starts a connection attempt."""
+        if self._attempt is not None and self._attempt_over.is_set():
+            self._finish_attempt(now)
+        if self._socket_open:
+            client = self.client
+            sock = client.socket()
+            if readable or (sock is not None and getattr(sock, "pending", lambda: 0)() > 0):
+                self._read(client)
+            if writable and client.socket() is not None:
+                client.loop_write()
+            if now >= self._next_misc and client.socket() is not None:
+                self._next_misc = now + MISC_INTERVAL
+                client.loop_misc()
+            if client.socket() is None:  # closed: by the broker, an error, or a keepalive miss
+                self._socket_open = False
+                self._schedule_retry(now)
+        idle = self._started and not self._socket_open and self._attempt is None
+        if idle and now >= self._retry_at:
+            self._begin_attempt()
+
+    def _read(self, client: paho.Client) -> None:
+        # paho reads about one packet per call; a PUBACK and an echo often arrive together,
+        # and each packet left would cost the agent one more pass through its loop.
+        for _ in range(MAX_READS):
+            client.loop_read()
+            sock = client.socket()
+            if sock is None or self._poller is None:
+                return
+            if not self._poller.poll(0) and getattr(sock, "pending", lambda: 0)() == 0:
+                return
+
+    def _begin_attempt(self) -> None:
+        # TCP connect and TLS handshake block (up to paho's connect timeout): a thread of their
+        # own keeps the agent answering its brain and its signals meanwhile.
+        self._attempt_error = None
+        self._attempt_over.clear()
+        self._attempt = threading.Thread(target=self._connect, name="mqtt-connect", daemon=True)
+        self._attempt.start()
+
+    def _connect(self) -> None:
+        try:
+            rc = self.client.reconnect()
+            if rc != MQTTErrorCode.MQTT_ERR_SUCCESS:
+                self._attempt_error = f"cannot connect to {self._connection.url}: {rc.name}"
+        except Exception as exc:  # socket, TLS and name errors alike become a retry
+            self._attempt_error = self._why(exc)
+        finally:
+            self._attempt_over.set()
+            self._inbox.wake()
+
+    def _why(self, exc: Exception) -> str:
+        url = self._connection.address.url
+        detail = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        return f"cannot connect to {url}: {detail}"
+
+    def _finish_attempt(self, now: float) -> None:
+        self._attempt = None
+        sock = self.client.socket()
+        if self._attempt_error is None and sock is not None:
+            self._socket_open = True
+            self._generation += 1
+            self._poller = select.poll()
+            self._poller.register(sock.fileno(), select.POLLIN)
+            self._next_misc = now + MISC_INTERVAL
+            return
+        self._inbox.put_local(ConnectFailed(self._attempt_error or "connection closed"))
+        self._schedule_retry(now)
+
+    def _schedule_retry(self, now: float) -> None:
+        self._retry_at = now + self._delay
+        self._delay = min(self._delay * 2, RECONNECT_MAX)
+
+    # ------------------------------------------------------------ publishing
 
     def publish_status(self, status: AgentStatus) -> paho.MQTTMessageInfo:
-        return self.client.publish(
-            self.status_topic, status.model_dump_json().encode("utf-8"), qos=QOS, retain=True
-        )
+        payload = status.model_dump_json().encode("utf-8")
+        self._echoes.append(payload)
+        return self.client.publish(self.status_topic, payload, qos=QOS, retain=True)
 
     def publish_description(self, description: RobotDescription) -> None:
         payload = description.model_dump_json(exclude_none=True).encode("utf-8")
@@ -134,11 +255,32 @@ class BrokerLink:
 
     def close(self, final: AgentStatus | None, timeout: float = 5.0) -> None:
         """Publish the final status if connected, then disconnect cleanly (no Last Will)."""
-        if final is not None and self.client.is_connected():
+        self._started = False
+        deadline = time.monotonic() + timeout
+        if final is not None and self._socket_open and self.client.is_connected():
             info = self.publish_status(final)
-            try:
-                info.wait_for_publish(timeout)
-            except (RuntimeError, ValueError) as exc:
-                log.warning("could not publish the final status: %s", exc)
-        self.client.disconnect()
-        self.client.loop_stop()
+            self._pump(lambda: info.is_published(), deadline)
+            if not info.is_published():
+                log.warning("could not publish the final status")
+        if self._socket_open:
+            self.client.disconnect()
+            self._pump(lambda: self.client.socket() is None, deadline)
+            self._socket_open = False
+        elif self._attempt is not None:
+            self.client.disconnect()  # an attempt still under way: its socket is not ours
+
+    def _pump(self, done: Callable[[], bool], deadline: float) -> None:
+        """The loop's work, until `done()` or the deadline: for the last messages at shutdown."""
+        while not done():
+            sock = self.client.socket()
+            left = deadline - time.monotonic()
+            if sock is None or left <= 0:
+                return
+            poller = select.poll()
+            writing = select.POLLOUT if self.client.want_write() else 0
+            poller.register(sock.fileno(), select.POLLIN | writing)
+            for _, mask in poller.poll(min(left, 0.1) * 1000):
+                if mask & (select.POLLIN | select.POLLHUP | select.POLLERR):
+                    self.client.loop_read()
+                if mask & select.POLLOUT and self.client.socket() is not None:
+                    self.client.loop_write()

@@ -104,8 +104,8 @@ class Supervisor:
         """Shutting down and nothing left to wait for."""
         return self.shutting_down and self.pid is None
 
-    def status(self) -> AgentStatus:
-        """The status to publish (seq is the connection's business, filled in by the caller)."""
+    def status(self, seq: int = 0) -> AgentStatus:
+        """The status to publish; `seq` is the connection's business, given by the caller."""
         brain = self.brain
         message = self.message
         if self.rejection is not None:
@@ -114,6 +114,7 @@ class Supervisor:
                 message += f" (still running {brain.request.digest}, pid {self.pid})"
         return AgentStatus(
             robot_id=self.robot_id,
+            seq=seq,
             state=self.state,
             digest=brain.request.digest if brain else None,
             revision=brain.request.revision if brain else None,

@@ -12,8 +12,13 @@ import tempfile
 from pathlib import Path
 
 
-def write_atomic(path: Path, data: bytes, mode: int = 0o600) -> None:
-    """Readers see the old file or the new one, never a half-written one."""
+def write_atomic(path: Path, data: bytes, mode: int = 0o600, *, durable: bool = True) -> None:
+    """Readers see the old file or the new one, never a half-written one.
+
+    `durable=False` skips the fsyncs, for files that mean nothing after a power cut anyway
+    (a pidfile names a process of the previous boot; a launch request is sent again): on a
+    robot's SD card each fsync can cost tens of milliseconds of a restart.
+    """
     fd, tmp = _create_temp(path)
     try:
         try:
@@ -21,7 +26,8 @@ def write_atomic(path: Path, data: bytes, mode: int = 0o600) -> None:
             view = memoryview(data)
             while view:
                 view = view[os.write(fd, view) :]
-            os.fsync(fd)
+            if durable:
+                os.fsync(fd)
         finally:
             os.close(fd)
         os.replace(tmp, path)
@@ -29,6 +35,8 @@ def write_atomic(path: Path, data: bytes, mode: int = 0o600) -> None:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+    if not durable:
+        return
     # The rename itself must survive a power cut too.
     dir_fd = os.open(path.parent, os.O_RDONLY)
     try:

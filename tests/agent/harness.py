@@ -195,6 +195,27 @@ class Observer:
         log = f"\nagent log:\n{agent.log_tail()}" if agent is not None else ""
         raise AssertionError(f"timed out waiting for {robot}: {what}; statuses:\n{trail}{log}")
 
+    def wait_seen(
+        self,
+        robot: str,
+        predicate: Callable[[AgentStatus], bool],
+        what: str,
+        since: int = 0,
+        timeout: float = TIMEOUT,
+    ) -> AgentStatus:
+        """A status from `since` (a history index) on that satisfies `predicate`, even if a
+        newer one has replaced it already."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for status in self.statuses.get(robot, [])[since:]:
+                    if predicate(status):
+                        return status
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise AssertionError(f"timed out waiting for {robot}: {what}")
+                self._cond.wait(min(remaining, 0.5))
+
     def wait_state(
         self, robot: str, state: AgentState, agent: AgentProc | None = None, **fields: Any
     ) -> AgentStatus:

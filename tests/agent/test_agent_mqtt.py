@@ -348,6 +348,7 @@ def test_late_last_will_from_an_older_connection_is_overwritten(
 ) -> None:
     agent = make_agent()
     running = start_running(agent, observer, mosquitto)
+    seen_before = len(observer.history(ROBOT))
     stale = AgentStatus(robot_id=ROBOT, state=AgentState.OFFLINE, seq=running.seq - 1)
     # A connection that dies only now, carrying a will from before the live connection: what
     # the broker does when it notices a dead connection of the agent's previous run late.
@@ -369,11 +370,12 @@ def test_late_last_will_from_an_older_connection_is_overwritten(
         os.kill(ghost.pid, signal.SIGKILL)
         ghost.wait()
 
-    observer.wait_for(
+    # The agent may overwrite it within a millisecond: look through the history, not the latest.
+    observer.wait_seen(
         ROBOT,
         lambda s: s.state == AgentState.OFFLINE and s.seq == stale.seq,
         "the late Last Will",
-        agent=agent,
+        since=seen_before,
     )
     live = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, seq=running.seq)
     assert live.pid == running.pid
