@@ -23,13 +23,14 @@ from configurator.source import SourceError
 from configurator.wire import ReconcilerStatus, Topics
 from reconciler.desired import Desired, load_desired
 from reconciler.diff import Actions, diff
-from reconciler.retained import RetainedView
+from reconciler.retained import RetainedView, take_snapshot
 from reconciler.source import BranchSource
 
 log = logging.getLogger("robotconf.reconciler")
 
 BACKOFF_INITIAL, BACKOFF_MAX = 1.0, 30.0
 LOCAL_POLL = 1.0  # when refs cannot be watched, look at the branch this often
+SAMPLE_TIMEOUT = 10.0  # seconds to wait for a sample of the robots' statuses
 
 
 class Outcome(enum.Enum):
@@ -99,13 +100,16 @@ class Controller:
         self._sign = signer
         self._wake = threading.Event()
         self._stop = threading.Event()
+        # Statuses are not mirrored: during a rollout every robot reports several times, and
+        # they matter only for the repair below (`_sample_running`), sampled now and then.
         self.view = RetainedView(
             connection,
-            [self.topics.all_launch, self.topics.all_status, self.topics.reconciler_status],
+            [self.topics.all_launch, self.topics.reconciler_status],
             f"{prefix}/sync",
             role="reconciler",
             on_synced=self._wake.set,
         )
+        self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
         self.serving: Desired | None = None  # the last good revision, applied or being applied
         self.status: ReconcilerStatus | None = None
@@ -185,7 +189,7 @@ class Controller:
 
         snapshot = self.view.snapshot()
         observed = observed_digests(snapshot, self.topics)
-        running = running_robots(snapshot, self.topics)
+        running = self._sample_running(fetch)
         errors = list(desired.errors)
         actions: Actions[LaunchRequest] | None = None
         if desired.fleet is not None:
@@ -277,6 +281,28 @@ class Controller:
             while len(self._built) > 4:
                 self._built.popitem(last=False)
         return built
+
+    def _sample_running(self, resync: bool) -> set[str]:
+        """Robots whose agent says it runs a brain, sampled at each resync and after each
+        (re)connection (when the broker may have lost the clears); empty otherwise.
+
+        Only a robot that is running but no longer assigned is acted on (cleared again), so
+        a sample is used once: between samples, a commit never clears anything twice."""
+        connection = self.view.connections
+        if not resync and connection == self._sampled_connection:
+            return set()
+        self._sampled_connection = connection
+        statuses = take_snapshot(
+            self.connection,
+            [self.topics.all_status],
+            f"{self.topics.prefix}/sync",
+            role="reconciler-sample",
+            timeout=SAMPLE_TIMEOUT,
+        )
+        if statuses is None:
+            log.info("no status sample from the broker this time")
+            return set()
+        return running_robots(statuses, self.topics)
 
     def _recover_serving(self, head: str | None) -> None:
         """After a restart, the last good revision is the one the retained status names."""

@@ -212,3 +212,18 @@ class RetainedView:
                 self._topics.pop(message.topic, None)
         if self._on_change is not None:
             self._on_change()
+
+
+def take_snapshot(
+    connection: Connection, filters: Sequence[str], marker_topic: str, role: str, timeout: float
+) -> dict[str, bytes] | None:
+    """The retained messages under `filters` right now, over a connection of its own; None
+    when the broker does not answer within `timeout` seconds."""
+    view = RetainedView(connection, filters, marker_topic, role=role)
+    view.start()
+    try:
+        if not view.wait_synced(timeout):
+            return None
+        return view.snapshot()
+    finally:
+        view.stop()
