@@ -50,6 +50,7 @@ log = logging.getLogger("robotconf.agent")
 
 LOG_CHECK_INTERVAL = 2.0  # seconds between brain log size checks
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
+STOPPING_QUIET = 0.05  # seconds a brain may take to stop before `stopping` is published
 
 
 def policy_of(config: AgentConfig) -> Policy:
@@ -95,6 +96,13 @@ class Agent:
         self.brain: process.Brain | None = None
         self._exit_fds: dict[int, process.Brain] = {}  # exit descriptors watched, until reaped
         self._accepted_payload: tuple[str, bytes] = ("", b"")  # digest, bytes as received
+        self._held_until: float | None = None  # when a status held back is published
+        self._brain_env = process.brain_environment(
+            {
+                "ROBOTCONF_LAUNCH_REQUEST": str(self.workdir / REQUEST_FILE),
+                "ROBOTCONF_ROBOT_ID": config.robot_id,
+            }
+        )
         self.connected = False
         self.conn_seq = 0
         self._last_published: AgentStatus | None = None
@@ -157,7 +165,9 @@ class Agent:
             self._apply(self.supervisor.tick(now))
             handled = True
         self._maybe_rotate_log(now)
-        if handled:  # the status changes with events and deadlines, nothing else
+        report = self._held_until
+        if handled or (report is not None and now >= report):
+            # The status changes with events and deadlines, nothing else.
             self._publish_if_changed()
 
     def watches(self) -> dict[int, tuple[int, object]]:
@@ -187,6 +197,8 @@ class Agent:
             due = min(due, self.supervisor.deadline)
         if self.brain is not None:
             due = min(due, self._next_log_check)
+        if self._held_until is not None:
+            due = min(due, self._held_until)
         link = self.link.wait_limit(now)
         if link is not None:
             due = min(due, now + link)
@@ -315,11 +327,7 @@ class Agent:
                 argv,
                 cwd=self.workdir,
                 log_fd=log_fd,
-                env={
-                    "ROBOTCONF_LAUNCH_REQUEST": str(path),
-                    "ROBOTCONF_ROBOT_ID": self.config.robot_id,
-                    "ROBOTCONF_DIGEST": request.digest,
-                },
+                env={**self._brain_env, b"ROBOTCONF_DIGEST": request.digest.encode("ascii")},
                 on_exit=lambda pid, code: self.inbox.put(BrainExited(pid, code)),
             )
         except OSError as exc:
@@ -368,12 +376,31 @@ class Agent:
 
     def _publish(self, force: bool) -> None:
         if not self.connected:
+            self._held_until = None  # the connection's first status is published in full
             return
         status = self.current_status()
         if not force and status == self._last_published:
             return
+        delay = 0.0 if force else publish_delay(status, self._last_published)
+        if delay > 0:
+            now = time.monotonic()
+            if self._held_until is None:
+                self._held_until = now + delay
+            if now < self._held_until:
+                return  # `due()` wakes the loop then, should nothing newer come first
+        self._held_until = None
         self.link.publish_status(status)
         self._last_published = status
+
+
+def publish_delay(status: AgentStatus, last: AgentStatus | None) -> float:
+    """Seconds a changed status may wait before it is published; a newer one replaces it.
+
+    A fresh `stopping` waits STOPPING_QUIET: most brains exit on SIGTERM within milliseconds,
+    and then the next state (starting, idle) says all there is to say, without one more
+    message per robot through the broker to every reader. Anything else goes at once."""
+    fresh_stop = last is None or last.state != AgentState.STOPPING
+    return STOPPING_QUIET if status.state == AgentState.STOPPING and fresh_stop else 0.0
 
 
 def run_agents(agents: Sequence[Agent]) -> None:

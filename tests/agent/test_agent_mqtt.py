@@ -73,6 +73,23 @@ def test_launch_starts_the_brain_with_the_request(
     assert "Follow: follow_with_poses" in agent.brain_log()
 
 
+def test_the_brain_gets_its_request_path_robot_and_digest_in_its_environment(
+    mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+) -> None:
+    show = 'echo "env: $ROBOTCONF_ROBOT_ID $ROBOTCONF_DIGEST $ROBOTCONF_LAUNCH_REQUEST $HOME"'
+    agent = make_agent(command=["sh", "-c", f"{show}; exec sleep 60"])
+    agent.start()
+    observer.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = make_request()
+    publish(mosquitto.url, LAUNCH, request.payload())
+    running = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(running.pid)
+    path = agent.workdir / "launch-request.json"
+    # Its own three variables, and the agent's environment (HOME) besides.
+    line = f"env: {ROBOT} {request.digest} {path} {os.environ.get('HOME', '')}"
+    wait_until(lambda: line in agent.brain_log(), "the brain's environment in its log")
+
+
 def test_same_digest_again_changes_nothing(
     mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
 ) -> None:
@@ -110,8 +127,7 @@ def test_new_digest_stops_then_starts(
     agent.note_brain(second.pid)
     assert second.pid != first.pid
     assert first.pid is not None and not is_alive(first.pid)
-    states = [s.state for s in observer.history(ROBOT)]
-    assert AgentState.STOPPING in states[states.index(AgentState.RUNNING) :]
+    # (A brain that stops this fast may never be reported `stopping`: see the stubborn one.)
     assert agent.request_on_disk()["digest"] == second_request.digest
     assert "SIGTERM received, stopping" in agent.brain_log()  # stopped gracefully
 
@@ -247,7 +263,12 @@ def test_stubborn_brain_is_killed_after_stop_timeout(
     )
     agent.note_brain(second.pid)
     assert first.pid is not None and not is_alive(first.pid)
-    assert any("sent SIGKILL" in s.message for s in observer.history(ROBOT))
+    history = observer.history(ROBOT)
+    # A brain that takes its time to stop is reported `stopping`, with its pid, all along.
+    stopping = [s for s in history if s.state == AgentState.STOPPING]
+    assert stopping and all(s.pid == first.pid for s in stopping)
+    assert stopping[0].message.startswith("stopping for new request")
+    assert any("sent SIGKILL" in s.message for s in stopping)
 
 
 def test_broker_restart_keeps_the_brain(

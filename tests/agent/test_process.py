@@ -17,6 +17,7 @@ import pytest
 from agent.process import (
     BrainLog,
     PidRecord,
+    brain_environment,
     is_alive,
     read_pidfile,
     spawn,
@@ -136,7 +137,7 @@ def test_spawn_reports_the_exit_and_kills_what_the_brain_left_in_its_group(tmp_p
             ["sh", "-c", "sleep 60 & echo $!; echo to-stderr >&2; exit 3"],
             cwd=tmp_path,
             log_fd=fd,
-            env={"ROBOTCONF_TEST": "1"},
+            env=brain_environment({"ROBOTCONF_TEST": "1"}),
             on_exit=on_exit,
         )
     finally:

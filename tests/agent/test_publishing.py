@@ -1,0 +1,27 @@
+"""When a changed status is published: the one rule that holds a status back (no broker)."""
+
+from __future__ import annotations
+
+from agent.runtime import STOPPING_QUIET, publish_delay
+from configurator.wire import AgentState, AgentStatus
+
+
+def status(state: AgentState, message: str = "") -> AgentStatus:
+    return AgentStatus(robot_id="tb3-01", state=state, seq=1, message=message)
+
+
+def test_a_fresh_stopping_waits_for_the_brain_to_be_gone() -> None:
+    assert publish_delay(status(AgentState.STOPPING), status(AgentState.RUNNING)) == STOPPING_QUIET
+    assert publish_delay(status(AgentState.STOPPING), None) == STOPPING_QUIET
+
+
+def test_a_stopping_already_reported_is_updated_at_once() -> None:
+    killed = status(AgentState.STOPPING, "sent SIGKILL")
+    assert publish_delay(killed, status(AgentState.STOPPING, "stopping")) == 0.0
+
+
+def test_every_other_state_goes_at_once() -> None:
+    for state in AgentState:
+        if state is not AgentState.STOPPING:
+            assert publish_delay(status(state), status(AgentState.STOPPING)) == 0.0
+            assert publish_delay(status(state), None) == 0.0
