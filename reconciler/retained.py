@@ -46,7 +46,7 @@ class RetainedView:
         role: str = "view",
         on_change: Callable[[], None] | None = None,
         on_synced: Callable[[], None] | None = None,
-        max_inflight: int = 1000,
+        max_inflight: int = 0,
     ) -> None:
         self.connection = connection
         self.filters = list(filters)
@@ -64,7 +64,9 @@ class RetainedView:
         self.connections = 0
         self._client = make_client(connection, self.client_id)
         # Many retained QoS 1 publishes in flight at once: waiting for each PUBACK in turn
-        # would make a 1,000-robot rollout as slow as 1,000 round trips.
+        # would make a 1,000-robot rollout as slow as 1,000 round trips. 0 is unlimited, and
+        # also spares paho its scan of every message in flight at each PUBACK (a limit makes
+        # a rollout quadratic in the number of robots).
         self._client.max_inflight_messages_set(max_inflight)
         self._client.on_connect = self._handle_connect
         self._client.on_disconnect = self._handle_disconnect
