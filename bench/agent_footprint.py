@@ -223,8 +223,10 @@ def main(argv: list[str]) -> int:
         f"  CPU  {result.cpu_seconds} s over the window = {result.cpu_percent} % of one core"
         f"  target <= {CPU_TARGET_PERCENT:g} %: {'ok' if cpu_ok else 'MISSED'}"
     )
-    print(f"  (the stand-in brain itself: {result.brain_rss_mb} MB; same pid throughout: "
-          f"{result.brain_kept_pid})")
+    print(
+        f"  (the stand-in brain itself: {result.brain_rss_mb} MB; same pid throughout: "
+        f"{result.brain_kept_pid})"
+    )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(asdict(result), indent=2) + "\n", encoding="utf-8")
