@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
 from collections import deque
 from dataclasses import dataclass
 
@@ -69,6 +70,11 @@ class Inbox:
     def __init__(self) -> None:
         self._events: deque[Event] = deque()
         self._read_fd, self._write_fd = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        # Once closed, a late wake-up (a connection attempt ending after the agent) must not
+        # write to a descriptor number that may belong to something else by then. Reentrant:
+        # a signal handler may run while this thread holds it.
+        self._closing = threading.RLock()
+        self._closed = False
 
     def put(self, event: Event) -> None:
         self._events.append(event)
@@ -79,8 +85,9 @@ class Inbox:
 
     def wake(self) -> None:
         # A full pipe already wakes the loop: a lost byte loses nothing.
-        with contextlib.suppress(BlockingIOError, OSError):
-            os.write(self._write_fd, b"!")
+        with self._closing, contextlib.suppress(BlockingIOError, OSError):
+            if not self._closed:
+                os.write(self._write_fd, b"!")
 
     def fileno(self) -> int:
         return self._read_fd
@@ -100,6 +107,10 @@ class Inbox:
         return bool(self._events)
 
     def close(self) -> None:
-        for fd in (self._read_fd, self._write_fd):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+        with self._closing:
+            if self._closed:
+                return
+            self._closed = True
+            for fd in (self._read_fd, self._write_fd):
+                with contextlib.suppress(OSError):
+                    os.close(fd)

@@ -294,6 +294,24 @@ def test_broker_restart_keeps_the_brain(
     observer.wait_state(ROBOT, AgentState.REJECTED, agent=agent, pid=running.pid)
 
 
+def test_an_agent_started_before_its_broker_waits_answers_signals_and_connects(
+    mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+) -> None:
+    mosquitto.stop()
+    waiting = make_agent().start()
+    wait_until(lambda: "retrying with backoff" in waiting.log_tail(), "a connection failure")
+    # Connecting runs beside the loop: a signal is handled while the broker is still away.
+    waiting.signal(signal.SIGTERM)
+    assert waiting.wait() == 0
+    assert "agent stopped" in waiting.log_tail()
+
+    agent = make_agent().start()
+    wait_until(lambda: "retrying with backoff" in agent.log_tail(), "a connection failure")
+    mosquitto.start()  # same port
+    idle = observer.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    assert idle.seq >= 1
+
+
 def test_sigterm_stops_the_brain_and_reports_offline(
     mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
 ) -> None:
