@@ -28,14 +28,13 @@ from agent.events import (
     StatusMessage,
 )
 from agent.workdir import SeqStore
-from configurator.mqtt import Connection, make_client
+from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 
 log = logging.getLogger(__name__)
 
 QOS = 1
 ECHOES = 8  # own status payloads remembered: a restart publishes three in quick succession
-RECONNECT_MIN, RECONNECT_MAX = 1.0, 30.0  # seconds between connection attempts, doubling
 MISC_INTERVAL = 1.0  # keepalive bookkeeping (pings, a silent broker) at least this often
 MAX_READS = 32  # packets read in one pass before the agent handles what they brought
 
@@ -83,7 +82,7 @@ class BrokerLink:
         self._generation = 0
         self._poller: select.poll | None = None  # readiness of the current socket, no waiting
         self._retry_at = 0.0
-        self._delay = RECONNECT_MIN
+        self._delay = RECONNECT_MIN_DELAY
         self._next_misc = 0.0
         self.client = make_client(connection, client_id=f"robotconf-agent-{robot_id}")
         self.client.on_pre_connect = self._on_pre_connect
@@ -114,7 +113,7 @@ class BrokerLink:
         if reason_code.is_failure:
             self._inbox.put_local(ConnectFailed(f"broker refused the connection: {reason_code}"))
             return
-        self._delay = RECONNECT_MIN
+        self._delay = RECONNECT_MIN_DELAY
         # Subscribing here, not once at start-up, restores the subscriptions after a reconnect.
         # The own status topic is watched for a late Last Will; QoS 0 is enough, since every
         # reconnection delivers the retained status anew, and spares a PUBACK per echo.
@@ -164,9 +163,8 @@ class BrokerLink:
             return None
         if not self._socket_open:
             return max(0.0, self._retry_at - now)
-        sock = self.client.socket()
-        if sock is not None and getattr(sock, "pending", lambda: 0)() > 0:
-            return 0.0  # TLS holds decrypted bytes that select() cannot see
+        if self._tls_pending():
+            return 0.0
         return max(0.0, self._next_misc - now)
 
     def service(self, readable: bool, writable: bool, now: float) -> None:
@@ -175,8 +173,7 @@ class BrokerLink:
             self._finish_attempt(now)
         if self._socket_open:
             client = self.client
-            sock = client.socket()
-            if readable or (sock is not None and getattr(sock, "pending", lambda: 0)() > 0):
+            if readable or self._tls_pending():
                 self._read(client)
             if writable and client.socket() is not None:
                 client.loop_write()
@@ -195,11 +192,15 @@ class BrokerLink:
         # and each packet left would cost the agent one more pass through its loop.
         for _ in range(MAX_READS):
             client.loop_read()
-            sock = client.socket()
-            if sock is None or self._poller is None:
+            if client.socket() is None or self._poller is None:
                 return
-            if not self._poller.poll(0) and getattr(sock, "pending", lambda: 0)() == 0:
+            if not self._poller.poll(0) and not self._tls_pending():
                 return
+
+    def _tls_pending(self) -> bool:
+        """TLS holds decrypted bytes that no readiness of the socket announces."""
+        sock = self.client.socket()
+        return sock is not None and getattr(sock, "pending", lambda: 0)() > 0
 
     def _begin_attempt(self) -> None:
         # TCP connect and TLS handshake block (up to paho's connect timeout): a thread of their
@@ -213,17 +214,18 @@ class BrokerLink:
         try:
             rc = self.client.reconnect()
             if rc != MQTTErrorCode.MQTT_ERR_SUCCESS:
-                self._attempt_error = f"cannot connect to {self._connection.url}: {rc.name}"
+                self._attempt_error = self._why(rc.name)
         except Exception as exc:  # socket, TLS and name errors alike become a retry
-            self._attempt_error = self._why(exc)
+            self._attempt_error = self._why(
+                getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+            )
         finally:
             self._attempt_over.set()
             self._inbox.wake()
 
-    def _why(self, exc: Exception) -> str:
-        url = self._connection.address.url
-        detail = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-        return f"cannot connect to {url}: {detail}"
+    def _why(self, detail: str) -> str:
+        # The address, never the configured URL: that may carry a password.
+        return f"cannot connect to {self._connection.address.url}: {detail}"
 
     def _finish_attempt(self, now: float) -> None:
         self._attempt = None
@@ -240,7 +242,7 @@ class BrokerLink:
 
     def _schedule_retry(self, now: float) -> None:
         self._retry_at = now + self._delay
-        self._delay = min(self._delay * 2, RECONNECT_MAX)
+        self._delay = min(self._delay * 2, RECONNECT_MAX_DELAY)
 
     # ------------------------------------------------------------ publishing
 

@@ -30,13 +30,8 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
-from configurator.launch import (  # noqa: E402
-    LaunchCapability,
-    LaunchScenario,
-    make_launch_request,
-)
-from configurator.types import MappingBinding  # noqa: E402
 from configurator.wire import AgentState, AgentStatus, Topics  # noqa: E402
+from tests.agent.harness import make_request  # noqa: E402
 from tests.mosquitto import Mosquitto  # noqa: E402
 
 RSS_TARGET_MB = 40.0
@@ -71,32 +66,6 @@ def cpu_ticks(pid: int) -> int:
     raw = Path(f"/proc/{pid}/stat").read_bytes()
     fields = raw[raw.rindex(b")") + 2 :].split()
     return int(fields[11]) + int(fields[12])  # utime, stime (fields 14 and 15)
-
-
-def request_payload() -> bytes:
-    capability = LaunchCapability(
-        name="follow-camera",
-        platform="ROS2",
-        robot_template="turtlebot3-camera",
-        mapping_scheme="gazebo",
-        tasks=["Delivery"],
-        actions=["Follow"],
-        logics={"Follow": "follow_with_poses"},
-        mappings={
-            "cmd_vel": MappingBinding(kind="topic", name="/cmd_vel", type="geometry_msgs/msg/Twist")
-        },
-    )
-    scenario = LaunchScenario(
-        name="bench",
-        capability=capability,
-        environment_name=None,
-        environment_type=None,
-        robot_settings={},
-        logic_settings={},
-        environment_knowledge={},
-        goals=[],
-    )
-    return make_launch_request(ROBOT, "Bench bot", "bench", scenario).payload()
 
 
 class StatusWatch:
@@ -154,7 +123,7 @@ def measure(seconds: float, interval: float, work: Path) -> Footprint:
         with (work / "agent.stderr").open("wb") as log:
             agent = subprocess.Popen([*argv, "--config", str(config_path)], stdout=log, stderr=log)
         watch = StatusWatch(broker)
-        watch.publish(Topics().launch(ROBOT), request_payload())
+        watch.publish(Topics().launch(ROBOT), make_request(ROBOT).payload())
         running = watch.wait_running(30)
         assert running.pid is not None
         brain_pid = running.pid

@@ -15,6 +15,10 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
 from configurator.wire import BrokerAddress, parse_broker_url
 
+# Seconds between connection attempts: the first retry after 1 s, doubling up to 30 s. paho's
+# own loop uses them for the reconciler and `status`; the agent, driving paho itself, too.
+RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY = 1.0, 30.0
+
 
 @dataclass(frozen=True)
 class Connection:
@@ -64,5 +68,7 @@ def make_client(connection: Connection, client_id: str) -> paho.Client:
             context.check_hostname = False
             context.verify_mode = ssl.CERT_NONE
         client.tls_set_context(context)
-    client.reconnect_delay_set(min_delay=1, max_delay=30)
+    client.reconnect_delay_set(
+        min_delay=int(RECONNECT_MIN_DELAY), max_delay=int(RECONNECT_MAX_DELAY)
+    )
     return client

@@ -206,9 +206,7 @@ class Controller:
         target = desired if actions is not None else self.serving
         if actions is None and target is not None and target.fleet is not None:
             # The head cannot be applied: keep serving (and refilling) the last good revision.
-            actions = diff(
-                target.fleet.requests, observed, target.fleet.suspended, True, running
-            )
+            actions = diff(target.fleet.requests, observed, target.fleet.suspended, True, running)
         if actions is not None and target is not None and not actions.empty:
             self._publish_status(
                 self._status(
@@ -332,9 +330,7 @@ class Controller:
     def _apply(self, actions: Actions[LaunchRequest]) -> bool:
         # Signed at publish time: issued_at is when the robot was told, not when it was built.
         sign = self._sign or (lambda request: request)
-        items = [
-            (self.topics.launch(r), sign(req).payload()) for r, req in actions.publish.items()
-        ]
+        items = [(self.topics.launch(r), sign(req).payload()) for r, req in actions.publish.items()]
         items += [(self.topics.launch(r), b"") for r in actions.clear]
         return self.view.publish_retained(items, self.publish_timeout)
 

@@ -195,7 +195,7 @@ class RetainedView:
             self._connected = False
             self._synced.clear()
         if self._started:
-            self.last_error = f"disconnected from {self.connection.url}: {reason}"
+            self.last_error = f"disconnected from {self.connection.address.url}: {reason}"
             log.info("%s; reconnecting", self.last_error)
 
     def _handle_message(

@@ -298,12 +298,17 @@ def test_an_agent_started_before_its_broker_waits_answers_signals_and_connects(
     mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
 ) -> None:
     mosquitto.stop()
-    waiting = make_agent().start()
-    wait_until(lambda: "retrying with backoff" in waiting.log_tail(), "a connection failure")
+    # Credentials in the URL (this broker takes any): they must not reach the log.
+    with_password = f"mqtt://robot:s3cret-pw@{mosquitto.host}:{mosquitto.port}"
+    waiting = make_agent("waiting", broker=with_password).start()
+    failure = f"cannot connect to mqtt://{mosquitto.host}:{mosquitto.port}: "
+    wait_until(lambda: failure in waiting.log_tail(), "a connection failure")
+    assert "retrying with backoff" in waiting.log_tail()
     # Connecting runs beside the loop: a signal is handled while the broker is still away.
     waiting.signal(signal.SIGTERM)
     assert waiting.wait() == 0
     assert "agent stopped" in waiting.log_tail()
+    assert "s3cret-pw" not in waiting.log_tail(lines=1000)
 
     agent = make_agent().start()
     wait_until(lambda: "retrying with backoff" in agent.log_tail(), "a connection failure")
