@@ -82,6 +82,29 @@ class LaunchRequest(_Wire):
         return self.digest == content_digest(self.content())
 
 
+class StopRequest(_Wire):
+    """A signed "stop": what the launch topic holds for a robot no longer assigned, when the
+    reconciler signs. An empty payload cannot carry a signature, so an agent that verifies
+    requests stops its brain only for one of these (DESIGN §7: empty means stop, unsigned)."""
+
+    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
+    kind: Literal["Stop"] = "Stop"
+    robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
+    revision: str = Field(description="the git commit that unassigned the robot")
+    issued_at: float | None = Field(None, description="unix time the stop was signed")
+    signature: str | None = Field(None, description="base64 Ed25519 over the signed fields")
+
+    def wire(self, *, signature: bool = True) -> dict[str, Any]:
+        """The JSON object published (signing fields only when set)."""
+        unset = {k for k in ("issued_at", "signature") if getattr(self, k) is None}
+        if not signature:
+            unset.add("signature")
+        return self.model_dump(mode="json", exclude=unset)
+
+    def payload(self) -> bytes:
+        return canonical_json(self.wire())
+
+
 def canonical_json(value: Any) -> bytes:
     """Sorted keys, no insignificant white space, UTF-8: equal content, equal bytes."""
     return json.dumps(

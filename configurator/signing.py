@@ -11,16 +11,18 @@ import base64
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 from configurator.files import write_atomic
-from configurator.launch import LaunchRequest, canonical_json
+from configurator.launch import LaunchRequest, StopRequest, canonical_json
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
         Ed25519PrivateKey,
         Ed25519PublicKey,
     )
+
+Signed = TypeVar("Signed", LaunchRequest, StopRequest)
 
 PRIVATE_NAME = "launch-signing.key"
 PUBLIC_NAME = "launch-signing.pub"
@@ -94,13 +96,12 @@ def load_public_key(path: Path) -> Ed25519PublicKey:
     return key
 
 
-def signed_bytes(request: LaunchRequest) -> bytes:
+def signed_bytes(request: LaunchRequest | StopRequest) -> bytes:
     return canonical_json(request.wire(signature=False))
 
 
-def sign(
-    request: LaunchRequest, key: Ed25519PrivateKey, issued_at: float | None = None
-) -> LaunchRequest:
+def sign(request: Signed, key: Ed25519PrivateKey, issued_at: float | None = None) -> Signed:
+    """The request (a launch or a stop) stamped with `issued_at` and signed over all of it."""
     stamped = request.model_copy(
         update={
             "issued_at": round(time.time() if issued_at is None else issued_at, 6),
@@ -111,7 +112,7 @@ def sign(
     return stamped.model_copy(update={"signature": signature})
 
 
-def verify(request: LaunchRequest, key: Ed25519PublicKey) -> str | None:
+def verify(request: LaunchRequest | StopRequest, key: Ed25519PublicKey) -> str | None:
     """None when the reconciler's key signed exactly this request, else why not."""
     from cryptography.exceptions import InvalidSignature
 
