@@ -168,18 +168,51 @@ class AgentStatus(_Message):
     seq: int = 0
 
 
+class ReconcilerReason(str, Enum):
+    """Why the reconciler's status is what it is (like a Flux condition's reason)."""
+
+    APPLIED = "Applied"  # the head commit is applied
+    PROGRESSING = "Progressing"  # publishing
+    BUILD_FAILED = "BuildFailed"  # the head commit does not validate or render
+    EMPTY_FLEET_REFUSED = "EmptyFleetRefused"  # the head would unassign every robot
+    SOURCE_UNAVAILABLE = "SourceUnavailable"  # the branch cannot be read or fetched
+    BROKER_UNAVAILABLE = "BrokerUnavailable"  # the broker did not acknowledge every message
+    INTERNAL_ERROR = "InternalError"  # a bug: logged with its traceback, retried
+    OFFLINE = "Offline"  # the reconciler stopped, or its Last Will: it died
+
+
+# A heartbeat older than this many intervals (and at least STALE_MIN seconds, which absorbs a
+# slow apply and some clock skew) means the reconciler is no longer working.
+STALE_INTERVALS, STALE_MIN = 3, 60.0
+
+
 class ReconcilerStatus(_Message):
     """The reconciler's retained status (Flux-style: ready or stalled, with why)."""
 
-    state: Literal["Ready", "Stalled", "Progressing"]
+    state: Literal["Ready", "Stalled", "Progressing", "Offline"]
     ready: bool
+    # A ReconcilerReason value; kept as text so that a reader older than a new reason still
+    # reads the status.
+    reason: str = ""
     branch: str | None = None
     source: str | None = None
     last_applied_revision: str | None = None
     last_attempted_revision: str | None = None
+    failed_revision: str | None = Field(None, description="the revision the reason is about")
     diagnostics: list[str] = Field(default_factory=list)
     message: str = ""
     robots: int = 0
     published: int = 0
     cleared: int = 0
     since: float = Field(default_factory=now)
+    heartbeat: float | None = Field(None, description="unix time this status was published")
+    interval: float | None = Field(None, description="seconds between heartbeats")
+    ignored_payloads: dict[str, int] = Field(
+        default_factory=dict, description="unreadable MQTT payloads skipped, by topic kind"
+    )
+
+    def stale(self, at: float) -> bool:
+        """True when its heartbeat is overdue; unknown (an older reconciler) is not stale."""
+        if self.state == "Offline" or self.heartbeat is None or not self.interval:
+            return False
+        return at - self.heartbeat > max(STALE_INTERVALS * self.interval, STALE_MIN)

@@ -12,11 +12,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
-from configurator.launch import LaunchRequest
 from configurator.mqtt import Connection
 from configurator.render import RenderError, render_fleet
-from configurator.signing import SigningKeyError
+from configurator.signing import Signed, SigningKeyError
 from configurator.source import SourceError
 from configurator.wire import DEFAULT_BROKER, ReconcilerStatus, Topics, validate_prefix
 from configurator.workspace import check
@@ -32,6 +32,9 @@ from reconciler.status import (
     parse_retained,
     short_rev,
 )
+
+if TYPE_CHECKING:
+    from reconciler.controller import Signer
 
 EXIT_OK, EXIT_FINDINGS, EXIT_TOOL = 0, 1, 2
 
@@ -106,14 +109,18 @@ def make_source(args: argparse.Namespace) -> BranchSource:
     return source
 
 
-def make_signer(key_path: Path | None) -> Callable[[LaunchRequest], LaunchRequest] | None:
-    """A function that signs requests with the key, or None when signing is off."""
+def make_signer(key_path: Path | None) -> Signer | None:
+    """A function that signs launch and stop requests with the key, or None when signing is off."""
     if key_path is None:
         return None
     from configurator.signing import load_private_key, sign
 
     key = load_private_key(key_path)
-    return lambda request: sign(request, key)
+
+    def signer(request: Signed) -> Signed:
+        return sign(request, key)
+
+    return signer
 
 
 def cmd_reconcile(args: argparse.Namespace) -> int:
@@ -196,7 +203,8 @@ def fleet_status(messages: dict[str, bytes], topics: Topics, desired: DesiredCac
     robots, where, notes = desired.get(retained.reconciler)
     if robots is None:
         robots = desired_from_retained(retained)
-    return FleetStatus(build_rows(robots, retained), retained.reconciler, where, list(notes))
+    rows = build_rows(robots, retained)
+    return FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
 
 
 def open_view(
@@ -267,15 +275,16 @@ def _watch(
         if view.synced:
             fleet = fleet_status(view.snapshot(), topics, desired)
             code = EXIT_OK if fleet.in_sync else EXIT_FINDINGS
-            text = json.dumps(fleet.as_json()) if as_json else format_text(fleet)
-            if text != shown:
+            # A heartbeat alone is not a change worth a new report.
+            key = json.dumps(fleet.as_json(heartbeat=False)) if as_json else format_text(fleet)
+            if key != shown:
                 if as_json:
-                    print(text, flush=True)
+                    print(json.dumps(fleet.as_json()), flush=True)
                 else:
                     _show(fleet, False, clear=tty)
                     if not tty:
                         print("---", flush=True)
-                shown = text
+                shown = key
         elif not as_json and shown != "offline":
             print(f"(waiting for the broker at {view.connection.address.url}: {view.last_error})")
             shown = "offline"

@@ -5,6 +5,8 @@ Shared by the reconciler (launch topics) and `robotconf status` (every robot top
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import itertools
 import logging
 import os
@@ -12,15 +14,86 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, ParamSpec
 
 import paho.mqtt.client as paho
 
 from configurator.mqtt import Connection, make_client
+from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
 
 log = logging.getLogger("robotconf.mqtt")
 
 _ids = itertools.count(1)
+P = ParamSpec("P")
+
+# Kept in place of a payload dropped for its size: the topic holds something, and it is
+# unreadable (a NUL byte never starts JSON). Only ever in memory.
+_OVERSIZED = b"\x00oversized "
+LOG_EVERY = 60.0  # seconds: at most one line per this about payloads that were skipped
+
+
+def oversized(size: int) -> bytes:
+    return _OVERSIZED + str(size).encode()
+
+
+def read_object(payload: bytes, max_bytes: int = MAX_PAYLOAD_BYTES) -> dict[str, Any]:
+    """A retained payload as a JSON object, size and depth bounded; PayloadError says why not."""
+    size = payload[len(_OVERSIZED) :]
+    if payload.startswith(_OVERSIZED) and size.isdigit() and len(size) < 12:
+        raise PayloadError(f"payload is {int(size):,} bytes, over the limit of {max_bytes:,}")
+    return parse_object(payload, max_bytes=max_bytes)
+
+
+class Ignored:
+    """Payloads skipped as unreadable: counted by kind, each distinct payload of a topic once
+    (a resync reads the same ones again), and logged at most once a minute, because any
+    robot may publish garbage in a loop."""
+
+    MAX_TOPICS = 10_000
+
+    def __init__(self, logger: logging.Logger = log, every: float = LOG_EVERY) -> None:
+        self._lock = threading.Lock()
+        self._seen: dict[str, bytes] = {}  # topic -> fingerprint of the payload last counted
+        self._counts: dict[str, int] = {}
+        self._log = logger
+        self._every = every
+        self._logged_at: float | None = None
+        self._unlogged = 0
+
+    def note(self, kind: str, topic: str, payload: bytes, reason: str) -> None:
+        fingerprint = hashlib.sha256(payload).digest()
+        with self._lock:
+            if self._seen.get(topic) == fingerprint:
+                return
+            if len(self._seen) >= self.MAX_TOPICS:
+                self._seen.clear()
+            self._seen[topic] = fingerprint
+            self._counts[kind] = self._counts.get(kind, 0) + 1
+            now = time.monotonic()
+            if self._logged_at is not None and now - self._logged_at < self._every:
+                self._unlogged += 1
+                return
+            self._logged_at, skipped, self._unlogged = now, self._unlogged, 0
+        more = f" (and {skipped} more since the last such line)" if skipped else ""
+        self._log.warning("ignored the %s payload on %r: %s%s", kind, topic, reason, more)
+
+    def counts(self) -> dict[str, int]:
+        with self._lock:
+            return dict(sorted(self._counts.items()))
+
+
+def _guarded(handler: Callable[P, None]) -> Callable[P, None]:
+    """A paho callback that never raises: paho 2 re-raises into its network thread, which
+    would end the connection for good."""
+
+    @functools.wraps(handler)
+    def run(*args: P.args, **kwargs: P.kwargs) -> None:
+        try:
+            handler(*args, **kwargs)
+        except Exception:
+            log.exception("MQTT %s failed; ignored, the connection goes on", handler.__name__)
+
+    return run
 
 
 def client_id(role: str) -> str:
@@ -46,7 +119,9 @@ class RetainedView:
         role: str = "view",
         on_change: Callable[[], None] | None = None,
         on_synced: Callable[[], None] | None = None,
+        on_topic: Callable[[str], None] | None = None,
         max_inflight: int = 0,
+        max_payload: int = MAX_PAYLOAD_BYTES,
     ) -> None:
         self.connection = connection
         self.filters = list(filters)
@@ -54,8 +129,13 @@ class RetainedView:
         self.marker_topic = f"{marker_topic}/{self.client_id}"
         self._on_change = on_change
         self._on_synced = on_synced
+        self._on_topic = on_topic
+        self.max_payload = max_payload
+        self.oversized = 0  # payloads dropped on arrival for their size
+        self._dropped = Ignored()
         self._lock = threading.Lock()
         self._topics: dict[str, bytes] = {}
+        self._arrivals: dict[str, int] = {}  # topic -> messages received on it
         self._generation = 0
         self._subscribe_mid: int | None = None
         self._synced = threading.Event()
@@ -63,6 +143,7 @@ class RetainedView:
         self.last_error: str | None = None
         self.connections = 0
         self._client = make_client(connection, self.client_id)
+        self._client.suppress_exceptions = True  # and every handler is guarded besides
         # Many retained QoS 1 publishes in flight at once: waiting for each PUBACK in turn
         # would make a 1,000-robot rollout as slow as 1,000 round trips. 0 is unlimited, and
         # also spares paho its scan of every message in flight at each PUBACK (a limit makes
@@ -117,16 +198,23 @@ class RetainedView:
         with self._lock:
             return dict(self._topics)
 
+    def get(self, topic: str) -> bytes | None:
+        with self._lock:
+            return self._topics.get(topic)
+
     # ------------------------------------------------------------------ publishing
 
     def publish_retained(self, items: Sequence[tuple[str, bytes]], timeout: float) -> bool:
         """Publishes retained QoS 1 and waits for every PUBACK; an empty payload clears a topic.
 
         True when the broker acknowledged all of them in time. The local copy is updated on
-        acknowledgement, so the next diff does not publish them again before their echo.
+        acknowledgement, so the next diff does not publish them again before their echo, unless
+        a message arrived on the topic meanwhile (the echo, or a newer one: it is the truth).
         """
         if not self._synced.is_set():
             return False
+        with self._lock:
+            before = {topic: self._arrivals.get(topic, 0) for topic, _ in items}
         infos = [
             (topic, payload, self._client.publish(topic, payload, qos=1, retain=True))
             for topic, payload in items
@@ -144,6 +232,8 @@ class RetainedView:
                 ok = False
                 continue
             with self._lock:
+                if self._arrivals.get(topic, 0) != before[topic]:
+                    continue
                 if payload:
                     self._topics[topic] = payload
                 else:
@@ -153,6 +243,7 @@ class RetainedView:
     # ------------------------------------------------------------------ paho callbacks
     # They run on paho's network thread: update memory, set events, never block.
 
+    @_guarded
     def _handle_connect(
         self, client: paho.Client, userdata: Any, flags: Any, reason: Any, properties: Any
     ) -> None:
@@ -174,6 +265,7 @@ class RetainedView:
         _, mid = client.subscribe(topics)
         self._subscribe_mid = mid
 
+    @_guarded
     def _handle_subscribe(
         self, client: paho.Client, userdata: Any, mid: int, reasons: Any, properties: Any
     ) -> None:
@@ -185,9 +277,11 @@ class RetainedView:
             log.warning("%s", self.last_error)
         client.publish(self.marker_topic, str(self._generation).encode(), qos=1)
 
+    @_guarded
     def _handle_connect_fail(self, client: paho.Client, userdata: Any) -> None:
         self.last_error = f"cannot reach the broker at {self.connection.address.url}"
 
+    @_guarded
     def _handle_disconnect(
         self, client: paho.Client, userdata: Any, flags: Any, reason: Any, properties: Any
     ) -> None:
@@ -198,6 +292,7 @@ class RetainedView:
             self.last_error = f"disconnected from {self.connection.address.url}: {reason}"
             log.info("%s; reconnecting", self.last_error)
 
+    @_guarded
     def _handle_message(
         self, client: paho.Client, userdata: Any, message: paho.MQTTMessage
     ) -> None:
@@ -207,13 +302,89 @@ class RetainedView:
                 if self._on_synced is not None:
                     self._on_synced()
             return
+        payload = message.payload
+        if len(payload) > self.max_payload:
+            # Dropped at once: a robot that publishes 100 MB must not make us hold it.
+            self.oversized += 1
+            self._dropped.note(
+                "oversized",
+                message.topic,
+                oversized(len(payload)),
+                f"{len(payload):,} bytes, over the limit of {self.max_payload:,}; dropped",
+            )
+            payload = oversized(len(payload))
         with self._lock:
-            if message.payload:
-                self._topics[message.topic] = bytes(message.payload)
+            self._arrivals[message.topic] = self._arrivals.get(message.topic, 0) + 1
+            if payload:
+                self._topics[message.topic] = bytes(payload)
             else:
                 self._topics.pop(message.topic, None)
+        if self._on_topic is not None:
+            self._on_topic(message.topic)
         if self._on_change is not None:
             self._on_change()
+
+
+class Presence:
+    """A connection that only holds a Last Will, which the broker publishes (retained, QoS 1)
+    when this process dies or loses the broker.
+
+    A will is fixed when a client connects, so a new will takes a new connection: it connects
+    first, then the old one leaves cleanly (which discards its will), so one is always in place.
+    """
+
+    def __init__(self, connection: Connection, topic: str, role: str = "presence") -> None:
+        self.connection = connection
+        self.topic = topic
+        self.role = role
+        self._client: paho.Client | None = None
+        self._will: bytes | None = None
+
+    @property
+    def will(self) -> bytes | None:
+        return self._will
+
+    def hold(self, will: bytes, timeout: float) -> bool:
+        """Makes `will` what the broker publishes if this process dies; False when the broker
+        did not accept a connection in time (the previous will stays in place)."""
+        if will == self._will:
+            return True
+        connected = threading.Event()
+
+        @_guarded
+        def on_connect(
+            client: paho.Client, userdata: Any, flags: Any, reason: Any, properties: Any
+        ) -> None:
+            if not getattr(reason, "is_failure", False):
+                connected.set()
+
+        client = make_client(self.connection, client_id(self.role))
+        client.suppress_exceptions = True
+        client.will_set(self.topic, will, qos=1, retain=True)
+        client.on_connect = on_connect
+        address = self.connection.address
+        client.connect_async(address.host, address.port, keepalive=30)
+        client.loop_start()
+        if not connected.wait(timeout):
+            _leave(client)
+            return False
+        old, self._client, self._will = self._client, client, will
+        if old is not None:
+            _leave(old)
+        return True
+
+    def release(self) -> None:
+        """Leaves cleanly: the broker discards the will (publish the offline status first)."""
+        client, self._client, self._will = self._client, None, None
+        if client is not None:
+            _leave(client)
+
+
+def _leave(client: paho.Client) -> None:
+    try:
+        client.disconnect()
+    finally:
+        client.loop_stop()
 
 
 def take_snapshot(

@@ -5,18 +5,20 @@ Formatting for people (a table, worst first) and for machines (JSON) lives here 
 
 from __future__ import annotations
 
-import contextlib
 import enum
-import json
+import re
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.launch import LaunchRequest
+from configurator.launch import LaunchRequest, StopRequest
 from configurator.render import FleetRender
+from configurator.safejson import PayloadError
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+from reconciler.retained import read_object
 
 
 class Verdict(str, enum.Enum):
@@ -64,6 +66,7 @@ class Observed:
 
     launch: LaunchRequest | None = None
     launch_digest: str | None = None  # also set when the payload is not a valid request
+    stopped: bool = False  # the launch topic holds a (signed) StopRequest: nothing assigned
     status: AgentStatus | None = None
     description: RobotDescription | None = None
 
@@ -72,36 +75,56 @@ class Observed:
 class Retained:
     robots: dict[str, Observed] = field(default_factory=dict)
     reconciler: ReconcilerStatus | None = None
+    ignored: dict[str, int] = field(default_factory=dict)  # unreadable payloads, by topic kind
+
+
+def _kind(topic: str, topics: Topics) -> str | None:
+    """Which retained message a topic holds: "reconciler-status" or a robot topic's leaf."""
+    if topic == topics.reconciler_status:
+        return "reconciler-status"
+    where = topics.robot_of(topic)
+    return where[1] if where is not None and where[1] in _ROBOT_LEAVES else None
+
+
+_ROBOT_LEAVES = {"launch", "status", "description"}
 
 
 def parse_retained(messages: Mapping[str, bytes], topics: Topics) -> Retained:
-    """Sorts retained messages by robot; unreadable ones are skipped, never fatal."""
+    """Sorts retained messages by robot; unreadable ones (size, depth, JSON, schema) are
+    skipped and counted, never fatal."""
     out = Retained()
     for topic, payload in messages.items():
-        if topic == topics.reconciler_status:
-            with contextlib.suppress(ValidationError):
-                out.reconciler = ReconcilerStatus.model_validate_json(payload)
+        kind = _kind(topic, topics)
+        if kind is None or not payload:
             continue
         where = topics.robot_of(topic)
-        if where is None or not payload:
-            continue
-        robot_id, leaf = where
-        robot = out.robots.setdefault(robot_id, Observed())
+        # A robot is known to the broker even when what it published cannot be read.
+        robot = out.robots.setdefault(where[0], Observed()) if where is not None else None
         try:
-            if leaf == "launch":
-                try:
-                    raw = json.loads(payload)
-                    robot.launch_digest = raw.get("digest") if isinstance(raw, dict) else None
-                except ValueError:
-                    robot.launch_digest = None
-                robot.launch = LaunchRequest.model_validate_json(payload)
-            elif leaf == "status":
-                robot.status = AgentStatus.model_validate_json(payload)
-            elif leaf == "description":
-                robot.description = RobotDescription.model_validate_json(payload)
-        except ValidationError:
-            continue
+            raw = read_object(payload)
+            if robot is None:
+                out.reconciler = ReconcilerStatus.model_validate(raw)
+            else:
+                _sort(robot, kind, raw)
+        except (PayloadError, ValidationError):
+            out.ignored[kind] = out.ignored.get(kind, 0) + 1
     return out
+
+
+def _sort(robot: Observed, kind: str, raw: dict[str, Any]) -> None:
+    """One robot topic's parsed object into `robot`; raises ValidationError when invalid."""
+    if kind == "launch":
+        if raw.get("kind") == "Stop":
+            StopRequest.model_validate(raw)
+            robot.stopped = True
+            return
+        digest = raw.get("digest")
+        robot.launch_digest = digest if isinstance(digest, str) else None
+        robot.launch = LaunchRequest.model_validate(raw)
+    elif kind == "status":
+        robot.status = AgentStatus.model_validate(raw)
+    else:
+        robot.description = RobotDescription.model_validate(raw)
 
 
 def desired_from_retained(retained: Retained) -> dict[str, DesiredRobot]:
@@ -215,18 +238,44 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
     return rows
 
 
+class Health(str, enum.Enum):
+    """Is a reconciler at work? Only `ok` lets a fleet be in sync."""
+
+    OK = "ok"
+    MISSING = "missing"  # no retained status: none ever ran on this prefix (or it was wiped)
+    OFFLINE = "offline"  # stopped, or its Last Will: it died or lost the broker
+    STALE = "stale"  # its heartbeat is overdue: hung, or cut off without its will firing yet
+
+
+def reconciler_health(status: ReconcilerStatus | None, at: float) -> Health:
+    if status is None:
+        return Health.MISSING
+    if status.state == "Offline":
+        return Health.OFFLINE
+    if status.stale(at):
+        return Health.STALE
+    return Health.OK
+
+
 @dataclass
 class FleetStatus:
     rows: list[RobotRow]
     reconciler: ReconcilerStatus | None
     desired_from: str  # where the desired state came from, in words
     notes: list[str] = field(default_factory=list)
+    ignored: dict[str, int] = field(default_factory=dict)  # unreadable payloads, by kind
+    checked_at: float = field(default_factory=time.time)
+
+    @property
+    def health(self) -> Health:
+        return reconciler_health(self.reconciler, self.checked_at)
 
     @property
     def in_sync(self) -> bool:
-        """Every robot settled and, when a reconciler reports, it has applied its branch."""
+        """Every robot settled, and a live reconciler has applied its branch."""
         robots_ok = all(r.verdict in SETTLED for r in self.rows)
-        return robots_ok and (self.reconciler is None or self.reconciler.ready)
+        ready = self.reconciler is not None and self.reconciler.ready
+        return robots_ok and ready and self.health is Health.OK
 
     def counts(self) -> dict[str, int]:
         found = {v.value: 0 for v in Verdict}
@@ -234,43 +283,73 @@ class FleetStatus:
             found[row.verdict.value] += 1
         return {k: n for k, n in found.items() if n}
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self, *, heartbeat: bool = True) -> dict[str, Any]:
+        """For scripts; without `heartbeat`, what `--watch` compares (a heartbeat alone is not
+        a change)."""
+        reconciler = self.reconciler.model_dump(mode="json") if self.reconciler else None
+        if reconciler is not None and not heartbeat:
+            reconciler.pop("heartbeat", None)
         return {
             "in_sync": self.in_sync,
             "desired_from": self.desired_from,
             "counts": self.counts(),
-            "reconciler": self.reconciler.model_dump(mode="json") if self.reconciler else None,
+            "reconciler": reconciler,
+            "reconciler_health": self.health.value,
             "robots": [r.as_json() for r in self.rows],
             "notes": self.notes,
+            "ignored_payloads": self.ignored,
         }
 
 
 # ------------------------------------------------------------------ text
 
+# C0 and C1 controls but the tab, and the Unicode line breaks: what a robot publishes must
+# not move the cursor, clear the screen or forge a line of this report.
+_CONTROLS = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def clean(text: str) -> str:
+    """Text from the broker, safe to print: control characters escaped."""
+    return _CONTROLS.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
+
 
 def short_digest(digest: str | None) -> str:
     if not digest:
         return "-"
-    return digest.removeprefix("sha256:")[:12]
+    return clean(digest.removeprefix("sha256:")[:12])
 
 
 def short_rev(revision: str | None) -> str:
-    return revision[:12] if revision else "-"
+    return clean(revision[:12]) if revision else "-"
 
 
-def reconciler_lines(status: ReconcilerStatus | None) -> list[str]:
+def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -> list[str]:
     if status is None:
-        return ["reconciler: no status on the broker (is `robotconf reconcile` running?)"]
-    where = f" on {status.branch}" if status.branch else ""
+        return [
+            "reconciler: MISSING — no reconciler status on the broker: no reconciler runs on "
+            "this prefix (start `robotconf reconcile`)"
+        ]
+    at = time.time() if at is None else at
+    where = f" on {clean(status.branch)}" if status.branch else ""
+    why = f" ({clean(status.reason)})" if status.reason and status.reason != status.state else ""
     line = (
-        f"reconciler: {status.state}{where}, applied {short_rev(status.last_applied_revision)}"
-        f", attempted {short_rev(status.last_attempted_revision)}, {status.robots} robots"
+        f"reconciler: {clean(status.state)}{why}{where}, "
+        f"applied {short_rev(status.last_applied_revision)}, "
+        f"attempted {short_rev(status.last_attempted_revision)}"
     )
+    if status.failed_revision:
+        line += f", failed on {short_rev(status.failed_revision)}"
+    line += f", {status.robots} robots"
     if status.message:
-        line += f" — {status.message}"
+        line += f" — {clean(status.message)}"
     lines = [line]
+    if reconciler_health(status, at) is Health.STALE and status.heartbeat is not None:
+        lines.append(
+            f"  STALE: its last heartbeat is {at - status.heartbeat:.0f} s old and it beats "
+            f"every {status.interval or 0:g} s: is the reconciler still running?"
+        )
     shown = status.diagnostics[:10]
-    lines += [f"  {d}" for d in shown]
+    lines += [f"  {clean(d)}" for d in shown]
     if len(status.diagnostics) > len(shown):
         lines.append(f"  ... {len(status.diagnostics) - len(shown)} more")
     return lines
@@ -280,12 +359,15 @@ _COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "ST
 
 
 def format_text(fleet: FleetStatus) -> str:
-    lines = reconciler_lines(fleet.reconciler)
-    lines.append(f"desired: {fleet.desired_from}")
-    lines += [f"note: {n}" for n in fleet.notes]
+    lines = reconciler_lines(fleet.reconciler, fleet.checked_at)
+    lines.append(f"desired: {clean(fleet.desired_from)}")
+    lines += [f"note: {clean(n)}" for n in fleet.notes]
+    if fleet.ignored:
+        kinds = ", ".join(f"{n} {kind}" for kind, n in sorted(fleet.ignored.items()))
+        lines.append(f"note: unreadable retained payloads skipped: {kinds}")
     table = [
         (
-            r.robot_id,
+            clean(r.robot_id),
             r.verdict.value,
             "yes" if r.online else "no",
             r.scenario or "-",
@@ -302,11 +384,11 @@ def format_text(fleet: FleetStatus) -> str:
     for row, r in zip(table, fleet.rows, strict=True):
         text = "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True))
         if r.verdict is not Verdict.IN_SYNC:
-            text += f"  {r.reason}"
+            text += f"  {clean(r.reason)}"
         lines.append(text.rstrip())
     if not fleet.rows:
         lines.append("(no robot is assigned or known to the broker)")
-    warnings = [f"warning: {r.robot_id}: {w}" for r in fleet.rows for w in r.warnings]
+    warnings = [f"warning: {clean(r.robot_id)}: {clean(w)}" for r in fleet.rows for w in r.warnings]
     if warnings:
         lines.append("")
         lines += warnings

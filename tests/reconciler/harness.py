@@ -18,12 +18,14 @@ from typing import Any, TypeVar
 
 import paho.mqtt.client as paho
 import yaml
+from pydantic import ValidationError
 
 from configurator.launch import LaunchRequest
 from configurator.mqtt import Connection
+from configurator.safejson import PayloadError
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, Topics
 from reconciler.desired import load_desired
-from reconciler.retained import RetainedView
+from reconciler.retained import RetainedView, read_object
 from tests.lab import Lab
 
 TIMEOUT = 60.0  # generous: CI machines are slow and shared
@@ -198,8 +200,25 @@ class Watch:
         return AgentStatus.model_validate_json(payload) if payload else None
 
     def reconciler(self) -> ReconcilerStatus | None:
+        """The retained reconciler status; None when there is none or it is unreadable."""
         payload = self.retained().get(self.topics.reconciler_status)
-        return ReconcilerStatus.model_validate_json(payload) if payload else None
+        if not payload:
+            return None
+        try:
+            return ReconcilerStatus.model_validate(read_object(payload))
+        except (PayloadError, ValidationError):
+            return None
+
+    def digest(self, robot_id: str) -> str | None:
+        """The digest retained on a robot's launch topic; "unreadable", or None for nothing."""
+        payload = self.retained().get(self.topics.launch(robot_id))
+        if not payload:
+            return None
+        try:
+            digest = read_object(payload).get("digest")
+        except PayloadError:
+            return "unreadable"
+        return digest if isinstance(digest, str) else "unreadable"
 
     def running(self, requests: dict[str, LaunchRequest]) -> dict[str, AgentStatus] | None:
         """Every robot's status when each one runs its request's digest, else None."""

@@ -58,6 +58,13 @@ def test_reconcile_stops_on_sigterm(lab: GitLab, mosquitto: Mosquitto, tmp_path:
     wait_for(lambda: "in sync with" in proc.output(), "the reconciler in sync")
     assert proc.stop(signal.SIGTERM) == 0
     assert "Traceback" not in proc.output()
+    # A clean stop sends no Last Will: the reconciler says it is offline itself.
+    watch = Watch(mosquitto.url)
+    try:
+        status = watch.wait_reconciler(lambda s: s.state == "Offline", "offline")
+        assert status.last_applied_revision == lab.head() and "stopped" in status.message
+    finally:
+        watch.close()
 
 
 def test_status_watch_follows_the_fleet(lab: GitLab, mosquitto: Mosquitto, tmp_path: Path) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -19,8 +20,12 @@ ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
 
 
 class Running:
-    def __init__(self, source: BranchSource, url: str, interval: float = 30.0) -> None:
-        self.controller = Controller(source, Connection(url), "robotconf", interval)
+    """A Controller on its own thread, as `robotconf reconcile` runs it."""
+
+    def __init__(
+        self, source: BranchSource, url: str, interval: float = 30.0, **options: Any
+    ) -> None:
+        self.controller = Controller(source, Connection(url), "robotconf", interval, **options)
         self.thread = threading.Thread(target=self.controller.run, daemon=True)
         self.thread.start()
 
@@ -107,8 +112,13 @@ def test_a_reconciler_started_on_a_bad_commit_serves_the_last_good_one(
         mosquitto.stop()
         mosquitto.start()
         wait_for(lambda: published(watch, lab, good), "the last good revision refilled")
-        status = watch.wait_reconciler(lambda s: s.last_attempted_revision == bad, "reported")
-        assert status.state == "Stalled" and status.last_applied_revision == good
+        # A broker that shuts down publishes the Last Wills of its clients: Offline for a
+        # moment, Progressing while it refills, then Stalled again.
+        status = watch.wait_reconciler(
+            lambda s: s.last_attempted_revision == bad and s.state == "Stalled", "reported"
+        )
+        assert status.last_applied_revision == good and status.reason == "BuildFailed"
+        assert status.failed_revision == bad
     finally:
         running.stop()
 

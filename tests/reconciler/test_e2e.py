@@ -107,6 +107,7 @@ def test_invalid_commit_changes_nothing_and_is_reported(fleet: Fleet) -> None:
         lambda s: s.last_attempted_revision == bad, "the bad commit attempted"
     )
     assert status.state == "Stalled" and not status.ready
+    assert status.reason == "BuildFailed" and status.failed_revision == bad
     assert status.last_applied_revision == good
     assert any("nope" in d and "delivery-gazebo.yaml" in d for d in status.diagnostics)
     for robot_id, request in fleet.requests(good).items():
@@ -122,7 +123,8 @@ def test_invalid_commit_changes_nothing_and_is_reported(fleet: Fleet) -> None:
         timeout=60,
     )
     assert done.returncode == 1  # robots run the last good revision, but the branch is stalled
-    assert "Stalled" in done.stdout and "nope" in done.stdout
+    assert "Stalled (BuildFailed)" in done.stdout and "nope" in done.stdout
+    assert f"failed on {bad[:12]}" in done.stdout
 
     fleet.lab.replace(
         "configs/scenarios/delivery-gazebo.yaml",

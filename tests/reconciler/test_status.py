@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from configurator.launch import StopRequest
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+from reconciler.retained import oversized
 from reconciler.status import (
     DesiredRobot,
     FleetStatus,
+    Health,
     Observed,
     Retained,
     Verdict,
@@ -100,7 +103,7 @@ def test_rows_are_worst_first_and_warn_about_templates() -> None:
     text = format_text(fleet)
     assert text.index("c-bad") < text.index("b-off") < text.index("a-ok")
     assert "warning: a-ok: assigned robot template" in text
-    assert "no status on the broker" in text
+    assert "no reconciler status on the broker" in text
 
 
 def test_in_sync_needs_every_assigned_robot_and_a_ready_reconciler() -> None:
@@ -110,13 +113,94 @@ def test_in_sync_needs_every_assigned_robot_and_a_ready_reconciler() -> None:
     )
     ready = ReconcilerStatus(state="Ready", ready=True, last_applied_revision="a" * 40)
     stalled = ReconcilerStatus(
-        state="Stalled", ready=False, diagnostics=["configs/fleet.yaml:1:1: error X bad"]
+        state="Stalled",
+        ready=False,
+        reason="BuildFailed",
+        failed_revision="b" * 40,
+        diagnostics=["configs/fleet.yaml:1:1: error X bad"],
     )
     assert FleetStatus(rows, ready, "t").in_sync
-    assert FleetStatus(rows, None, "t").in_sync
     assert not FleetStatus(rows, stalled, "t").in_sync
     text = format_text(FleetStatus(rows, stalled, "t"))
-    assert "reconciler: Stalled" in text and "error X bad" in text
+    assert "reconciler: Stalled (BuildFailed)" in text and "error X bad" in text
+    assert f"failed on {'b' * 12}" in text
+
+
+def test_no_dead_or_stale_reconciler_is_in_sync() -> None:
+    rows = build_rows({"r1": want()}, Retained(robots={"r1": seen(AgentState.RUNNING)}))
+    at = 1_000_000.0
+    beating = ReconcilerStatus(state="Ready", ready=True, heartbeat=at - 20, interval=30)
+    assert FleetStatus(rows, beating, "t", checked_at=at).health is Health.OK
+    assert FleetStatus(rows, beating, "t", checked_at=at).in_sync
+
+    missing = FleetStatus(rows, None, "t", checked_at=at)
+    assert missing.health is Health.MISSING and not missing.in_sync
+    assert "reconciler: MISSING" in format_text(missing)
+
+    will = ReconcilerStatus(state="Offline", ready=False, reason="Offline", message="it died")
+    offline = FleetStatus(rows, will, "t", checked_at=at)
+    assert offline.health is Health.OFFLINE and not offline.in_sync
+    assert "reconciler: Offline" in format_text(offline)
+    assert offline.as_json()["reconciler_health"] == "offline"
+
+    # Ready, but its heartbeat is 3 intervals (and a minute) overdue: hung or cut off.
+    late = beating.model_copy(update={"heartbeat": at - 3 * 30 - 1})
+    stale = FleetStatus(rows, late, "t", checked_at=at)
+    assert stale.health is Health.STALE and not stale.in_sync
+    assert "STALE: its last heartbeat is 91 s old" in format_text(stale)
+    assert stale.as_json()["reconciler_health"] == "stale"
+    # An older reconciler without a heartbeat cannot be judged stale.
+    old = ReconcilerStatus(state="Ready", ready=True)
+    assert FleetStatus(rows, old, "t", checked_at=at).in_sync
+
+
+def test_unreadable_payloads_are_counted_and_control_characters_escaped() -> None:
+    topics = Topics()
+    deep = b"[" * 100_000 + b"]" * 100_000
+    messages = {
+        topics.status("deep"): deep,
+        topics.status("dup"): b'{"robot_id": "dup", "state": "running", "state": "idle"}',
+        topics.status("utf8"): b'{"robot_id": "utf8", "state": "\xff"}',  # not UTF-8
+        topics.status("big"): oversized(2_000_000),
+        topics.launch("deep"): b"{" * 50_000,
+        topics.description("dup"): b'{"id": "dup", "id": "x"}',
+        topics.reconciler_status: deep,
+        topics.status("evil"): AgentStatus(
+            robot_id="evil", state=AgentState.FAILED, message="\x1b[2Jok\nreconciler: Ready"
+        )
+        .model_dump_json()
+        .encode(),
+        topics.description("two\nforged"): b"{}",
+        topics.launch("fake"): b"\x00oversized not a size",  # looks like our placeholder
+    }
+    parsed = parse_retained(messages, topics)
+    assert parsed.ignored == {"status": 4, "launch": 2, "description": 2, "reconciler-status": 1}
+    assert parsed.reconciler is None
+    assert set(parsed.robots) == {"deep", "dup", "utf8", "big", "evil", "two\nforged", "fake"}
+    assert all(parsed.robots[r].status is None for r in ("deep", "dup", "utf8", "big"))
+    desired = {"evil": DesiredRobot("evil", "s", D1)}
+    fleet = FleetStatus(build_rows(desired, parsed), None, "t", ignored=parsed.ignored)
+    text = format_text(fleet)
+    assert "\x1b" not in text and "\\x1b[2Jok\\nreconciler: Ready" in text
+    assert "\nforged" not in text and "two\\nforged" in text
+    assert "unreadable retained payloads skipped: 2 description, 2 launch" in text
+
+
+def test_a_retained_stop_is_unassigned() -> None:
+    topics = Topics()
+    stop = StopRequest(robot_id="r1", revision="c" * 40, issued_at=1.0, signature="AA==")
+    idle = AgentStatus(robot_id="r1", state=AgentState.IDLE)
+    parsed = parse_retained(
+        {
+            topics.launch("r1"): stop.payload(),
+            topics.status("r1"): idle.model_dump_json().encode(),
+        },
+        topics,
+    )
+    assert parsed.ignored == {} and parsed.robots["r1"].stopped
+    assert [(r.robot_id, r.verdict) for r in build_rows({}, parsed)] == [("r1", Verdict.UNASSIGNED)]
+    # Assigned again: its request is on its way.
+    assert verdict(want(), parsed.robots["r1"])[0] is Verdict.PROGRESSING
 
 
 def test_parse_retained_sorts_topics_and_skips_garbage() -> None:
