@@ -24,7 +24,21 @@ except ImportError:  # pragma: no cover - depends on the PyYAML build
 
 MAX_FILE_BYTES = 8 * 1024 * 1024
 MAX_DEPTH = 64
+# JSON readers differ beyond 64-bit integers; longer digit strings are refused before any
+# conversion (Python refuses over 4,300 digits, and base 60 is quadratic).
+MAX_INT = 2**63 - 1
+_MAX_NUMBER_CHARS = 100
 _NOT_BRACKET = re.compile(r"[^\[\]{}]+")
+# What opens block collections at the start of a line: indentation and the indicators - ? :
+_BLOCK_LEAD = re.compile(r"^[ ?:-]*", re.MULTILINE)
+# YAML 1.1 breaks lines here too, editors and git do not: a reported line would be wrong.
+_ODD_BREAKS = re.compile("\r(?!\n)|[\x85\u2028\u2029]")
+_BREAK_NAMES = {
+    "\r": "a carriage return not followed by a line feed (old Mac line end)",
+    "\x85": "NEXT LINE (U+0085)",
+    "\u2028": "LINE SEPARATOR (U+2028)",
+    "\u2029": "PARAGRAPH SEPARATOR (U+2029)",
+}
 
 _STR = "tag:yaml.org,2002:str"
 _INT = "tag:yaml.org,2002:int"
@@ -32,10 +46,27 @@ _FLOAT = "tag:yaml.org,2002:float"
 _BOOL = "tag:yaml.org,2002:bool"
 _NULL = "tag:yaml.org,2002:null"
 _TIMESTAMP = "tag:yaml.org,2002:timestamp"
+_MERGE = "tag:yaml.org,2002:merge"
 _MAP = "tag:yaml.org,2002:map"
 _SEQ = "tag:yaml.org,2002:seq"
 
 _scalars = SafeConstructor()
+
+
+def _implicit_patterns() -> dict[str, list[re.Pattern[str]]]:
+    """The patterns by which YAML resolves a plain scalar to each tag: an explicitly tagged
+    value must match its tag's, or constructing it would fail (`!!float abc`)."""
+    found: dict[str, list[re.Pattern[str]]] = {}
+    for resolvers in yaml.resolver.Resolver.yaml_implicit_resolvers.values():
+        for tag, pattern in resolvers:
+            if pattern not in found.setdefault(tag, []):
+                found[tag].append(pattern)
+    return found
+
+
+_FITS = _implicit_patterns()
+_UNFIT = object()  # a tagged value that is not of its tag
+_TAG_NAMES = {_INT: "an integer", _FLOAT: "a number", _BOOL: "a boolean", _NULL: "null"}
 
 Loc = Sequence[str | int]
 
@@ -103,6 +134,16 @@ def _problem(mark: Any, code: str, message: str) -> YamlProblem:
     return YamlProblem(mark.line + 1, mark.column + 1, code, message)
 
 
+def _within(problem: YamlProblem, text: str) -> YamlProblem:
+    """libyaml places an error at the end of an unterminated last line on the line after it,
+    which does not exist: report it at the end of the last line instead."""
+    last = text.count("\n") + 1
+    if problem.line <= last:
+        return problem
+    tail = len(text) - (text.rfind("\n") + 1)
+    return YamlProblem(last, tail + 1, problem.code, problem.message)
+
+
 def _position_of_byte(raw: bytes, offset: int) -> tuple[int, int]:
     """Line and column (1-based) of a byte offset into UTF-8; columns count characters, as
     YAML marks do (a leading BOM is not one)."""
@@ -149,6 +190,30 @@ def _tab_indents(text: str) -> list[YamlProblem]:
     return problems
 
 
+def _refuse_odd_line_breaks(text: str) -> None:
+    """RC003 for line breaks only YAML sees: after one, YAML's line numbers and everyone
+    else's would differ, so no position reported past it could be trusted."""
+    problems = []
+    for match in _ODD_BREAKS.finditer(text):
+        offset = match.start()
+        line = text.count("\n", 0, offset) + 1
+        col = offset - (text.rfind("\n", 0, offset) + 1) + 1
+        problems.append(
+            YamlProblem(
+                line,
+                col,
+                "RC003",
+                f"{_BREAK_NAMES[match.group()]} breaks the line for YAML but not for editors "
+                "or git; end lines with a line feed (\\n), or write the character as an "
+                "escape in a double-quoted string",
+            )
+        )
+        if len(problems) == 10:
+            break
+    if problems:
+        raise YamlReadError(problems)
+
+
 def _reader_problem(text: str, exc: yaml.reader.ReaderError) -> YamlProblem:
     """A character YAML refuses (control characters): located, in one line."""
     raw = text.encode("utf-8")
@@ -180,13 +245,23 @@ def _flow_depth_bound(text: str) -> int:
     return peak
 
 
+def _block_depth_bound(text: str) -> int:
+    """An upper bound of block nesting: a block collection starts at or before the end of its
+    line's run of indentation and indicators, and each column holds at most a mapping and a
+    sequence (`key:` then `- item` at the same indentation)."""
+    lead = max((len(m) for m in _BLOCK_LEAD.findall(text)), default=0)
+    return 2 * (lead + 1) + 1
+
+
 def _refuse_runaway_nesting(text: str) -> None:
     """RC009 before composing: libyaml's composer recurses once per level in C, so some tens of
-    thousands of nested brackets (a file of a few hundred kB) overflow the stack and crash.
+    thousands of nested levels (brackets, or `- - - ...` in a few hundred kB) overflow the
+    stack and crash.
 
-    Only a text that could nest deep is scanned, event by event, which is cheap next to
-    composing; syntax errors are left to the composer, which locates them."""
-    if _flow_depth_bound(text) <= MAX_DEPTH:
+    Only a text that could nest deep is scanned, event by event (libyaml's parser keeps no C
+    stack per level), which is cheap next to composing; syntax errors are left to the
+    composer, which locates them."""
+    if _flow_depth_bound(text) + _block_depth_bound(text) <= MAX_DEPTH:
         return
     loader = _Loader(text)
     depth = 0
@@ -292,13 +367,12 @@ class _Builder:
             result: dict[str, Any] = {}
             first_line: dict[str, int] = {}
             for key_node, value_node in node.value:
-                if not isinstance(key_node, ScalarNode) or key_node.tag == _NULL:
+                if not isinstance(key_node, ScalarNode) or key_node.tag != _STR:
+                    if key_node.tag == _MERGE:
+                        # `<<: *name` is first of all an alias: refused as one, where it is.
+                        self.build(value_node, depth + 1, key_node.start_mark)
                     self.problems.append(
-                        _problem(
-                            key_node.start_mark,
-                            "RC009",
-                            "a key must be a plain name, not a list, mapping or null",
-                        )
+                        _problem(key_node.start_mark, "RC009", _key_message(key_node))
                     )
                     continue
                 key = str(key_node.value)
@@ -323,28 +397,76 @@ class _Builder:
 
     def scalar(self, node: ScalarNode) -> Any:
         tag = node.tag
-        if tag in (_STR, _TIMESTAMP):
-            # Dates stay text: launch requests are JSON.
+        if tag == _STR:
             return node.value
-        if tag == _NULL:
-            return None
-        if tag == _BOOL:
-            return _scalars.construct_yaml_bool(node)
-        if tag == _INT:
+        if tag not in _TAG_NAMES and tag != _TIMESTAMP:
+            return self.refuse(node, _tag_message(node))
+        if tag == _INT and len(node.value) > _MAX_NUMBER_CHARS:
+            return self.refuse(node, _too_large(node))
+        # An untagged value fits its tag by construction; one tagged explicitly (`!!float abc`)
+        # may not, and then constructing it fails in one of these ways.
+        try:
+            value = self.construct(node)
+        except (ValueError, KeyError, IndexError, TypeError, OverflowError):
+            value = _UNFIT
+        if value is _UNFIT:
+            return self.refuse(
+                node,
+                f"{_snippet(node.value)} is not {_TAG_NAMES.get(tag, 'a date')}, as its tag "
+                f"'{_short_tag(tag)}' says; drop the tag, or write a value of that type",
+            )
+        if tag == _INT and abs(value) > MAX_INT:
+            return self.refuse(node, _too_large(node))
+        if tag == _FLOAT and (math.isnan(value) or math.isinf(value)):
+            return self.refuse(
+                node, f"{_snippet(node.value)} cannot be represented in JSON; use a finite number"
+            )
+        return value
+
+    @staticmethod
+    def construct(node: ScalarNode) -> Any:
+        if node.tag == _INT:
             return _scalars.construct_yaml_int(node)
-        if tag == _FLOAT:
-            value = _scalars.construct_yaml_float(node)
-            if math.isnan(value) or math.isinf(value):
-                self.problems.append(
-                    _problem(
-                        node.start_mark,
-                        "RC009",
-                        f"'{node.value}' cannot be represented in JSON; use a finite number",
-                    )
-                )
-            return value
-        self.problems.append(_problem(node.start_mark, "RC009", _tag_message(node)))
-        return node.value
+        if node.tag == _FLOAT:
+            return _scalars.construct_yaml_float(node)
+        if node.tag == _BOOL:
+            return _scalars.construct_yaml_bool(node)
+        if not any(p.fullmatch(node.value) for p in _FITS[node.tag]):
+            return _UNFIT
+        # Dates stay text: launch requests are JSON.
+        return None if node.tag == _NULL else node.value
+
+    def refuse(self, node: Node, message: str) -> None:
+        self.problems.append(_problem(node.start_mark, "RC009", message))
+
+
+def _key_message(node: Node) -> str:
+    if not isinstance(node, ScalarNode):
+        return "a key must be a plain name, not a list or mapping"
+    if node.tag == _MERGE:
+        return "merge keys (<<) are not supported; write the keys out in full"
+    read_as = _TAG_NAMES.get(node.tag, "a date" if node.tag == _TIMESTAMP else "not text")
+    return (
+        f"key {_snippet(node.value)} is read as {read_as}, and keys must be text; "
+        f"quote it: '{node.value[:40]}': ..."
+    )
+
+
+def _too_large(node: ScalarNode) -> str:
+    return (
+        f"{_snippet(node.value)} is beyond the 64-bit integer range JSON readers share; "
+        "quote it if it is text"
+    )
+
+
+def _snippet(value: str, limit: int = 40) -> str:
+    """A value as it may appear in a message: quoted, and cut when long."""
+    shown = value if len(value) <= limit else value[:limit] + "..."
+    return repr(shown)
+
+
+def _short_tag(tag: str) -> str:
+    return "!!" + tag[len("tag:yaml.org,2002:") :] if tag.startswith("tag:yaml.org,2002:") else tag
 
 
 def _first_alias_mark(text: str) -> Any:
@@ -365,7 +487,10 @@ def _first_alias_mark(text: str) -> Any:
 
 
 def _tag_message(node: Node) -> str:
-    return f"YAML tag '{node.tag}' is not supported; use plain strings, numbers, lists, mappings"
+    return (
+        f"YAML tag '{_short_tag(node.tag)}' is not supported; "
+        "use plain strings, numbers, lists, mappings"
+    )
 
 
 def parse_document(path: str, raw: bytes) -> YamlDocument:
@@ -383,12 +508,16 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
             ]
         )
     text = decode(raw)
+    _refuse_odd_line_breaks(text)
     if "\t" in text:
         tabs = _tab_indents(text)
         if tabs:
             raise YamlReadError(tabs)
-    _refuse_runaway_nesting(text)
-    root = _compose(text)
+    try:
+        _refuse_runaway_nesting(text)
+        root = _compose(text)
+    except YamlReadError as exc:
+        raise YamlReadError([_within(p, text) for p in exc.problems]) from None
     if root is None or (
         isinstance(root, ScalarNode) and root.tag == _NULL and not root.value.strip()
     ):

@@ -5,7 +5,13 @@ from __future__ import annotations
 import pytest
 
 from configurator import yamlio
-from configurator.yamlio import MAX_DEPTH, YamlDocument, YamlReadError, parse_document
+from configurator.yamlio import (
+    MAX_DEPTH,
+    YamlDocument,
+    YamlProblem,
+    YamlReadError,
+    parse_document,
+)
 
 SCENARIO = b"""\
 # yaml-language-server: $schema=../../schemas/scenario.schema.json
@@ -25,10 +31,14 @@ def _doc(raw: bytes) -> YamlDocument:
     return parse_document("configs/scenarios/x.yaml", raw)
 
 
-def _problems(raw: bytes) -> list[tuple[int, int, str]]:
+def _refused(raw: bytes) -> list[YamlProblem]:
     with pytest.raises(YamlReadError) as caught:
         parse_document("x.yaml", raw)
-    return [(p.line, p.col, p.code) for p in caught.value.problems]
+    return caught.value.problems
+
+
+def _problems(raw: bytes) -> list[tuple[int, int, str]]:
+    return [(p.line, p.col, p.code) for p in _refused(raw)]
 
 
 # ------------------------------------------------------------------ data
@@ -83,22 +93,28 @@ def test_dates_stay_strings(text: str) -> None:
 
 
 @pytest.mark.parametrize(
-    ("key", "name"),
+    ("key", "read_as"),
     [
-        ("yes", "yes"),
-        ("no", "no"),
-        ("on", "on"),
-        ("true", "true"),
-        ("1", "1"),
-        ("0.5", "0.5"),
-        ("2024-05-01", "2024-05-01"),
-        ('"quoted"', "quoted"),
+        ("yes", "a boolean"),
+        ("on", "a boolean"),
+        ("true", "a boolean"),
+        ("1", "an integer"),
+        ("0.5", "a number"),
+        ("2024-05-01", "a date"),
+        ("~", "null"),
+        ("<<", "merge keys"),
     ],
 )
-def test_keys_stay_strings(key: str, name: str) -> None:
+def test_keys_that_are_not_text_are_refused(key: str, read_as: str) -> None:
+    (problem,) = _refused(f"a: 1\n{key}: value\n".encode())
+    assert (problem.line, problem.col, problem.code) == (2, 1, "RC009")
+    assert read_as in problem.message
+
+
+@pytest.mark.parametrize("key", ["'yes'", '"1"', "'2024-05-01'", '"quoted"', "plain"])
+def test_quoted_keys_are_text(key: str) -> None:
     data = _doc(f"{key}: value\n".encode()).data
-    assert data == {name: "value"}
-    assert all(type(k) is str for k in data)
+    assert data == {key.strip("'\""): "value"}
 
 
 def test_utf8_bom_is_dropped_and_positions_ignore_it() -> None:
@@ -149,9 +165,9 @@ def test_locate_missing_path_falls_back_to_the_parent() -> None:
     assert doc.locate([]) == (2, 1)
 
 
-def test_locate_keys_that_are_not_strings_in_yaml() -> None:
-    doc = _doc(b"settings:\n  1: one\n  yes: two\n")
-    assert doc.locate(["settings", "1"]) == (2, 6)
+def test_locate_quoted_keys_that_look_like_other_types() -> None:
+    doc = _doc(b"settings:\n  '1': one\n  'yes': two\n")
+    assert doc.locate(["settings", "1"]) == (2, 8)
     assert doc.locate(["settings", "yes"], key=True) == (3, 3)
 
 
@@ -250,3 +266,89 @@ def test_keys_must_be_plain_names(raw: bytes) -> None:
 )
 def test_tags_are_refused(raw: bytes) -> None:
     assert _problems(raw) == [(1, 4, "RC009")]
+
+
+# ------------------------------------------------------------------ totality (issue 10, item 4)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "x:\n" + "- " * 50_000 + "1\n",  # block sequences on one line: segfaulted libyaml
+        "x:\n" + "".join("  " * i + "-\n" for i in range(200)) + "1\n",
+        "".join(" " * i + "k:\n" for i in range(2_000)) + "x: 1\n",
+        "x: " + "[" * 50_000,
+        "x:\n" + "- " * 40 + "[" * 40 + "1\n",  # block and flow together
+    ],
+)
+def test_nesting_of_every_kind_is_refused_before_composing(text: str) -> None:
+    problems = _refused(text.encode())
+    assert [p.code for p in problems] == ["RC009"]
+    assert problems[0].line >= 1
+
+
+def test_moderate_indentation_is_still_read() -> None:
+    text = "a:\n" + "".join("  " * i + f"k{i}:\n" for i in range(1, 40)) + "  " * 40 + "v: 1\n"
+    assert _doc(text.encode()).data["a"]["k1"]["k2"]
+
+
+@pytest.mark.parametrize(
+    ("value", "says"),
+    [
+        ("!!float abc", "'abc' is not a number"),
+        ("!!float", "'' is not a number"),
+        ("!!int x", "'x' is not an integer"),
+        ("!<tag:yaml.org,2002:int> x", "'x' is not an integer"),
+        ("!!bool maybe", "'maybe' is not a boolean"),
+        ("!!null x", "'x' is not null"),
+        ("!!timestamp nope", "'nope' is not a date"),
+        ("!!binary aGk=", "'!!binary' is not supported"),
+        ("!!set {a}", "'!!set' is not supported"),
+        ("!custom x", "'!custom' is not supported"),
+        ("9" * 5_000, "beyond the 64-bit integer range"),
+        ("0x" + "f" * 5_000, "beyond the 64-bit integer range"),
+        ("1:" * 3_000 + "1", "beyond the 64-bit integer range"),
+        ("9223372036854775808", "beyond the 64-bit integer range"),
+        ("1.0e+999", "cannot be represented in JSON"),
+        ("1" * 500 + ".5", "cannot be represented in JSON"),
+    ],
+)
+def test_every_tag_and_number_is_data_or_rc009(value: str, says: str) -> None:
+    (problem,) = _refused(f"a: 1\nb: {value}\n".encode())
+    assert (problem.line, problem.col, problem.code) == (2, 4, "RC009")
+    assert says in problem.message
+    assert len(problem.message) < 300
+
+
+@pytest.mark.parametrize(
+    ("value", "data"),
+    [
+        ("!!int '3'", 3),
+        ("!!str 1", "1"),
+        ("!!float 1", 1.0),
+        ("!!bool 'true'", True),
+        ("-9223372036854775807", -(2**63) + 1),
+        ("1" * 300 + ".5", float("1" * 300 + ".5")),
+    ],
+)
+def test_tagged_values_that_fit_are_read(value: str, data: object) -> None:
+    assert _doc(f"b: {value}\n".encode()).data == {"b": data}
+
+
+@pytest.mark.parametrize(
+    ("br", "name"),
+    [
+        ("\u2028", "LINE SEPARATOR"),
+        ("\u2029", "PARAGRAPH SEPARATOR"),
+        ("\x85", "NEXT LINE"),
+        ("\r", "carriage return"),
+    ],
+)
+def test_line_breaks_only_yaml_sees_are_refused_on_the_real_line(br: str, name: str) -> None:
+    (problem,) = _refused(f"a: 1\nb: x{br}c: [\nd: 2\n".encode())
+    assert (problem.line, problem.col, problem.code) == (2, 5, "RC003")
+    assert name in problem.message
+
+
+def test_an_error_at_the_end_of_an_unterminated_last_line_is_on_that_line() -> None:
+    assert _problems(b"a: 1\nb: [") == [(2, 5, "RC003")]

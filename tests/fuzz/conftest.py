@@ -1,0 +1,24 @@
+"""Hypothesis profiles for the property-based tests: bounded so the whole set stays near a minute.
+
+`HYPOTHESIS_PROFILE=deep` explores much longer (by hand, not in CI).
+"""
+
+from __future__ import annotations
+
+import os
+
+from hypothesis import HealthCheck, settings
+
+settings.register_profile(
+    "ci",
+    max_examples=150,
+    deadline=None,  # a slow example is not a failure: CI machines are shared
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+settings.register_profile(
+    "deep",
+    max_examples=5_000,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
