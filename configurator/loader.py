@@ -14,7 +14,7 @@ from pydantic import BaseModel, ValidationError
 
 from configurator.diagnostics import Diagnostic, Severity
 from configurator.repository import Entry, Platform, Repository
-from configurator.source import Source
+from configurator.source import FileTooLarge, Source
 from configurator.types import (
     Action,
     CapabilityConfiguration,
@@ -89,6 +89,8 @@ _PLACES = (
     "models/platforms/<platform>/{platform.yaml,robot-templates/,mapping-schemes/}"
 )
 _PLATFORM_DIR = re.compile(r"^models/platforms/([^/]+)/")
+_YAML_SUFFIX = re.compile(r"\.ya?ml$", re.IGNORECASE)
+FLEET_PATH = "configs/fleet.yaml"
 
 
 def classify(path: str) -> tuple[Kind, tuple[str, ...]] | None:
@@ -107,15 +109,26 @@ def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
     """Every file of the source, typed; diagnostics for everything that is not readable."""
     repo = Repository(revision_of=lambda: source.revision)
     diagnostics: list[Diagnostic] = []
+    for path, why in source.refused().items():
+        diagnostics.append(_error(path, "RC008", f"not read: {path} {why}"))
+        found = classify(path)
+        if found is not None:
+            repo.broken.setdefault(found[0].name, set()).add(_qualified(found[1]))
     for path in source.files():
         platform_dir = _PLATFORM_DIR.match(path)
         if platform_dir:
             repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
-        if not path.endswith((".yaml", ".yml")):
+        suffix = _YAML_SUFFIX.search(path)
+        if suffix is None:
             continue  # READMEs and the like may sit beside the YAML files
-        if path.endswith(".yml"):
+        if suffix.group() != ".yaml":
             diagnostics.append(
-                _error(path, "RC105", "YAML files here end in .yaml; rename this .yml file")
+                _error(
+                    path,
+                    "RC105",
+                    f"YAML files here end in .yaml; rename this {suffix.group()} file "
+                    "(it is not read)",
+                )
             )
             continue
         found = classify(path)
@@ -145,7 +158,22 @@ def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
                 )
             )
         _add(repo, kind.name, groups, Entry(name, model, doc))
+    if repo.fleet is None and "fleet" not in repo.broken:
+        diagnostics.append(_missing_fleet(source))
     return repo, diagnostics
+
+
+def _missing_fleet(source: Source) -> Diagnostic:
+    """The reconciler cannot apply a commit without a fleet: neither may validate pass one."""
+    hint = ""
+    if not any(path.startswith(("configs/", "models/")) for path in source.files()):
+        hint = " (this folder holds no configs/ or models/ files: is it the repository root?)"
+    return _error(
+        FLEET_PATH,
+        "RC106",
+        f"{FLEET_PATH} is missing: it says which robot runs which scenario; create it "
+        f"(`robots: {{}}` and `allow_empty: true` for a fleet of none){hint}",
+    )
 
 
 def _qualified(groups: tuple[str, ...]) -> str:
@@ -157,6 +185,9 @@ def _load_one(
 ) -> tuple[YamlDocument | None, Any]:
     try:
         raw = source.read(path)
+    except FileTooLarge as exc:
+        diagnostics.append(_error(path, "RC008", str(exc)))
+        return None, None
     except OSError as exc:
         diagnostics.append(_error(path, "RC008", f"cannot read the file: {exc.strerror or exc}"))
         return None, None
