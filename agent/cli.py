@@ -41,7 +41,7 @@ def main(argv: list[str]) -> int:
     except SystemExit as exc:  # argparse has printed the usage problem already
         return exc.code if isinstance(exc.code, int) else 2
     try:
-        config = load_config(args.config)
+        config = load_config(args.config, prepare=not args.check)
         if args.broker:
             config = with_broker(config, args.broker)
     except ConfigInvalid as exc:

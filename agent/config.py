@@ -15,6 +15,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from configurator.diagnostics import did_you_mean
+from configurator.files import read_regular
 from configurator.mqtt import Connection
 from configurator.types import ROBOT_ID_PATTERN
 from configurator.wire import (
@@ -25,7 +26,13 @@ from configurator.wire import (
     parse_broker_url,
     validate_prefix,
 )
-from configurator.yamlio import YamlDocument, YamlProblem, YamlReadError, parse_document
+from configurator.yamlio import (
+    MAX_FILE_BYTES,
+    YamlDocument,
+    YamlProblem,
+    YamlReadError,
+    parse_document,
+)
 
 COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 
@@ -252,9 +259,10 @@ def _explain(error: Any) -> tuple[Loc, str]:
     return loc, f"{where}: {message} (got {error.get('input')!r})"
 
 
-def _check_environment(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
-    """What only the machine can tell: files readable, the work directory writable."""
-    problem = _workdir_problem(config.workdir)
+def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc, str]]:
+    """What only the machine can tell: files readable, the work directory writable (made
+    when `prepare`; only looked at otherwise)."""
+    problem = _workdir_problem(config.workdir) if prepare else _workdir_unusable(config.workdir)
     if problem:
         yield (
             ("workdir",),
@@ -288,6 +296,20 @@ def _check_environment(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
             yield loc, f"{_dotted(loc)}: cannot read {path} ({reason}); give a readable file"
 
 
+def _workdir_unusable(path: Path) -> str | None:
+    """Why the agent could not make or use `path`, judged without changing anything."""
+    existing = path
+    while not existing.exists():
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    if existing.exists() and not existing.is_dir():
+        return f"{existing} is not a directory"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return None
+
+
 def _workdir_problem(path: Path) -> str | None:
     try:
         path.mkdir(mode=0o700, parents=True, exist_ok=True)
@@ -301,7 +323,9 @@ def _workdir_problem(path: Path) -> str | None:
     return None
 
 
-def parse_config(text: str, filename: str, base: Path | None = None) -> AgentConfig:
+def parse_config(
+    text: str, filename: str, base: Path | None = None, *, prepare: bool = True
+) -> AgentConfig:
     """Validate agent.yaml text; raises ConfigInvalid listing every problem with its line."""
     # The repository's strict reader: duplicate keys, aliases, tabs refused, positions kept.
     try:
@@ -314,7 +338,7 @@ def parse_config(text: str, filename: str, base: Path | None = None) -> AgentCon
         raise ConfigInvalid(_errors(filename, doc, (_explain(e) for e in exc.errors()))) from None
     if base is not None:
         config = config.resolved(base)
-    problems = list(_check_environment(config))
+    problems = list(_check_environment(config, prepare))
     if problems:
         raise ConfigInvalid(_errors(filename, doc, problems))
     return config
@@ -336,13 +360,14 @@ def _errors(
     return sorted(out, key=lambda e: (e.line or 0, e.message))
 
 
-def load_config(path: Path) -> AgentConfig:
+def load_config(path: Path, *, prepare: bool = True) -> AgentConfig:
+    """`prepare=False` (`--check`) changes nothing on disk: the work directory is not made."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_regular(path, MAX_FILE_BYTES, follow=True).decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+        reason = (exc.strerror or str(exc)) if isinstance(exc, OSError) else "not UTF-8 text"
         raise ConfigInvalid([ConfigError(str(path), None, f"cannot read: {reason}")]) from None
-    return parse_config(text, str(path), base=path.parent.absolute())
+    return parse_config(text, str(path), base=path.parent.absolute(), prepare=prepare)
 
 
 def with_broker(config: AgentConfig, url: str) -> AgentConfig:

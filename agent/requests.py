@@ -5,20 +5,23 @@ Pure: validated with the shared LaunchRequest type, checked against the robot's 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.launch import API_VERSION, LaunchRequest
+from configurator.launch import API_VERSION, LaunchRequest, StopRequest, canonical_json
+from configurator.safejson import PayloadError, parse_object
 from configurator.wire import RobotDescription
 
 
 @dataclass(frozen=True)
 class Clear:
-    """The empty retained payload: no assignment."""
+    """No assignment: the empty payload, or a Stop (signed, when this agent verifies)."""
+
+    issued_at: float | None = None  # of a signed Stop: it advances the replay watermark
 
 
 @dataclass(frozen=True)
@@ -33,7 +36,11 @@ class Reject:
 
 
 Verdict = Clear | Accept | Reject
-Verifier = Callable[[LaunchRequest], "str | None"]  # None when the signature is good
+# Checks the signature of the parsed JSON object; None when it is good.
+Verifier = Callable[[dict[str, Any]], "str | None"]
+
+# A launch request is a few kB; the broker's own limit may be higher.
+MAX_REQUEST_BYTES = 1024 * 1024
 
 
 @dataclass(frozen=True)
@@ -44,22 +51,25 @@ class Freshness:
     running_digest: str | None  # the request it runs now: re-sending that one is harmless
 
 
-def _stale(request: LaunchRequest, freshness: Freshness | None) -> str | None:
-    if freshness is None or freshness.newest_issued_at is None or request.issued_at is None:
+def _stale(issued_at: float | None, digest: str | None, freshness: Freshness | None) -> str | None:
+    if freshness is None or freshness.newest_issued_at is None or issued_at is None:
         return None
-    if request.issued_at >= freshness.newest_issued_at:
+    if issued_at >= freshness.newest_issued_at:
         return None
-    if request.digest == freshness.running_digest:
+    if digest is not None and digest == freshness.running_digest:
         return None
     return (
-        f"replayed request: issued at {_iso(request.issued_at)}, before the newest one this "
+        f"replayed request: issued at {_iso(issued_at)}, before the newest one this "
         f"robot accepted ({_iso(freshness.newest_issued_at)}); a rollback must come as a new "
         "commit"
     )
 
 
 def _iso(stamp: float) -> str:
-    return datetime.fromtimestamp(stamp, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    try:
+        return datetime.fromtimestamp(stamp, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    except (OverflowError, OSError, ValueError):
+        return f"{stamp!r} (not a time)"
 
 
 def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
@@ -68,7 +78,8 @@ def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
         where = ".".join(str(p) for p in error["loc"]) or "(top level)"
         parts.append(f"{where}: {error['msg']}")
     more = exc.error_count() - limit
-    return "; ".join(parts) + (f"; and {more} more" if more > 0 else "")
+    summary = "; ".join(parts) + (f"; and {more} more" if more > 0 else "")
+    return summary if len(summary) <= 400 else summary[:397] + "..."  # keys come from the payload
 
 
 def interpret(
@@ -77,26 +88,45 @@ def interpret(
     verify: Verifier | None = None,
     freshness: Freshness | None = None,
 ) -> Verdict:
+    """The verdict on one launch-topic payload. Nothing is trusted before it is verified: the
+    payload is parsed under bounds, addressed and (when `verify` is set) its signature checked
+    on the plain JSON object; only then is it validated as a request."""
     if not payload.strip():
+        if verify is not None:
+            return Reject(
+                "unsigned stop refused: this agent requires signed requests, and an empty "
+                "message cannot be signed; the brain keeps running"
+            )
         return Clear()
     try:
-        data = json.loads(payload)
-    except (UnicodeDecodeError, ValueError) as exc:
-        return Reject(f"malformed JSON: {exc}")
-    if not isinstance(data, dict):
-        return Reject(f"a launch request must be a JSON object, got {type(data).__name__}")
+        data = parse_object(payload, max_bytes=MAX_REQUEST_BYTES)
+    except PayloadError as exc:
+        return Reject(f"malformed launch request: {exc}")
     # Checked before the full validation so that a newer format gets a reason people understand.
     version = data.get("apiVersion")
     if version != API_VERSION:
-        return Reject(f"unknown apiVersion {version!r}; this agent understands {API_VERSION!r}")
+        return Reject(
+            f"unknown apiVersion {_short(version)}; this agent understands {API_VERSION!r}"
+        )
+    addressed = data.get("robot_id")
+    if addressed != robot.id:
+        return Reject(f"the request is for robot {_short(addressed)}, this is {robot.id!r}")
+    if verify is not None:
+        if payload != canonical_json(data):
+            # The brain gets these very bytes: nothing may ride along that the signature's
+            # canonical form does not cover (white space, escapes, key order).
+            return Reject("a signed request must be in canonical JSON form, as signed")
+        problem = verify(data)
+        if problem is not None:
+            return Reject(problem)
+    if data.get("kind") == "Stop":
+        return _stop(data, verify is not None, freshness)
     try:
         request = LaunchRequest.model_validate(data)
     except ValidationError as exc:
         return Reject(f"not a valid launch request: {_validation_summary(exc)}")
-    if request.robot_id != robot.id:
-        return Reject(f"the request is for robot {request.robot_id!r}, this is {robot.id!r}")
     if verify is not None:
-        problem = verify(request) or _stale(request, freshness)
+        problem = _stale(request.issued_at, request.digest, freshness)
         if problem is not None:
             return Reject(problem)
     if not request.digest_matches():
@@ -116,3 +146,21 @@ def interpret(
             f"capability {capability.name!r} {target}; this robot recommends {recommended!r}"
         )
     return Accept(request, warnings)
+
+
+def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Verdict:
+    try:
+        stop = StopRequest.model_validate(data)
+    except ValidationError as exc:
+        return Reject(f"not a valid stop: {_validation_summary(exc)}")
+    if signed:
+        problem = _stale(stop.issued_at, None, freshness)
+        if problem is not None:
+            return Reject(problem)
+    return Clear(stop.issued_at if signed else None)
+
+
+def _short(value: Any) -> str:
+    """A value from the payload as a message may quote it: bounded."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."

@@ -6,6 +6,7 @@ The only place where the state machine, the brain process and the broker link me
 from __future__ import annotations
 
 import contextlib
+import errno
 import gc
 import logging
 import os
@@ -30,7 +31,7 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
-from agent.service import BrokerLink
+from agent.service import MAX_STATUS_BYTES, BrokerLink
 from agent.supervisor import Effect, Kill, Policy, Spawn, Supervisor, Terminate, describe_exit
 from agent.workdir import (
     ISSUED_FILE,
@@ -38,11 +39,13 @@ from agent.workdir import (
     PID_FILE,
     REQUEST_FILE,
     SEQ_FILE,
+    STAGED_FILE,
     IssuedStore,
     SeqStore,
     write_atomic,
 )
 from configurator.launch import LaunchRequest
+from configurator.safejson import PayloadError, parse_object
 from configurator.wire import AgentState, AgentStatus
 from configurator.wire import now as now_wall
 
@@ -89,10 +92,10 @@ class Agent:
         )
         self.verify: requests.Verifier | None = None
         if config.public_key is not None:
-            from configurator.signing import load_public_key, verify
+            from configurator.signing import load_public_key, verify_object
 
             key = load_public_key(config.public_key)
-            self.verify = lambda request: verify(request, key)
+            self.verify = lambda data: verify_object(data, key)
         self.brain: process.Brain | None = None
         self._exit_fds: dict[int, process.Brain] = {}  # exit descriptors watched, until reaped
         self._accepted_payload: tuple[str, bytes] = ("", b"")  # digest, bytes as received
@@ -157,7 +160,7 @@ class Agent:
         # Everything that arrived together is handled before one status goes out.
         handled = False
         while (event := self.inbox.pop()) is not None:
-            self._handle(event, time.monotonic())
+            self._handle_guarded(event, time.monotonic())
             handled = True
         now = time.monotonic()
         deadline = self.supervisor.deadline
@@ -218,6 +221,15 @@ class Agent:
 
     # ------------------------------------------------------------ events
 
+    def _handle_guarded(self, event: Event, now: float) -> None:
+        """One event; a bug in handling it is logged and reported, and the loop goes on: no
+        payload may stop the agent (a retained one would stop every restart, too)."""
+        try:
+            self._handle(event, now)
+        except Exception as exc:
+            log.exception("internal error while handling %s", type(event).__name__)
+            self.supervisor.message = f"internal error ({type(exc).__name__}); see the agent log"
+
     def _handle(self, event: Event, now: float) -> None:
         sup = self.supervisor
         if isinstance(event, Connected):
@@ -255,6 +267,8 @@ class Agent:
         sup = self.supervisor
         if isinstance(verdict, requests.Clear):
             log.info("launch request cleared")
+            if verdict.issued_at is not None:
+                self.issued.accepted(verdict.issued_at)
             self._apply(sup.clear(now))
         elif isinstance(verdict, requests.Reject):
             log.warning("launch request rejected: %s", verdict.reason)
@@ -266,13 +280,35 @@ class Agent:
                 self.issued.accepted(verdict.request.issued_at)
             # The brain gets the bytes as published (validated above), not a re-serialisation.
             self._accepted_payload = (verdict.request.digest, payload)
+            desired = sup.desired
+            if desired is None or desired.request.digest != verdict.request.digest:
+                problem = self._stage(payload)
+                if problem is not None:
+                    log.error("%s", problem)
+                    self._apply(sup.reject(problem, now))
+                    return
             self._apply(sup.accept(verdict.request, verdict.warnings, now))
+
+    def _stage(self, payload: bytes) -> str | None:
+        """Writes the next request beside the current one before anything is stopped: a full
+        or read-only disk must leave the running brain running. None when it is written."""
+        staged = self.workdir / STAGED_FILE
+        try:
+            write_atomic(staged, payload, mode=0o600, durable=False)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                staged.unlink()
+            return (
+                f"cannot write the new request to {staged}: {_os_error(exc)}; "
+                "the running brain is left as it is"
+            )
+        return None
 
     def _on_own_status(self, payload: bytes) -> None:
         try:
-            seen = AgentStatus.model_validate_json(payload)
-        except ValidationError:
-            return
+            seen = AgentStatus.model_validate(parse_object(payload, max_bytes=MAX_STATUS_BYTES))
+        except (PayloadError, ValidationError):
+            return  # not ours: anything else on this topic is no reason to act
         self.seq.observe(seen.seq)
         if seen.state != AgentState.OFFLINE or not self.connected or self.supervisor.shutting_down:
             return
@@ -313,10 +349,14 @@ class Agent:
         argv = process.substitute(self.config.command, path)
         try:
             digest, payload = self._accepted_payload
-            if digest != request.digest:
-                payload = request.payload()
-            # Not durable: after a power cut the retained request arrives again.
-            write_atomic(path, payload, mode=0o600, durable=False)
+            staged = self.workdir / STAGED_FILE
+            if digest == request.digest and staged.exists():
+                os.replace(staged, path)  # a rename needs no space: staged before the stop
+            else:
+                if digest != request.digest:
+                    payload = request.payload()
+                # Not durable: after a power cut the retained request arrives again.
+                write_atomic(path, payload, mode=0o600, durable=False)
             log_fd = self.brain_log.open_for_child()
         except OSError as exc:
             problem = f"cannot write {exc.filename}: {exc.strerror}"
@@ -391,6 +431,12 @@ class Agent:
         self._held_until = None
         self.link.publish_status(status)
         self._last_published = status
+
+
+def _os_error(exc: OSError) -> str:
+    """`[Errno 28] No space left on device` as `ENOSPC: No space left on device`."""
+    name = errno.errorcode.get(exc.errno or 0, "error")
+    return f"{name}: {exc.strerror or exc}"
 
 
 def publish_delay(status: AgentStatus, last: AgentStatus | None) -> float:

@@ -27,6 +27,7 @@ from agent.events import (
     LaunchMessage,
     StatusMessage,
 )
+from agent.requests import MAX_REQUEST_BYTES
 from agent.workdir import SeqStore
 from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
@@ -34,6 +35,7 @@ from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 log = logging.getLogger(__name__)
 
 QOS = 1
+MAX_STATUS_BYTES = 64 * 1024  # an agent status is a few hundred bytes
 ECHOES = 8  # own status payloads remembered: a restart publishes three in quick succession
 MISC_INTERVAL = 1.0  # keepalive bookkeeping (pings, a silent broker) at least this often
 MAX_READS = 32  # packets read in one pass before the agent handles what they brought
@@ -85,6 +87,8 @@ class BrokerLink:
         self._delay = RECONNECT_MIN_DELAY
         self._next_misc = 0.0
         self.client = make_client(connection, client_id=f"robotconf-agent-{robot_id}")
+        # A callback that raises must not end the loop: paho logs it and goes on.
+        self.client.suppress_exceptions = True
         self.client.on_pre_connect = self._on_pre_connect
         self.client.on_connect = self._on_connect
         self.client.on_disconnect = self._on_disconnect
@@ -131,10 +135,12 @@ class BrokerLink:
         self._inbox.put_local(Disconnected(str(reason_code)))
 
     def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
+        # Cut to one byte over each limit: the verdict (too large) is the same, the rest of a
+        # huge payload is not kept while it waits in the inbox.
         if message.topic == self.launch_topic:
-            self._inbox.put_local(LaunchMessage(bytes(message.payload)))
+            self._inbox.put_local(LaunchMessage(bytes(message.payload[: MAX_REQUEST_BYTES + 1])))
         elif message.topic == self.status_topic:
-            payload = bytes(message.payload)
+            payload = bytes(message.payload[: MAX_STATUS_BYTES + 1])
             if payload not in self._echoes:
                 self._inbox.put_local(StatusMessage(payload))
 

@@ -16,6 +16,7 @@ from configurator.files import write_atomic
 __all__ = ["write_atomic"]  # kept here too: the agent's modules import it from its workdir
 
 REQUEST_FILE = "launch-request.json"
+STAGED_FILE = "launch-request.json.next"  # the next request, written before the old brain stops
 LOG_FILE = "brain.log"
 PID_FILE = "brain.pid"
 SEQ_FILE = "agent.seq"

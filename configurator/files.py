@@ -1,6 +1,8 @@
-"""Atomic, private file writes: readers see the old file or the new one, never a half of it.
+"""Safe file access: atomic private writes (readers see the old file or the new one, never a
+half of it) and bounded reads of regular files only (never through a link, never a FIFO).
 
-Used by the agent (requests, pidfile, counters) and by the commands that write secrets.
+Used by the agent (requests, pidfile, counters, agent.yaml), the repository reader and the
+commands that write secrets.
 """
 
 from __future__ import annotations
@@ -8,8 +10,52 @@ from __future__ import annotations
 import contextlib
 import itertools
 import os
+import stat
 import tempfile
 from pathlib import Path
+
+
+class NotRegularFile(OSError):
+    """Refused without reading: a link, FIFO, device or socket, or over the size limit."""
+
+
+def file_kind(mode: int) -> str | None:
+    """What a non-regular entry is, in words; None for a regular file or a folder."""
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe (FIFO)"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return None
+
+
+def read_regular(path: Path, limit: int, *, follow: bool = False) -> bytes:
+    """The bytes of a regular file of at most `limit` bytes; NotRegularFile otherwise.
+
+    O_NONBLOCK so that a FIFO is refused, not waited on; without `follow`, O_NOFOLLOW so that a
+    link swapped in since the caller looked is refused, not followed. The size is checked
+    before anything is read."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    if not follow:
+        flags |= os.O_NOFOLLOW
+    fd = os.open(path, flags)
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            kind = file_kind(info.st_mode) or "a folder"
+            raise NotRegularFile(f"is {kind}, not a regular file")
+        if info.st_size > limit:
+            raise NotRegularFile(f"is {info.st_size:,} bytes, over the limit of {limit:,}")
+        with os.fdopen(fd, "rb", closefd=False) as stream:
+            data = stream.read(limit + 1)
+        if len(data) > limit:
+            raise NotRegularFile(f"is over the limit of {limit:,} bytes")
+        return data
+    finally:
+        os.close(fd)
 
 
 def write_atomic(path: Path, data: bytes, mode: int = 0o600, *, durable: bool = True) -> None:

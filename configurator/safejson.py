@@ -9,6 +9,7 @@ Agent-safe: the standard library only.
 from __future__ import annotations
 
 import json
+import math
 import re
 from typing import Any
 
@@ -19,6 +20,8 @@ MAX_JSON_DEPTH = 64
 # A JSON string: what is inside it never counts as nesting.
 _STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
 _NOT_BRACKET = re.compile(rb"[^\[\]{}]+")
+# A \u escape of a UTF-16 surrogate: paired it is one character, alone it is no text at all.
+_SURROGATE_ESCAPE = re.compile(rb"\\u[dD][89a-fA-F]")
 
 
 class PayloadError(ValueError):
@@ -51,10 +54,35 @@ def _no_constant(name: str) -> Any:
     raise PayloadError(f"{name} is not a JSON number")
 
 
+def _finite(text: str) -> float:
+    value = float(text)
+    if math.isinf(value):
+        raise PayloadError(f"number {text[:20]!r} is too large to be represented")
+    return value
+
+
+def _check_text(value: Any) -> None:
+    """Refuses a lone surrogate anywhere in the value: it cannot be written out as UTF-8."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, str):
+            try:
+                item.encode("utf-8")
+            except UnicodeEncodeError:
+                raise PayloadError("a string holds a lone UTF-16 surrogate escape") from None
+        elif isinstance(item, dict):
+            stack.extend(item.keys())
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+
+
 def parse_json(
     payload: bytes, *, max_bytes: int = MAX_PAYLOAD_BYTES, max_depth: int = MAX_JSON_DEPTH
 ) -> Any:
-    """The parsed value, or PayloadError: too large, nested too deep, not UTF-8, not strict JSON."""
+    """The parsed value, or PayloadError: too large, nested too deep, not UTF-8, not strict JSON
+    (duplicate keys, NaN, numbers beyond float range, lone surrogates)."""
     if len(payload) > max_bytes:
         raise PayloadError(f"payload is {len(payload):,} bytes, over the limit of {max_bytes:,}")
     depth = _depth(payload)
@@ -65,11 +93,19 @@ def parse_json(
     except UnicodeDecodeError as exc:
         raise PayloadError(f"payload is not UTF-8 (byte {exc.start})") from None
     try:
-        return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
+        value = json.loads(
+            text,
+            object_pairs_hook=_no_duplicates,
+            parse_constant=_no_constant,
+            parse_float=_finite,
+        )
     except PayloadError:
         raise
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, over-long integers
         raise PayloadError(f"malformed JSON: {exc}") from None
+    if _SURROGATE_ESCAPE.search(payload):
+        _check_text(value)
+    return value
 
 
 def parse_object(

@@ -11,7 +11,7 @@ import base64
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from configurator.files import write_atomic
 from configurator.launch import LaunchRequest, StopRequest, canonical_json
@@ -114,16 +114,33 @@ def sign(request: Signed, key: Ed25519PrivateKey, issued_at: float | None = None
 
 def verify(request: LaunchRequest | StopRequest, key: Ed25519PublicKey) -> str | None:
     """None when the reconciler's key signed exactly this request, else why not."""
+    return verify_object(request.wire(), key)
+
+
+# A signature is 64 bytes; anything much longer is not one, and is not decoded.
+_MAX_SIGNATURE_CHARS = 128
+
+
+def verify_object(data: dict[str, Any], key: Ed25519PublicKey) -> str | None:
+    """None when the reconciler's key signed exactly this parsed request (a launch or a stop),
+    else why not. Works on the plain JSON object, so nothing else of it is trusted, or even
+    built, before its signature is known to be good."""
     from cryptography.exceptions import InvalidSignature
 
-    if request.signature is None or request.issued_at is None:
+    signature, issued_at = data.get("signature"), data.get("issued_at")
+    if signature is None or issued_at is None:
         return "request is not signed, and this agent requires signed requests"
+    if not isinstance(signature, str) or len(signature) > _MAX_SIGNATURE_CHARS:
+        return "signature is not a base64 Ed25519 signature"
+    if isinstance(issued_at, bool) or not isinstance(issued_at, (int, float)):
+        return "issued_at is not a number"
     try:
-        raw = base64.b64decode(request.signature, validate=True)
+        raw = base64.b64decode(signature, validate=True)
     except ValueError:
         return "signature is not valid base64"
+    unsigned = {k: v for k, v in data.items() if k != "signature"}
     try:
-        key.verify(raw, signed_bytes(request))
-    except InvalidSignature:
+        key.verify(raw, canonical_json(unsigned))
+    except (InvalidSignature, ValueError):
         return "signature does not verify: the request was altered or signed by another key"
     return None

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Protocol
 
+from configurator.files import NotRegularFile, file_kind, read_regular
 from configurator.yamlio import MAX_FILE_BYTES
 
 ROOTS = ("configs", "models")
@@ -70,18 +71,6 @@ def printable_path(path: str) -> str:
     return path.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
 
 
-def _kind_of(mode: int) -> str | None:
-    if stat.S_ISLNK(mode):
-        return SYMLINK
-    if stat.S_ISFIFO(mode):
-        return "a named pipe (FIFO)"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    return None
-
-
 class WorkTreeSource:
     """Files as they are on disk: regular files only, never through a link."""
 
@@ -106,7 +95,7 @@ class WorkTreeSource:
                 refused[top] = f"cannot be read ({exc.strerror})"
                 continue
             if not stat.S_ISDIR(mode):
-                refused[top] = refusal(_kind_of(mode) or "a file") + f" ({top}/ must be a folder)"
+                refused[top] = refusal(file_kind(mode) or "a file") + f" ({top}/ must be a folder)"
                 continue
             # Walked with a stack, not recursion: a hostile tree may nest thousands deep.
             pending = [top]
@@ -138,7 +127,7 @@ class WorkTreeSource:
                     elif stat.S_ISREG(mode):
                         found.append(path)
                     else:
-                        refused[path] = refusal(_kind_of(mode) or "not a regular file")
+                        refused[path] = refusal(file_kind(mode) or "not a regular file")
         self._files, self._refused = sorted(found), refused
 
     def files(self) -> list[str]:
@@ -154,24 +143,14 @@ class WorkTreeSource:
         return self._refused
 
     def read(self, path: str) -> bytes:
-        # O_NOFOLLOW and O_NONBLOCK: a file swapped for a link or a FIFO since the scan is
-        # refused, never followed nor waited on; the size is known before anything is read.
-        flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
-        fd = os.open(self.root / path, flags)
+        # A file swapped for a link or a FIFO since the scan is refused, never followed.
         try:
-            info = os.fstat(fd)
-            kind = _kind_of(info.st_mode)
-            if kind is not None or not stat.S_ISREG(info.st_mode):
-                raise OSError(f"{path} {refusal(kind or 'not a regular file')}")
-            if info.st_size > MAX_FILE_BYTES:
-                raise FileTooLarge(info.st_size)
-            with os.fdopen(fd, "rb", closefd=False) as stream:
-                data = stream.read(MAX_FILE_BYTES + 1)
-            if len(data) > MAX_FILE_BYTES:
-                raise FileTooLarge(len(data))
-            return data
-        finally:
-            os.close(fd)
+            return read_regular(self.root / path, MAX_FILE_BYTES)
+        except NotRegularFile:
+            size = os.stat(self.root / path, follow_symlinks=False).st_size
+            if size > MAX_FILE_BYTES:
+                raise FileTooLarge(size) from None
+            raise
 
     @property
     def revision(self) -> str:

@@ -40,3 +40,20 @@ def test_object_required() -> None:
     assert parse_object(b'{"k": [1, 2.5, true, null]}') == {"k": [1, 2.5, True, None]}
     with pytest.raises(PayloadError, match="expected a JSON object, got an array"):
         parse_object(b"[]")
+
+
+@pytest.mark.parametrize(
+    ("payload", "why"),
+    [
+        (b'{"issued_at": 1e999}', "too large to be represented"),
+        (b'["\\ud800"]', "lone UTF-16 surrogate"),
+        (b'{"\\udfff": 1}', "lone UTF-16 surrogate"),
+    ],
+)
+def test_values_that_cannot_be_written_back_are_refused(payload: bytes, why: str) -> None:
+    with pytest.raises(PayloadError, match=why):
+        parse_json(payload)
+
+
+def test_paired_surrogate_escapes_are_one_character() -> None:
+    assert parse_json(b'["\\ud83d\\ude00", "\\\\ud800"]') == ["\U0001f600", "\\ud800"]

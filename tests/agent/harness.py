@@ -20,10 +20,12 @@ from typing import Any
 
 import paho.mqtt.client as paho
 import yaml
+from pydantic import ValidationError
 
 from agent.process import is_alive, read_pidfile
 from configurator.launch import LaunchCapability, LaunchRequest, LaunchScenario, make_launch_request
 from configurator.mqtt import Connection, make_client
+from configurator.safejson import PayloadError, parse_object
 from configurator.types import MappingBinding
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 
@@ -154,13 +156,17 @@ class Observer:
         if found is None or not msg.payload:
             return
         robot, leaf = found
-        with self._cond:
-            if leaf == "status":
-                status = AgentStatus.model_validate_json(msg.payload)
-                self.statuses.setdefault(robot, []).append(status)
-            elif leaf == "description":
-                self.descriptions[robot] = RobotDescription.model_validate_json(msg.payload)
-            self._cond.notify_all()
+        try:  # tests publish garbage on these topics too: only agents' messages are recorded
+            with self._cond:
+                if leaf == "status":
+                    status = AgentStatus.model_validate(parse_object(msg.payload))
+                    self.statuses.setdefault(robot, []).append(status)
+                elif leaf == "description":
+                    description = RobotDescription.model_validate(parse_object(msg.payload))
+                    self.descriptions[robot] = description
+                self._cond.notify_all()
+        except (PayloadError, ValidationError):
+            return
 
     def history(self, robot: str) -> list[AgentStatus]:
         with self._cond:

@@ -215,3 +215,36 @@ def test_workdir_is_made_private(tmp_path: Path) -> None:
     config = load_config(write(tmp_path, GOOD))
     assert config.workdir == loose
     assert loose.stat().st_mode & 0o777 == 0o700
+
+
+def _tree(root: Path) -> list[tuple[str, int, int]]:
+    return sorted(
+        (str(p.relative_to(root)), p.lstat().st_mode, p.lstat().st_mtime_ns)
+        for p in [root, *root.rglob("*")]
+    )
+
+
+def test_check_changes_nothing_on_disk(tmp_path: Path) -> None:
+    path = write(tmp_path, GOOD.replace("workdir: work", "workdir: state/work"))
+    before = _tree(tmp_path)
+    assert main(["--config", str(path), "--check"]) == 0
+    assert _tree(tmp_path) == before  # the work directory is not made, nothing is probed
+    # An unusable one is still reported, without being touched.
+    (tmp_path / "state").write_text("a file where a folder should be\n")
+    before = _tree(tmp_path)
+    assert main(["--config", str(path), "--check"]) == 2
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("target", ["/dev/zero", "fifo"])
+def test_an_agent_yaml_that_is_no_file_is_refused(tmp_path: Path, target: str) -> None:
+    path = tmp_path / "agent.yaml"
+    if target == "fifo":
+        import os
+
+        os.mkfifo(path)
+    else:
+        path.symlink_to(target)
+    with pytest.raises(ConfigInvalid) as caught:
+        load_config(path)
+    assert "not a regular file" in str(caught.value.errors[0])

@@ -4,13 +4,20 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from agent.requests import Accept, Clear, Freshness, Reject, Verifier, interpret
 from agent.workdir import IssuedStore
-from configurator.launch import LaunchRequest
-from configurator.signing import generate_keys, load_private_key, load_public_key, sign, verify
+from configurator.launch import StopRequest, canonical_json
+from configurator.signing import (
+    generate_keys,
+    load_private_key,
+    load_public_key,
+    sign,
+    verify_object,
+)
 from configurator.wire import RobotDescription
 from tests.agent.harness import make_request
 
@@ -42,7 +49,7 @@ def test_another_robots_request_is_rejected() -> None:
 
 @pytest.mark.parametrize("payload", [b"{", b"\xff\xfe", b"[1, 2"])
 def test_malformed_json_is_rejected(payload: bytes) -> None:
-    assert reason(payload).startswith("malformed JSON")
+    assert reason(payload).startswith("malformed launch request")
 
 
 def test_non_object_is_rejected() -> None:
@@ -92,15 +99,19 @@ def test_signatures_are_checked_when_the_agent_has_a_key(tmp_path: Path) -> None
     pair = generate_keys(tmp_path)
     public = load_public_key(pair.public)
 
-    def check(request: LaunchRequest) -> str | None:
-        return verify(request, public)
+    def check(data: dict[str, Any]) -> str | None:
+        return verify_object(data, public)
 
     signed = sign(make_request(), load_private_key(pair.private))
     assert interpret(signed.payload(), ROBOT, check) == Accept(signed, [])
     assert "not signed" in reason_with(make_request().payload(), check)
     data = json.loads(signed.payload())
     data["revision"] = "another-commit"  # outside the digest, inside the signature
-    assert "does not verify" in reason_with(json.dumps(data).encode(), check)
+    assert "does not verify" in reason_with(canonical_json(data), check)
+    # The very bytes that were signed, nothing else: no white space or escapes ride along.
+    assert "canonical JSON form" in reason_with(
+        json.dumps(json.loads(signed.payload())).encode(), check
+    )
 
 
 def reason_with(payload: bytes, check: Verifier) -> str:
@@ -113,8 +124,8 @@ def test_an_older_signed_request_is_a_replay_unless_it_is_the_running_one(tmp_pa
     pair = generate_keys(tmp_path)
     public, private = load_public_key(pair.public), load_private_key(pair.private)
 
-    def check(request: LaunchRequest) -> str | None:
-        return verify(request, public)
+    def check(data: dict[str, Any]) -> str | None:
+        return verify_object(data, public)
 
     old = sign(make_request(), private, issued_at=1000.0)
     new = sign(make_request(template="turtlebot3-burger"), private, issued_at=2000.0)
@@ -140,3 +151,64 @@ def test_the_newest_issue_time_survives_an_agent_restart(tmp_path: Path) -> None
     store.accepted(1000.0)  # never goes back
     assert IssuedStore(tmp_path / "newest").newest == 2000.5
     assert (tmp_path / "newest").stat().st_mode & 0o777 == 0o600
+
+
+@pytest.fixture
+def keyed(tmp_path: Path) -> tuple[Any, Verifier]:
+    pair = generate_keys(tmp_path)
+    public = load_public_key(pair.public)
+    return load_private_key(pair.private), lambda data: verify_object(data, public)
+
+
+def test_with_a_key_only_a_signed_stop_stops(keyed: tuple[Any, Verifier]) -> None:
+    private, check = keyed
+    assert "unsigned stop refused" in reason_with(b"", check)
+    assert "not signed" in reason_with(
+        StopRequest(robot_id="tb3-01", revision="r").payload(), check
+    )
+    stop = sign(StopRequest(robot_id="tb3-01", revision="r"), private, issued_at=5000.0)
+    assert interpret(stop.payload(), ROBOT, check) == Clear(5000.0)
+    other = sign(StopRequest(robot_id="tb3-02", revision="r"), private)
+    assert "for robot 'tb3-02'" in reason_with(other.payload(), check)
+    # An old stop cannot undo a newer request either.
+    stale = interpret(stop.payload(), ROBOT, check, Freshness(6000.0, "sha256:running"))
+    assert isinstance(stale, Reject) and "replayed request" in stale.reason
+
+
+def test_without_a_key_an_unsigned_stop_stops() -> None:
+    assert interpret(StopRequest(robot_id="tb3-01", revision="r").payload(), ROBOT) == Clear()
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"[" * 100_000 + b"]" * 100_000,
+        b'{"apiVersion": "robotconf/v1", "issued_at": Infinity}',
+        b'{"apiVersion": "robotconf/v1", "robot_id": "tb3-01", "issued_at": 1e999}',
+        b'{"apiVersion": "robotconf/v1", "robot_id": "tb3-01", "y": "\\ud800"}',
+        b'{"apiVersion": "robotconf/v1", "robot_id": "tb3-01", "n": ' + b"9" * 5000 + b"}",
+        b'{"apiVersion": "robotconf/v1", "robot_id": null}',
+        b'{"apiVersion": "robotconf/v1", "robot_id": "tb3-01", "robot_id": "tb3-01"}',
+        b'{"apiVersion": "' + b"v" * 2_000_000 + b'"}',
+        b'{"apiVersion": ["robotconf/v1"]}',
+    ],
+)
+def test_hostile_payloads_are_rejected_with_a_short_reason(
+    payload: bytes, keyed: tuple[Any, Verifier]
+) -> None:
+    for check in (None, keyed[1]):
+        verdict = interpret(payload, ROBOT, check)
+        assert isinstance(verdict, Reject), verdict
+        assert len(verdict.reason) < 500
+
+
+@pytest.mark.parametrize("issued_at", [1e308, -1e308, 0.0, 2**62])
+def test_replay_checks_survive_any_signed_time(
+    issued_at: float, keyed: tuple[Any, Verifier]
+) -> None:
+    private, check = keyed
+    signed = sign(make_request(), private, issued_at=issued_at)
+    verdict = interpret(signed.payload(), ROBOT, check, Freshness(1e300, None))
+    assert isinstance(verdict, (Accept, Reject))
+    verdict = interpret(signed.payload(), ROBOT, check, Freshness(-1e300, None))
+    assert isinstance(verdict, (Accept, Reject))

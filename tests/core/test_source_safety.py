@@ -11,7 +11,7 @@ import pytest
 
 from configurator.yamlio import MAX_FILE_BYTES
 from reconciler.desired import load_desired
-from tests.lab import Lab
+from tests.lab import ROBOTCONF, Lab
 
 CAPABILITY = "configs/capabilities/evil.yaml"
 
@@ -108,9 +108,7 @@ def test_a_folder_that_is_not_a_configuration_repository(tmp_path: Path) -> None
     empty = tmp_path / "empty"
     empty.mkdir()
     done = subprocess.run(
-        [str(Path(os.environ.get("VIRTUAL_ENV", "")) / "bin" / "robotconf")]
-        if False
-        else ["robotconf", "validate", "--repo", str(empty)],
+        [ROBOTCONF, "validate", "--repo", str(empty)],
         capture_output=True,
         text=True,
         timeout=60,
@@ -191,7 +189,7 @@ def test_a_shallow_clone_without_the_revision(lab: Lab, tmp_path: Path) -> None:
         ["git", "clone", "-q", "--depth", "1", f"file://{lab.root}", str(shallow)], check=True
     )
     done = subprocess.run(
-        ["robotconf", "validate", "--repo", str(shallow), "--rev", first],
+        [ROBOTCONF, "validate", "--repo", str(shallow), "--rev", first],
         capture_output=True,
         text=True,
         timeout=60,

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from configurator.launch import LaunchRequest, content_digest
+from configurator.launch import LaunchRequest, canonical_json, content_digest
 from configurator.signing import generate_keys, load_private_key, sign
 from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.retained import RetainedView
@@ -179,7 +179,7 @@ def test_forged_requests_are_rejected_and_the_brain_keeps_running(
         forged = sign(LaunchRequest.model_validate(data), load_private_key(other.private))
         data = json.loads(forged.payload())
         reason = "does not verify"
-    secure.send(robot_id, json.dumps(data).encode())
+    secure.send(robot_id, canonical_json(data))
     secure.wait_rejected(robot_id, reason)
     _brain_untouched(secure, robot_id, before)
     # The genuine request again: accepted, nothing restarts.
