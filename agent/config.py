@@ -38,7 +38,9 @@ COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # Values of their own type only (`stop_timeout: "10"`, `insecure: "yes"` are mistakes);
+    # paths are the exception: YAML gives them as text.
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class DescriptionConfig(_Strict):
@@ -72,9 +74,9 @@ class RestartConfig(_Strict):
 
 
 class TlsConfig(_Strict):
-    ca_file: Path | None = None
-    cert_file: Path | None = None
-    key_file: Path | None = None
+    ca_file: Path | None = Field(None, strict=False)
+    cert_file: Path | None = Field(None, strict=False)
+    key_file: Path | None = Field(None, strict=False)
     insecure: bool = False  # skip server certificate checks: lab benches only
 
 
@@ -88,18 +90,18 @@ class AgentConfig(_Strict):
     prefix: str = DEFAULT_PREFIX
     description: DescriptionConfig
     command: list[str]
-    workdir: Path
+    workdir: Path = Field(strict=False)
     stop_timeout: float = Field(default=10.0, gt=0)
     startsecs: float = Field(default=1.0, ge=0)
     restart: RestartConfig = Field(default_factory=lambda: RestartConfig())
     keepalive: int = Field(default=30, ge=5, le=3600)
     log: LogConfig = Field(default_factory=lambda: LogConfig())
     username: str | None = None
-    password_file: Path | None = None
+    password_file: Path | None = Field(None, strict=False)
     tls: TlsConfig | None = None
     # The reconciler's Ed25519 public key (`robotconf keys generate`): when set, only requests
     # it signed are accepted.
-    public_key: Path | None = None
+    public_key: Path | None = Field(None, strict=False)
 
     @field_validator("broker")
     @classmethod

@@ -8,11 +8,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from configurator.types import SERVICE_USERS
+
 
 @dataclass(frozen=True)
 class ServiceUsers:
-    reconciler: str = "reconciler"
-    viewer: str = "viewer"
+    # The defaults are the names `validate` reserves (configurator.types.SERVICE_USERS).
+    reconciler: str = SERVICE_USERS[0]
+    viewer: str = SERVICE_USERS[1]
 
     def names(self) -> set[str]:
         return {self.reconciler, self.viewer}

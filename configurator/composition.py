@@ -99,7 +99,7 @@ def setting_problem(definition: SettingDefinition, value: JsonScalar) -> tuple[s
             "enum": "one of the choices",
         }[kind]
         return "RC402", f"must be {expected} ({kind}), got {value!r}"
-    if definition.choices is not None and value not in definition.choices:
+    if definition.choices is not None and not is_choice(value, definition.choices):
         options = ", ".join(repr(c) for c in definition.choices)
         return "RC404", f"{value!r} is not one of the choices: {options}"
     if is_number and kind in ("number", "integer"):
@@ -112,6 +112,11 @@ def setting_problem(definition: SettingDefinition, value: JsonScalar) -> tuple[s
             unit = f" {definition.unit}" if definition.unit else ""
             return "RC403", f"{value!r} is outside {bounds}{unit}"
     return None
+
+
+def is_choice(value: JsonScalar, choices: list[JsonScalar]) -> bool:
+    """Type and value: in Python `True == 1 == 1.0`, but `true` is not the choice `1`."""
+    return any(type(value) is type(c) and value == c for c in choices)
 
 
 def _num(value: float) -> str:

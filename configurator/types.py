@@ -5,20 +5,41 @@ Pure pydantic; imported by the robot-side agent too, so nothing heavier than pyd
 
 from __future__ import annotations
 
+import re
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+# `$` ends the text in pydantic's and JSON Schema's regexes; Python's `re` also lets it match
+# before a final newline, so Python code matches robot ids in full with `is_robot_id`.
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+_ROBOT_ID = re.compile(ROBOT_ID_PATTERN)
+# The broker users of the service side (broker-config): no robot may log in as one of them.
+SERVICE_USERS = ("reconciler", "viewer")
+
+
+def is_robot_id(text: str) -> bool:
+    return _ROBOT_ID.fullmatch(text) is not None
+
+
+def reserved_robot_id(text: str) -> str | None:
+    """The service user a robot id would collide with (in any letter case), else None."""
+    for user in SERVICE_USERS:
+        if text.lower() == user:
+            return user
+    return None
+
 
 JsonScalar = bool | int | float | str
 JsonObject = dict[str, Any]
 
 
 class Strict(BaseModel):
-    """Every document type forbids unknown fields: a typo must never pass silently."""
+    """Every document type forbids unknown fields (a typo must never pass silently) and takes
+    values only of their own type: `suspended: "yes"`, `minimum: true` or `speed: "0.2"` are
+    mistakes, not conversions."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 # ---------------------------------------------------------------- settings

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from typing import Any
 
 from configurator.composition import (
@@ -18,14 +17,13 @@ from configurator.repository import Entry, Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
 from configurator.types import (
-    ROBOT_ID_PATTERN,
     CapabilityConfiguration,
     JsonScalar,
     ScenarioConfiguration,
     SettingDefinition,
+    is_robot_id,
+    reserved_robot_id,
 )
-
-ROBOT_ID = re.compile(ROBOT_ID_PATTERN)
 
 
 def check_capability(
@@ -332,13 +330,22 @@ def check_fleet(repo: Repository, report: Reporter) -> None:
     if fleet is None:
         return
     for robot_id, assignment in fleet.model.robots.items():
-        if not ROBOT_ID.match(robot_id):
+        if not is_robot_id(robot_id):
             report.error(
                 fleet,
                 ["robots", robot_id],
                 "RC501",
-                f"robot id '{robot_id}' is not usable as an MQTT topic level: use 1-64 "
+                f"robot id {robot_id!r} is not usable as an MQTT topic level: use 1-64 "
                 "letters, digits, '_', '.', '-', starting with a letter or digit",
+                key=True,
+            )
+        elif (user := reserved_robot_id(robot_id)) is not None:
+            report.error(
+                fleet,
+                ["robots", robot_id],
+                "RC501",
+                f"robot id {robot_id!r} is reserved: '{user}' is the broker user of the "
+                "service side, and a robot logs in as its id; choose another id",
                 key=True,
             )
         if assignment.scenario not in repo.scenarios and not repo.is_broken(

@@ -248,3 +248,18 @@ def test_an_agent_yaml_that_is_no_file_is_refused(tmp_path: Path, target: str) -
     with pytest.raises(ConfigInvalid) as caught:
         load_config(path)
     assert "not a regular file" in str(caught.value.errors[0])
+
+
+@pytest.mark.parametrize(
+    ("line", "field"),
+    [
+        ('stop_timeout: "10"', "stop_timeout"),
+        ("stop_timeout: true", "stop_timeout"),
+        ('keepalive: "30"', "keepalive"),
+        ('tls: {insecure: "yes"}', "tls.insecure"),
+    ],
+)
+def test_values_have_their_own_type(tmp_path: Path, line: str, field: str) -> None:
+    text = GOOD.replace("stop_timeout: 10\n", "") + line + "\n"
+    found = problems(tmp_path, text)
+    assert len(found) == 1 and field in found[0], found
