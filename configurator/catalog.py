@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from configurator.repository import Repository
+from configurator.textsafe import printable_lines
 
 
 def catalogue_summary(repo: Repository) -> dict[str, Any]:
@@ -71,4 +72,4 @@ def format_catalogue(summary: dict[str, Any]) -> str:
             f"  {name} ({e['type']}): locations {', '.join(e['locations']) or '-'}; "
             f"knowledge sets {', '.join(e['knowledge_sets']) or '-'}"
         )
-    return "\n".join(out) + "\n"
+    return printable_lines(out)

@@ -8,6 +8,8 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from enum import Enum
 
+from configurator.textsafe import printable
+
 
 class Severity(str, Enum):
     ERROR = "error"
@@ -26,8 +28,10 @@ class Diagnostic:
     message: str
 
     def __str__(self) -> str:
+        # Names and values come from the files: escaped, so that none can forge a line.
         return (
-            f"{self.path}:{self.line}:{self.col}: {self.severity.value} {self.code} {self.message}"
+            f"{printable(self.path)}:{self.line}:{self.col}: {self.severity.value} {self.code} "
+            f"{printable(self.message)}"
         )
 
     @property
@@ -67,7 +71,7 @@ def format_json(diagnostics: list[Diagnostic]) -> str:
 
 
 def _github_escape(value: str, *, prop: bool = False) -> str:
-    value = value.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+    value = printable(value).replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
     if prop:
         value = value.replace(":", "%3A").replace(",", "%2C")
     return value

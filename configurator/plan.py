@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from configurator.render import FleetRender
+from configurator.textsafe import markdown_code, markdown_text, printable_lines
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
 
@@ -107,7 +108,7 @@ def format_plan_text(plan: Plan) -> str:
             if c.kind == "held":
                 detail += " (suspended: left as it is)"
         lines.append(f"  {_SIGN[c.kind]} {c.robot_id}  {detail}")
-    return "\n".join(lines) + "\n"
+    return printable_lines(lines)
 
 
 def format_plan_markdown(plan: Plan) -> str:
@@ -123,15 +124,15 @@ def format_plan_markdown(plan: Plan) -> str:
     lines += ["| robot | change | scenario | changed fields |", "| --- | --- | --- | --- |"]
     for c in plan.changes:
         scenario = (
-            f"{c.scenario_before} → {c.scenario_after}"
+            f"{markdown_text(c.scenario_before)} → {markdown_text(c.scenario_after)}"
             if c.scenario_before and c.scenario_after and c.scenario_before != c.scenario_after
-            else (c.scenario_after or c.scenario_before or "")
+            else markdown_text(c.scenario_after or c.scenario_before or "")
         )
-        fields = "<br>".join(f"`{f}`" for f in c.fields[:20])
+        fields = "<br>".join(markdown_code(f) for f in c.fields[:20])
         if len(c.fields) > 20:
             fields += f"<br>… {len(c.fields) - 20} more"
         kind = "held (suspended)" if c.kind == "held" else c.kind
-        lines.append(f"| `{c.robot_id}` | {kind} | {scenario} | {fields} |")
+        lines.append(f"| {markdown_code(c.robot_id)} | {kind} | {scenario} | {fields} |")
     return "\n".join(lines) + "\n"
 
 

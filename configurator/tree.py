@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from configurator.composition import implementation_for, missing_requires, why_unavailable
 from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
+from configurator.textsafe import printable_lines
 
 
 @dataclass
@@ -141,4 +142,4 @@ def format_tree(tree: CapabilityTree) -> str:
                 prefix = gp + ("   " if last_alt else "│  ")
             for i, node in enumerate(actions):
                 lines.extend(_action_lines(node, prefix, i == len(actions) - 1))
-    return "\n".join(lines) + "\n"
+    return printable_lines(lines)

@@ -5,6 +5,7 @@ Pure pydantic; shared by the agent, the reconciler and `robotconf status`.
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 from enum import Enum
@@ -89,24 +90,34 @@ class BrokerAddress:
         return f"{'mqtts' if self.tls else 'mqtt'}://{self.host}:{self.port}"
 
 
+_USERINFO = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*://)[^/?#]*@")
+
+
+def redact_url(url: str) -> str:
+    """The URL without its user name and password: what logs, messages and statuses show.
+    Textual, so that even a URL too broken to parse never echoes a secret."""
+    return _USERINFO.sub(r"\1", url)
+
+
 def parse_broker_url(url: str) -> BrokerAddress:
     """`mqtt://host[:port]` or `mqtts://host[:port]` (TLS); credentials in the URL allowed."""
+    shown = redact_url(url)
     try:
         parts = urlsplit(url)
         port = parts.port
     except ValueError as exc:
         raise ValueError(
-            f"broker URL {url!r} is not valid ({exc}); e.g. mqtt://127.0.0.1:1883"
-        ) from exc
+            f"broker URL {shown!r} is not valid ({exc}); e.g. mqtt://127.0.0.1:1883"
+        ) from None
     if parts.scheme not in ("mqtt", "mqtts"):
         raise ValueError(
-            f"broker URL {url!r} must start with mqtt:// or mqtts:// (TLS), "
+            f"broker URL {shown!r} must start with mqtt:// or mqtts:// (TLS), "
             "e.g. mqtt://127.0.0.1:1883"
         )
     if not parts.hostname:
-        raise ValueError(f"broker URL {url!r} has no host; e.g. mqtt://127.0.0.1:1883")
+        raise ValueError(f"broker URL {shown!r} has no host; e.g. mqtt://127.0.0.1:1883")
     if parts.path not in ("", "/") or parts.query or parts.fragment:
-        raise ValueError(f"broker URL {url!r} must be only scheme://host:port")
+        raise ValueError(f"broker URL {shown!r} must be only scheme://host:port")
     tls = parts.scheme == "mqtts"
     return BrokerAddress(
         host=parts.hostname,

@@ -13,9 +13,9 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
-from urllib.parse import urlsplit, urlunsplit
 
 from configurator.source import SourceError
+from configurator.wire import redact_url
 
 log = logging.getLogger("robotconf.reconciler")
 
@@ -149,12 +149,7 @@ class LocalBranch:
 
 def redact(url: str) -> str:
     """The URL without user name or password, for logs and the retained status."""
-    parts = urlsplit(url)
-    if parts.username is None and parts.password is None:
-        return url
-    host = parts.hostname or ""
-    netloc = f"{host}:{parts.port}" if parts.port else host
-    return urlunsplit(parts._replace(netloc=netloc))
+    return redact_url(url)
 
 
 def default_cache_dir() -> Path:

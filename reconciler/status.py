@@ -6,7 +6,6 @@ Formatting for people (a table, worst first) and for machines (JSON) lives here 
 from __future__ import annotations
 
 import enum
-import re
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -17,6 +16,7 @@ from pydantic import ValidationError
 from configurator.launch import LaunchRequest, StopRequest
 from configurator.render import FleetRender
 from configurator.safejson import PayloadError
+from configurator.textsafe import printable
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
 from reconciler.retained import read_object
 
@@ -303,14 +303,10 @@ class FleetStatus:
 
 # ------------------------------------------------------------------ text
 
-# C0 and C1 controls but the tab, and the Unicode line breaks: what a robot publishes must
-# not move the cursor, clear the screen or forge a line of this report.
-_CONTROLS = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029]")
-
 
 def clean(text: str) -> str:
     """Text from the broker, safe to print: control characters escaped."""
-    return _CONTROLS.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
+    return printable(text)
 
 
 def short_digest(digest: str | None) -> str:

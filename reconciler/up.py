@@ -25,7 +25,7 @@ from configurator.mqtt import Connection
 from configurator.render import FleetRender
 from configurator.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from configurator.source import SourceError
-from configurator.wire import Topics
+from configurator.wire import Topics, redact_url
 from reconciler.commands import UsageError, connection_from, make_signer, open_view
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
@@ -228,7 +228,7 @@ def run_up(args: argparse.Namespace) -> int:
     broker: Any = None
     if args.broker:
         url = args.broker
-        say(f"broker: {url} (given)")
+        say(f"broker: {redact_url(url)} (given)")
     else:
         from reconciler.broker import BrokerStartError, EmbeddedBroker
 
@@ -277,13 +277,14 @@ def run_up(args: argparse.Namespace) -> int:
         f"reconciling {plan.root} branch '{plan.branch}' (head {plan.head[:12]}), "
         f"{len(plan.fleet.requests)} robot(s); agent files and logs in {plan.workdir}"
     )
+    shown = redact_url(url)  # a password in the URL stays out of the terminal
     header = [
-        f"robotconf up: broker {url}, branch '{plan.branch}' of {plan.root}",
-        f"  another terminal: robotconf status --broker {url}    Ctrl-C stops everything",
+        f"robotconf up: broker {shown}, branch '{plan.branch}' of {plan.root}",
+        f"  another terminal: robotconf status --broker {shown}    Ctrl-C stops everything",
         *[f"  note: {n}" for n in plan.notes],
         "",
     ]
-    say(f"another terminal: robotconf status --broker {url}   Ctrl-C stops everything")
+    say(f"another terminal: robotconf status --broker {shown}   Ctrl-C stops everything")
     thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
     thread.start()
     view.start()

@@ -17,6 +17,7 @@ from configurator.diagnostics import (
 )
 from configurator.plan import format_plan_markdown, format_plan_text, make_plan, plan_as_json
 from configurator.render import FleetRender, RenderError, render_fleet, render_robot
+from configurator.textsafe import json_printable
 from configurator.tree import build_tree, format_tree
 from configurator.workspace import Checked, check
 
@@ -87,7 +88,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     except RenderError as exc:
         print(f"robotconf: {exc}", file=sys.stderr)
         return EXIT_FINDINGS
-    print(json.dumps(request.wire(), indent=2, sort_keys=True, ensure_ascii=False))
+    print(json_printable(json.dumps(request.wire(), indent=2, sort_keys=True, ensure_ascii=False)))
     return EXIT_OK
 
 
