@@ -127,7 +127,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--secrets", type=Path, default=None, help="password files (default: OUT/secrets)"
     )
-    p.add_argument("--port", type=int, default=8883, help="listener port (default: %(default)s)")
+    p.add_argument(
+        "--port", type=int, default=8883, help="robots' listener port (default: %(default)s)"
+    )
+    p.add_argument(
+        "--service-port",
+        type=int,
+        default=None,
+        help="listener port of the reconciler and viewers (default: --port + 1)",
+    )
     p.add_argument("--bind", default=None, help="listener address (default: all)")
     p.add_argument("--certfile", type=Path, default=None, help="server certificate (TLS)")
     p.add_argument("--keyfile", type=Path, default=None, help="server key (TLS)")

@@ -76,7 +76,7 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
         )
         return EXIT_FINDINGS
     out: Path = args.out
-    acl_file, conf_file, passwd_file = out / "acl", out / "mosquitto.conf", out / "passwd"
+    acl_file, conf_file = out / "acl", out / "mosquitto.conf"
     listener = Listener(
         port=args.port,
         bind=args.bind,
@@ -85,23 +85,25 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
         cafile=args.cafile.resolve() if args.cafile else None,
         require_certificate=args.require_certificate,
     )
+    service_port = args.service_port or args.port + 1
     acl = render_acl(prefix, robots, users)
     # The broker host may keep the files elsewhere than where they are written now.
-    installed = args.install_dir or out.resolve()
-    conf = render_conf(listener, installed / "passwd", installed / "acl")
-    wanted_users = set(robots) | users.names()
+    conf = render_conf(listener, service_port, args.install_dir or out.resolve())
+    # Robots and services in separate files: each listener knows only its own users.
+    passwd = {out / "passwd": set(robots), out / "passwd-services": users.names()}
 
     if args.check:
         stale = []
         if not acl_file.is_file() or acl_file.read_text(encoding="utf-8") != acl:
             stale.append(f"{acl_file} differs from the fleet")
-        have = _passwd_users(passwd_file)
-        if have != wanted_users:
-            missing, extra = sorted(wanted_users - have), sorted(have - wanted_users)
-            stale.append(
-                f"{passwd_file}: missing {', '.join(missing) or '-'}; "
-                f"extra {', '.join(extra) or '-'}"
-            )
+        for passwd_file, wanted in passwd.items():
+            have = _passwd_users(passwd_file)
+            if have != wanted:
+                missing, extra = sorted(wanted - have), sorted(have - wanted)
+                stale.append(
+                    f"{passwd_file}: missing {', '.join(missing) or '-'}; "
+                    f"extra {', '.join(extra) or '-'}"
+                )
         for line in stale:
             print(f"robotconf: {line}", file=sys.stderr)
         if stale:
@@ -121,20 +123,30 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
     secrets_dir.mkdir(parents=True, exist_ok=True)
     os.chmod(secrets_dir, 0o700)
     out.mkdir(parents=True, exist_ok=True)
-    # Plain entries go to a 0600 file that mosquitto_passwd hashes in place: no password ever
-    # appears on a command line or in a log.
-    plain = "".join(f"{u}:{_password_for(secrets_dir, u)}\n" for u in sorted(wanted_users))
-    staging = out / ".passwd.staging"
+    for passwd_file, wanted in passwd.items():
+        problem = _write_passwd(tool, passwd_file, wanted, secrets_dir)
+        if problem is not None:
+            print(f"robotconf: {problem}", file=sys.stderr)
+            return EXIT_TOOL
+    acl_file.write_text(acl, encoding="utf-8")
+    conf_file.write_text(conf, encoding="utf-8")
+    count = len(robots) + len(users.names())
+    print(f"wrote {conf_file}, {acl_file}, {', '.join(str(p) for p in passwd)} ({count} users)")
+    print(f"robots connect on port {args.port}, the reconciler and viewers on {service_port}")
+    print(f"passwords: {secrets_dir}/<user>.password (0600); give each robot its own file")
+    print("the broker reads passwd and acl: make them readable by its user (chown mosquitto)")
+    return EXIT_OK
+
+
+def _write_passwd(tool: str, passwd_file: Path, users: set[str], secrets_dir: Path) -> str | None:
+    """Plain entries go to a 0600 file that mosquitto_passwd hashes in place: no password ever
+    appears on a command line or in a log. None when written, else why not."""
+    plain = "".join(f"{u}:{_password_for(secrets_dir, u)}\n" for u in sorted(users))
+    staging = passwd_file.with_name(f".{passwd_file.name}.staging")
     write_atomic(staging, plain.encode("utf-8"), 0o600)
     done = subprocess.run([tool, "-U", str(staging)], capture_output=True, text=True)
     if done.returncode != 0:
         staging.unlink(missing_ok=True)
-        print(f"robotconf: mosquitto_passwd failed: {done.stderr.strip()}", file=sys.stderr)
-        return EXIT_TOOL
+        return f"mosquitto_passwd failed: {done.stderr.strip()}"
     os.replace(staging, passwd_file)
-    acl_file.write_text(acl, encoding="utf-8")
-    conf_file.write_text(conf, encoding="utf-8")
-    print(f"wrote {conf_file}, {acl_file}, {passwd_file} ({len(wanted_users)} users)")
-    print(f"passwords: {secrets_dir}/<user>.password (0600); give each robot its own file")
-    print("the broker reads passwd and acl: make them readable by its user (chown mosquitto)")
-    return EXIT_OK
+    return None

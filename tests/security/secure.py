@@ -8,8 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from configurator.mqtt import Connection
+from configurator.types import SERVICE_USERS
 from tests.lab import ROBOTCONF
-from tests.mosquitto import Mosquitto
+from tests.mosquitto import Mosquitto, free_port
 from tests.tlsutil import Pki, make_pki
 
 
@@ -19,13 +20,15 @@ class SecuredMosquitto(Mosquitto):
     def __init__(self, workdir: Path, generated: Path) -> None:
         super().__init__(workdir)
         self.generated = generated
+        self.service_port = free_port()  # the reconciler's and viewers' listener
 
     def _write_config(self) -> Path:
         conf = self.workdir / "mosquitto.conf"
         lines = []
+        ports = iter([self.port, self.service_port])
         for line in self.generated.read_text(encoding="utf-8").splitlines():
             if line.startswith("listener "):
-                line = f"listener {self.port} {self.host}"
+                line = f"listener {next(ports)} {self.host}"
             lines.append(line)
         # Started as root, Mosquitto would drop to the `mosquitto` user, which cannot read the
         # test's 0600 files; a real deployment chowns them to that user instead.
@@ -42,14 +45,25 @@ class Secured:
 
     @property
     def url(self) -> str:
+        """Where robots connect."""
         return f"mqtts://127.0.0.1:{self.server.port}"
+
+    @property
+    def service_url(self) -> str:
+        """Where the reconciler and viewers connect."""
+        return f"mqtts://127.0.0.1:{self.server.service_port}"
+
+    def url_for(self, user: str | None) -> str:
+        return self.service_url if user in SERVICE_USERS else self.url
 
     def secret(self, user: str) -> Path:
         return self.out / "secrets" / f"{user}.password"
 
-    def connection(self, user: str | None, *, password_file: Path | None = None) -> Connection:
+    def connection(
+        self, user: str | None, *, password_file: Path | None = None, url: str | None = None
+    ) -> Connection:
         return Connection(
-            url=self.url,
+            url=url or self.url_for(user),
             username=user,
             password_file=password_file or (self.secret(user) if user else None),
             ca_file=self.pki.ca_cert,
@@ -58,7 +72,7 @@ class Secured:
     def cli_args(self, user: str) -> list[str]:
         """`--broker ... --username ... --password-file ... --ca-file ...` for robotconf."""
         return [
-            "--broker", self.url,
+            "--broker", self.url_for(user),
             "--username", user,
             "--password-file", str(self.secret(user)),
             "--ca-file", str(self.pki.ca_cert),

@@ -165,13 +165,13 @@ def test_viewer_cannot_publish_a_launch_request(broker: Secured) -> None:
 
 def test_unverifiable_server_is_refused_unless_told_otherwise(broker: Secured) -> None:
     untrusted = Connection(
-        url=f"mqtts://127.0.0.1:{broker.server.port}",
+        url=broker.service_url,
         username="viewer",
         password_file=broker.secret("viewer"),
     )
     client = make_client(untrusted, "viewer-untrusted")
     with pytest.raises(OSError, match=r"CERTIFICATE_VERIFY_FAILED|certificate verify failed"):
-        client.connect("127.0.0.1", broker.server.port)
+        client.connect("127.0.0.1", broker.server.service_port)
     insecure = Connection(
         url=untrusted.url, username="viewer", password_file=broker.secret("viewer"), insecure=True
     )
@@ -219,3 +219,55 @@ def test_broker_config_check_notices_a_new_robot(tmp_path: Path) -> None:
     assert (out / "secrets" / "tb3-01.password").read_text() == before
     assert (out / "secrets" / "tb3-99.password").is_file()
     assert "tb3-99:$7$" in (out / "passwd").read_text()
+
+
+def test_a_robot_cannot_take_another_robots_session(broker: Secured) -> None:
+    """Connecting with robot B's client id under robot A's credentials must neither knock B
+    off nor set off B's Last Will (issue 10, item 8): the robots' listener makes every client
+    id its user name."""
+    b = make_client(broker.connection("tb3-02"), "robotconf-agent-tb3-02")
+    b_status = "robotconf/robots/tb3-02/status"
+    b.will_set(b_status, b'{"state": "offline"}', qos=1, retain=True)
+    dropped = threading.Event()
+    b.on_disconnect = lambda *args: dropped.set()
+    up = threading.Event()
+    b.on_connect = lambda *args: up.set()
+    b.connect("127.0.0.1", broker.server.port)
+    b.loop_start()
+    watcher = connect(broker.connection("viewer"), "viewer-watching")
+    try:
+        assert up.wait(WAIT)
+        b.publish(b_status, b'{"state": "running"}', qos=1, retain=True).wait_for_publish(WAIT)
+        watcher.client.subscribe(b_status, qos=1)
+        for stolen in ("robotconf-agent-tb3-02", "tb3-02"):
+            a = connect(broker.connection("tb3-01"), stolen)
+            assert a.reason == "Success"  # it connects, as itself
+            a.close()
+        time.sleep(1.0)  # what a takeover would have done by now: nothing may happen
+        assert not dropped.is_set()
+        assert all(b"offline" not in payload for _, payload in watcher.messages)
+    finally:
+        watcher.close()
+        b.disconnect()
+        b.loop_stop()
+
+
+def test_robots_have_no_credentials_on_the_service_listener(broker: Secured) -> None:
+    robot = connect(broker.connection("tb3-01", url=broker.service_url), "tb3-01")
+    try:
+        assert robot.reason != "Success"
+    finally:
+        robot.close()
+    # The reconciler holds several connections, and viewers may be many: none knocks another off.
+    sessions = [
+        connect(broker.connection(user), f"robotconf-{user}-{n}")
+        for user in ("reconciler", "viewer")
+        for n in range(2)
+    ]
+    try:
+        assert [s.reason for s in sessions] == ["Success"] * 4
+        time.sleep(0.5)
+        assert all(s.client.is_connected() for s in sessions)
+    finally:
+        for session in sessions:
+            session.close()
