@@ -155,11 +155,25 @@ def _position_of_byte(raw: bytes, offset: int) -> tuple[int, int]:
     return line, col
 
 
+# Longest first: UTF-32's little-endian mark begins with UTF-16's.
+_OTHER_BOMS = (
+    (codecs.BOM_UTF32_LE, "UTF-32"),
+    (codecs.BOM_UTF32_BE, "UTF-32"),
+    (codecs.BOM_UTF16_LE, "UTF-16"),
+    (codecs.BOM_UTF16_BE, "UTF-16"),
+)
+
+
 def decode(raw: bytes) -> str:
     """UTF-8 text or a located RC001; a leading BOM is accepted and dropped."""
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
+        for bom, encoding in _OTHER_BOMS:
+            if raw.startswith(bom):
+                raise YamlReadError(
+                    [YamlProblem(1, 1, "RC001", f"file is {encoding}; save it as UTF-8")]
+                ) from None
         line, col = _position_of_byte(raw, exc.start)
         raise YamlReadError(
             [

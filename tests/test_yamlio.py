@@ -352,3 +352,10 @@ def test_line_breaks_only_yaml_sees_are_refused_on_the_real_line(br: str, name: 
 
 def test_an_error_at_the_end_of_an_unterminated_last_line_is_on_that_line() -> None:
     assert _problems(b"a: 1\nb: [") == [(2, 5, "RC003")]
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-32"])
+def test_a_file_in_another_unicode_encoding_says_which(encoding: str) -> None:
+    (problem,) = _refused("a: 1\n".encode(encoding))
+    assert (problem.line, problem.col, problem.code) == (1, 1, "RC001")
+    assert problem.message == f"file is {encoding.upper()}; save it as UTF-8"
