@@ -49,23 +49,11 @@ class LaunchScenario(_Wire):
     goals: list[LaunchGoal]
 
 
-class LaunchRequest(_Wire):
-    """One robot's complete start-up configuration."""
+class _Published(_Wire):
+    """What the reconciler publishes on a launch topic, signed or not."""
 
-    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
-    kind: Literal["LaunchRequest"] = "LaunchRequest"
-    robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
-    robot_name: str
-    revision: str = Field(description="the git commit it was rendered from")
-    digest: str = Field(pattern=DIGEST_PATTERN, description="sha256 of the content")
-    scenario: LaunchScenario
-    # Set when the reconciler signs the request (configurator/signing.py).
     issued_at: float | None = Field(None, description="unix time the request was signed")
     signature: str | None = Field(None, description="base64 Ed25519 over the signed fields")
-
-    def content(self) -> dict[str, Any]:
-        """What the digest covers: everything but revision, digest and the signature fields."""
-        return self.model_dump(mode="json", exclude=_NOT_CONTENT)
 
     def wire(self, *, signature: bool = True) -> dict[str, Any]:
         """The JSON object published (signing fields only when set)."""
@@ -78,11 +66,28 @@ class LaunchRequest(_Wire):
         """The canonical bytes published on the launch topic."""
         return canonical_json(self.wire())
 
+
+class LaunchRequest(_Published):
+    """One robot's complete start-up configuration."""
+
+    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
+    kind: Literal["LaunchRequest"] = "LaunchRequest"
+    robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
+    robot_name: str
+    revision: str = Field(description="the git commit it was rendered from")
+    digest: str = Field(pattern=DIGEST_PATTERN, description="sha256 of the content")
+    scenario: LaunchScenario
+
+    def content(self) -> dict[str, Any]:
+        """What the digest covers: everything but revision, digest and the signature fields."""
+        return self.model_dump(mode="json", exclude=_NOT_CONTENT)
+
+
     def digest_matches(self) -> bool:
         return self.digest == content_digest(self.content())
 
 
-class StopRequest(_Wire):
+class StopRequest(_Published):
     """A signed "stop": what the launch topic holds for a robot no longer assigned, when the
     reconciler signs. An empty payload cannot carry a signature, so an agent that verifies
     requests stops its brain only for one of these (DESIGN §7: empty means stop, unsigned)."""
@@ -91,18 +96,6 @@ class StopRequest(_Wire):
     kind: Literal["Stop"] = "Stop"
     robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
     revision: str = Field(description="the git commit that unassigned the robot")
-    issued_at: float | None = Field(None, description="unix time the stop was signed")
-    signature: str | None = Field(None, description="base64 Ed25519 over the signed fields")
-
-    def wire(self, *, signature: bool = True) -> dict[str, Any]:
-        """The JSON object published (signing fields only when set)."""
-        unset = {k for k in ("issued_at", "signature") if getattr(self, k) is None}
-        if not signature:
-            unset.add("signature")
-        return self.model_dump(mode="json", exclude=unset)
-
-    def payload(self) -> bytes:
-        return canonical_json(self.wire())
 
 
 def canonical_json(value: Any) -> bytes:

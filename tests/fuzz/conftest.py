@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, settings
 
 settings.register_profile(
     "ci",
-    max_examples=150,
+    max_examples=300,
     deadline=None,  # a slow example is not a failure: CI machines are shared
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
