@@ -205,3 +205,28 @@ def test_a_replayed_older_request_is_rejected(secure: SecureFleet) -> None:
     secure.send(robot_id, old)
     secure.wait_rejected(robot_id, "replayed request")
     _brain_untouched(secure, robot_id, now)
+
+
+def test_only_a_signed_stop_stops_a_brain(secure: SecureFleet) -> None:
+    """An empty retained payload, which anyone allowed on the topic can publish, stops nothing
+    when signing is on; the reconciler's signed Stop does (issue 10, item 3)."""
+    robot_id = "tb3-03"
+    before = secure.wait_running(secure.lab.requests())[robot_id]
+    genuine = secure.launch(robot_id)
+    secure.send(robot_id, b"")
+    secure.wait_rejected(robot_id, "unsigned stop refused")
+    _brain_untouched(secure, robot_id, before)
+    secure.send(robot_id, genuine)
+    wait_for(
+        lambda: (s := secure.status(robot_id)) and s.state is AgentState.RUNNING,
+        f"{robot_id} running again",
+    )
+    # The reconciler unassigns the robot: its signed Stop is obeyed.
+    secure.lab.replace("configs/fleet.yaml", "  tb3-03: {", "  # tb3-03: {")
+    secure.lab.commit("tb3-03 leaves the fleet")
+    wait_for(
+        lambda: (s := secure.status(robot_id)) and s.state is AgentState.IDLE,
+        f"{robot_id} idle after the signed stop",
+    )
+    assert before.pid is not None and not pid_alive(before.pid)
+    assert json.loads(secure.launch(robot_id))["kind"] == "Stop"
