@@ -1,7 +1,7 @@
 """Strict YAML reading that remembers where every key and value came from.
 
-Refuses what would hide a mistake or exhaust memory: duplicate keys, aliases (alias bombs),
-tabs in indentation, several documents, non-UTF-8 bytes, oversized files.
+Refuses what would hide a mistake or exhaust the process: duplicate keys, aliases, tabs in
+indentation, several documents, non-UTF-8 bytes, odd line breaks, oversized or deep files.
 """
 
 from __future__ import annotations
@@ -9,8 +9,10 @@ from __future__ import annotations
 import codecs
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
+from itertools import islice
 from typing import Any
 
 import yaml
@@ -21,25 +23,54 @@ try:  # the C parser is several times faster; fall back where libyaml is missing
     from yaml import CSafeLoader as _Loader
 except ImportError:  # pragma: no cover - depends on the PyYAML build
     from yaml import SafeLoader as _Loader  # type: ignore[assignment]
+_LIBYAML = _Loader.__name__.startswith("C")
 
 MAX_FILE_BYTES = 8 * 1024 * 1024
+# Composed and built, a YAML node takes some hundreds of bytes and a few microseconds: at
+# most about 150 MB and 1.5 s a file. A 10,000-robot fleet.yaml is some 70,000 events.
+MAX_EVENTS = 200_000
+# A file's problems past this many are not listed (a file of tabs, or of one duplicate key,
+# would list every line).
+MAX_PROBLEMS = 100
 MAX_DEPTH = 64
+_TOO_DEEP = f"nested deeper than {MAX_DEPTH} levels"
+_DEPTH_STEP: dict[type[yaml.Event], int] = {
+    yaml.MappingStartEvent: 1,
+    yaml.SequenceStartEvent: 1,
+    yaml.MappingEndEvent: -1,
+    yaml.SequenceEndEvent: -1,
+}
+# libyaml's composer takes some 320 bytes of C stack a level (8 MiB overflow at ~25,000):
+# a text with at most _SAFE_BRACKETS opening brackets and no run of indentation and block
+# indicators as long as _LONG_LEAD nests under 1,000 levels, safe on any thread.
+_SAFE_BRACKETS = 500
 # JSON readers differ beyond 64-bit integers; longer digit strings are refused before any
 # conversion (Python refuses over 4,300 digits, and base 60 is quadratic).
 MAX_INT = 2**63 - 1
 _MAX_NUMBER_CHARS = 100
-_NOT_BRACKET = re.compile(r"[^\[\]{}]+")
+_NON_FINITE = re.compile(r"[-+]?\.(?:inf|Inf|INF|nan|NaN|NAN)")
 # What opens block collections at the start of a line: indentation and the indicators - ? :
-_BLOCK_LEAD = re.compile(r"^[ ?:-]*", re.MULTILINE)
+# (a run of 247 nests at most 2 * 247 + 3 levels, with _SAFE_BRACKETS under 1,000).
+_LONG_LEAD = re.compile(r"^[ ?:-]{248,}", re.MULTILINE)
+_TAB_INDENT = re.compile(r"^ *\t", re.MULTILINE)
 # YAML 1.1 breaks lines here too, editors and git do not: a reported line would be wrong.
-_ODD_BREAKS = re.compile("\r(?!\n)|[\x85\u2028\u2029]")
-_BREAK_NAMES = {
-    "\r": "a carriage return not followed by a line feed (old Mac line end)",
-    "\x85": "NEXT LINE (U+0085)",
-    "\u2028": "LINE SEPARATOR (U+2028)",
-    "\u2029": "PARAGRAPH SEPARATOR (U+2029)",
+# A byte order mark past the start (files joined together) is invisible, and YAML takes it
+# for the start of a stream.
+_ODD_CHARS = re.compile("\r(?!\n)|[\x85\u2028\u2029\ufeff]")
+_BREAKS_LINES = (
+    " breaks the line for YAML but not for editors or git; end lines with a line feed (\\n), "
+    "or write the character as an escape in a double-quoted string"
+)
+_ODD_CHAR_MESSAGES = {
+    "\r": "a carriage return not followed by a line feed (old Mac line end)" + _BREAKS_LINES,
+    "\x85": "NEXT LINE (U+0085)" + _BREAKS_LINES,
+    "\u2028": "LINE SEPARATOR (U+2028)" + _BREAKS_LINES,
+    "\u2029": "PARAGRAPH SEPARATOR (U+2029)" + _BREAKS_LINES,
+    "\ufeff": "byte order mark (U+FEFF) inside the file, an invisible character (files joined "
+    "together?); remove it, or write \\ufeff in a double-quoted string",
 }
 
+_STANDARD = "tag:yaml.org,2002:"
 _STR = "tag:yaml.org,2002:str"
 _INT = "tag:yaml.org,2002:int"
 _FLOAT = "tag:yaml.org,2002:float"
@@ -49,6 +80,7 @@ _TIMESTAMP = "tag:yaml.org,2002:timestamp"
 _MERGE = "tag:yaml.org,2002:merge"
 _MAP = "tag:yaml.org,2002:map"
 _SEQ = "tag:yaml.org,2002:seq"
+_KNOWN_TAGS = {_STR, _INT, _FLOAT, _BOOL, _NULL, _TIMESTAMP, _MAP, _SEQ}
 
 _scalars = SafeConstructor()
 
@@ -188,40 +220,30 @@ def decode(raw: bytes) -> str:
     return text[1:] if text.startswith("\ufeff") else text
 
 
-def _tab_indents(text: str) -> list[YamlProblem]:
-    problems = []
-    for number, line in enumerate(text.split("\n"), start=1):
-        body = line.lstrip(" ")
-        if body.startswith("\t"):
-            problems.append(
-                YamlProblem(
-                    number,
-                    len(line) - len(body) + 1,
-                    "RC002",
-                    "tab character in indentation; YAML indents with spaces only",
-                )
-            )
-    return problems
+def _tab_indents(text: str) -> Iterator[YamlProblem]:
+    line, counted = 1, 0
+    for match in _TAB_INDENT.finditer(text):
+        tab = match.end() - 1
+        line += text.count("\n", counted, tab)
+        counted = tab
+        yield YamlProblem(
+            line,
+            tab - match.start() + 1,
+            "RC002",
+            "tab character in indentation; YAML indents with spaces only",
+        )
 
 
-def _refuse_odd_line_breaks(text: str) -> None:
-    """RC003 for line breaks only YAML sees: after one, YAML's line numbers and everyone
-    else's would differ, so no position reported past it could be trusted."""
+def _refuse_odd_characters(text: str) -> None:
+    """RC003 for line breaks only YAML sees (after one, YAML's line numbers and everyone
+    else's would differ, so no position reported past it could be trusted) and for a byte
+    order mark past the start."""
     problems = []
-    for match in _ODD_BREAKS.finditer(text):
+    for match in _ODD_CHARS.finditer(text):
         offset = match.start()
         line = text.count("\n", 0, offset) + 1
         col = offset - (text.rfind("\n", 0, offset) + 1) + 1
-        problems.append(
-            YamlProblem(
-                line,
-                col,
-                "RC003",
-                f"{_BREAK_NAMES[match.group()]} breaks the line for YAML but not for editors "
-                "or git; end lines with a line feed (\\n), or write the character as an "
-                "escape in a double-quoted string",
-            )
-        )
+        problems.append(YamlProblem(line, col, "RC003", _ODD_CHAR_MESSAGES[match.group()]))
         if len(problems) == 10:
             break
     if problems:
@@ -232,7 +254,7 @@ def _reader_problem(text: str, exc: yaml.reader.ReaderError) -> YamlProblem:
     """A character YAML refuses (control characters): located, in one line."""
     raw = text.encode("utf-8")
     offset = exc.position
-    if not _Loader.__name__.startswith("C"):  # libyaml counts bytes, pure Python characters
+    if not _LIBYAML:  # libyaml counts bytes, pure Python characters
         offset = len(text[:offset].encode("utf-8"))
     line, col = _position_of_byte(raw, offset)
     char = exc.character if isinstance(exc.character, int) else ord(exc.character)
@@ -244,65 +266,107 @@ def _reader_problem(text: str, exc: yaml.reader.ReaderError) -> YamlProblem:
     )
 
 
-def _flow_depth_bound(text: str) -> int:
-    """An upper bound of flow ([...], {...}) nesting: brackets inside quotes count too.
+def _may_nest_deep(text: str) -> bool:
+    """Whether the text could nest beyond some 1,000 levels, where libyaml's composer nears
+    the end of a small thread's stack.
 
-    Block nesting needs indentation, so within MAX_FILE_BYTES it stays far below what the C
-    composer survives; only flow nesting can run away."""
-    depth = peak = 0
-    for bracket in "".join(_NOT_BRACKET.split(text)):
-        if bracket in "[{":
-            depth += 1
-            peak = max(peak, depth)
-        elif depth:
-            depth -= 1
-    return peak
+    Flow nesting is at most the count of opening brackets, quoted or not (closing ones cannot
+    lower it: one in a quoted string or a comment closes nothing). A block collection starts
+    at or before the end of its line's run of indentation and indicators, and each column
+    holds at most a mapping and a sequence: a run of n characters nests 2n + 3 levels."""
+    if text.count("[") + text.count("{") > _SAFE_BRACKETS:
+        return True
+    return _LONG_LEAD.search(text) is not None
 
 
-def _block_depth_bound(text: str) -> int:
-    """An upper bound of block nesting: a block collection starts at or before the end of its
-    line's run of indentation and indicators, and each column holds at most a mapping and a
-    sequence (`key:` then `- item` at the same indentation)."""
-    lead = max((len(m) for m in _BLOCK_LEAD.findall(text)), default=0)
-    return 2 * (lead + 1) + 1
+def _compose_within_bounds(text: str) -> Node | None:
+    """Compose only what cannot crash the process or take it over.
+
+    libyaml's composer recurses in C once per level (tens of thousands of levels, brackets or
+    `- - - ...` in a few hundred kB, overflowed the stack) and takes time quadratic in flow
+    nesting, so a text that may nest deep is composed only once its events show nesting
+    within MAX_DEPTH (the builder refuses what is deeper). Every node costs some hundreds of
+    bytes and microseconds (8 MiB of `[],` took 1.4 GB and 27 s), so a text that may hold
+    more than MAX_EVENTS is composed only once they are counted."""
+    if not _LIBYAML or _may_nest_deep(text):
+        _scan_events(text)
+    elif len(text) > MAX_EVENTS:  # each event takes at least a character
+        _count_events(text)
+    return _compose(text)
 
 
-def _refuse_runaway_nesting(text: str) -> None:
-    """RC009 before composing: libyaml's composer recurses once per level in C, so some tens of
-    thousands of nested levels (brackets, or `- - - ...` in a few hundred kB) overflow the
-    stack and crash.
-
-    Only a text that could nest deep is scanned, event by event (libyaml's parser keeps no C
-    stack per level), which is cheap next to composing; syntax errors are left to the
-    composer, which locates them."""
-    if _flow_depth_bound(text) + _block_depth_bound(text) <= MAX_DEPTH:
-        return
+def _scan_events(text: str) -> None:
+    """RC009 for nesting deeper than MAX_DEPTH, located as the builder would, and RC008 for
+    more than MAX_EVENTS, from libyaml's events (its parser keeps no C stack per level).
+    Syntax errors are left to the composer, which locates them."""
     loader = _Loader(text)
-    depth = 0
+    depth = events = 0
     try:
-        while loader.check_event():
-            event = loader.get_event()
-            if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
-                if depth > MAX_DEPTH:
-                    raise YamlReadError(
-                        [
-                            _problem(
-                                event.start_mark, "RC009", f"nested deeper than {MAX_DEPTH} levels"
-                            )
-                        ]
-                    )
-                depth += 1
-            elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-                depth -= 1
+        while (event := loader.get_event()) is not None:
+            events += 1
+            if events > MAX_EVENTS:
+                raise YamlReadError([_too_many_events()])
+            step = _DEPTH_STEP.get(type(event), 0)
+            if step > 0 and depth > MAX_DEPTH:
+                raise YamlReadError([_problem(event.start_mark, "RC009", _TOO_DEEP)])
+            depth += step
     except yaml.YAMLError:
         return
     finally:
         loader.dispose()
 
 
+def _count_events(text: str) -> None:
+    """RC008 for more than MAX_EVENTS, counted in C; syntax errors are left to the composer."""
+    loader = _Loader(text)
+    try:
+        events = loader.raw_parse()
+    except yaml.YAMLError:
+        return
+    finally:
+        loader.dispose()
+    if events > MAX_EVENTS:
+        raise YamlReadError([_too_many_events()])
+
+
+def _too_many_events() -> YamlProblem:
+    return YamlProblem(
+        1,
+        1,
+        "RC008",
+        f"file holds too much to read: over {MAX_EVENTS:,} YAML nodes (a key or a value "
+        "counts one, a list or a mapping two); split it into smaller files",
+    )
+
+
+_RESOLVER = yaml.resolver.Resolver()
+
+
+@lru_cache(maxsize=4096)
+def _resolve_plain(value: str) -> str:
+    return str(_RESOLVER.resolve(ScalarNode, value, (True, False)))  # type: ignore[no-untyped-call]
+
+
+class _ComposingLoader(_Loader):
+    """The safe loader, resolving each distinct short plain scalar once, and skipping the
+    bookkeeping of path resolvers (none is registered): resolving was a fifth of the time to
+    validate a repository."""
+
+    def descend_resolver(self, current_node: Any, current_index: Any) -> None:
+        return None
+
+    def ascend_resolver(self) -> None:
+        return None
+
+    def resolve(self, kind: type[Node], value: Any, implicit: tuple[bool, bool]) -> str:
+        if kind is ScalarNode and implicit[0] and len(value) <= 64:
+            return _resolve_plain(value)
+        return str(super().resolve(kind, value, implicit))  # type: ignore[no-untyped-call]
+
+
 def _compose(text: str) -> Node | None:
     try:
-        loader = _Loader(text)  # the pure-Python reader checks every character here
+        loader = _ComposingLoader(text)  # the pure-Python reader checks every character here
     except yaml.reader.ReaderError as exc:  # pragma: no cover - only without libyaml
         raise YamlReadError([_reader_problem(text, exc)]) from None
     try:
@@ -318,6 +382,18 @@ def _compose(text: str) -> Node | None:
                         "RC006",
                         "a second YAML document starts here; one file holds one document "
                         "(remove the '---' line or split the file)",
+                    )
+                ]
+            ) from None
+        if "duplicate anchor" in f"{exc.context}":
+            first = exc.context_mark.line + 1 if exc.context_mark else "?"
+            raise YamlReadError(
+                [
+                    _problem(
+                        exc.problem_mark,
+                        "RC005",
+                        f"anchor (&name) defined twice (first at line {first}); anchors serve "
+                        "only aliases, which are not supported: remove it",
                     )
                 ]
             ) from None
@@ -370,9 +446,7 @@ class _Builder:
             )
         self.seen.add(id(node))
         if depth > MAX_DEPTH:
-            raise YamlReadError(
-                [_problem(node.start_mark, "RC009", f"nested deeper than {MAX_DEPTH} levels")]
-            )
+            raise YamlReadError([_problem(node.start_mark, "RC009", _TOO_DEEP)])
         if isinstance(node, ScalarNode):
             return self.scalar(node)
         if isinstance(node, MappingNode):
@@ -395,7 +469,7 @@ class _Builder:
                         _problem(
                             key_node.start_mark,
                             "RC004",
-                            f"duplicate key '{key}' (first at line {first_line[key]}); "
+                            f"duplicate key {_snippet(key)} (first at line {first_line[key]}); "
                             "each key may appear once",
                         )
                     )
@@ -421,17 +495,21 @@ class _Builder:
         # may not, and then constructing it fails in one of these ways.
         try:
             value = self.construct(node)
-        except (ValueError, KeyError, IndexError, TypeError, OverflowError):
+        except OverflowError:  # a base-60 float past float's range
+            return self.refuse(node, _too_large(node))
+        except (ValueError, KeyError, IndexError, TypeError):
             value = _UNFIT
         if value is _UNFIT:
             return self.refuse(
                 node,
                 f"{_snippet(node.value)} is not {_TAG_NAMES.get(tag, 'a date')}, as its tag "
-                f"'{_short_tag(tag)}' says; drop the tag, or write a value of that type",
+                f"{_tag_name(tag)} says; drop the tag, or write a value of that type",
             )
         if tag == _INT and abs(value) > MAX_INT:
             return self.refuse(node, _too_large(node))
-        if tag == _FLOAT and (math.isnan(value) or math.isinf(value)):
+        if tag == _FLOAT and not math.isfinite(value):
+            if not _NON_FINITE.fullmatch(node.value):  # digits past float's range
+                return self.refuse(node, _too_large(node))
             return self.refuse(
                 node, f"{_snippet(node.value)} cannot be represented in JSON; use a finite number"
             )
@@ -459,14 +537,16 @@ def _key_message(node: Node) -> str:
         return "a key must be a plain name, not a list or mapping"
     if node.tag == _MERGE:
         return "merge keys (<<) are not supported; write the keys out in full"
-    read_as = _TAG_NAMES.get(node.tag, "a date" if node.tag == _TIMESTAMP else "not text")
-    return (
-        f"key {_snippet(node.value)} is read as {read_as}, and keys must be text; "
-        f"quote it: '{node.value[:40]}': ..."
-    )
+    key = _snippet(node.value)
+    if node.tag not in _TAG_NAMES and node.tag != _TIMESTAMP:
+        return f"key {key} has the tag {_tag_name(node.tag)}; keys must be text: drop the tag"
+    read_as = _TAG_NAMES.get(node.tag, "a date")
+    return f"key {key} is read as {read_as}, and keys must be text; quote it: {key}: ..."
 
 
 def _too_large(node: ScalarNode) -> str:
+    if node.tag == _FLOAT:
+        return f"{_snippet(node.value)} is beyond the range of a number (about 1.8e308)"
     return (
         f"{_snippet(node.value)} is beyond the 64-bit integer range JSON readers share; "
         "quote it if it is text"
@@ -479,8 +559,10 @@ def _snippet(value: str, limit: int = 40) -> str:
     return repr(shown)
 
 
-def _short_tag(tag: str) -> str:
-    return "!!" + tag[len("tag:yaml.org,2002:") :] if tag.startswith("tag:yaml.org,2002:") else tag
+def _tag_name(tag: str) -> str:
+    """A tag as written (`!!int` for a standard one), quoted and cut like any snippet."""
+    short = "!!" + tag[len(_STANDARD) :] if tag.startswith(_STANDARD) else tag
+    return _snippet(short)
 
 
 def _first_alias_mark(text: str) -> Any:
@@ -501,10 +583,25 @@ def _first_alias_mark(text: str) -> Any:
 
 
 def _tag_message(node: Node) -> str:
+    if node.tag in _KNOWN_TAGS:  # a standard tag on the wrong kind of node (`!!str {a: 1}`)
+        kinds: dict[type[Node], str] = {MappingNode: "a mapping", SequenceNode: "a list"}
+        kind = kinds.get(type(node), "one value")
+        return f"YAML tag {_tag_name(node.tag)} does not fit {kind}; drop the tag"
     return (
-        f"YAML tag '{_short_tag(node.tag)}' is not supported; "
+        f"YAML tag {_tag_name(node.tag)} is not supported; "
         "use plain strings, numbers, lists, mappings"
     )
+
+
+def _capped(problems: Iterable[YamlProblem]) -> list[YamlProblem]:
+    """The first MAX_PROBLEMS, the last of them saying that there are more."""
+    found = iter(problems)
+    listed = list(islice(found, MAX_PROBLEMS))
+    if next(found, None) is not None:
+        last = listed[-1]
+        note = f"{last.message} (further problems in this file are not listed)"
+        listed[-1] = YamlProblem(last.line, last.col, last.code, note)
+    return listed
 
 
 def parse_document(path: str, raw: bytes) -> YamlDocument:
@@ -522,14 +619,13 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
             ]
         )
     text = decode(raw)
-    _refuse_odd_line_breaks(text)
+    _refuse_odd_characters(text)
     if "\t" in text:
-        tabs = _tab_indents(text)
+        tabs = _capped(_tab_indents(text))
         if tabs:
             raise YamlReadError(tabs)
     try:
-        _refuse_runaway_nesting(text)
-        root = _compose(text)
+        root = _compose_within_bounds(text)
     except YamlReadError as exc:
         raise YamlReadError([_within(p, text) for p in exc.problems]) from None
     if root is None or (
@@ -553,5 +649,5 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
     builder = _Builder(text)
     data = builder.build(root)
     if builder.problems:
-        raise YamlReadError(builder.problems)
+        raise YamlReadError(_capped(builder.problems))
     return YamlDocument(path=path, data=data, root=root)

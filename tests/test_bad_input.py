@@ -39,9 +39,29 @@ def _deep_nesting_huge() -> bytes:
     return b"capability: turtlebot3-camera\nknowledge:\n  k: " + b"[" * depth + b"]" * depth + b"\n"
 
 
+def _block_nesting_huge() -> bytes:
+    """50,000 nested block sequences in 100 kB: libyaml's composer overflowed the C stack."""
+    return b"capability: turtlebot3-camera\nknowledge:\n  k:\n    " + b"- " * 50_000 + b"1\n"
+
+
+def _hidden_nesting() -> bytes:
+    """60,000 levels whose brackets balance out, the closing ones in comments: a bracket
+    count that trusted closing brackets let it through to the composer, which crashed."""
+    step = b"[" * 20 + b" #" + b"]" * 20 + b"\n"
+    return b"capability: turtlebot3-camera\nknowledge:\n  k: " + step * 3_000
+
+
+def _too_many_nodes() -> bytes:
+    """A quarter of a million values in 1 MB: composed, some 30 s and 1.4 GB per 8 MiB."""
+    return b"capability: turtlebot3-camera\nknowledge:\n  k: [" + b"a," * 250_000 + b"]\n"
+
+
 GENERATORS: dict[str, Callable[[], bytes]] = {
     "oversized": _oversized,
     "deep-nesting-huge": _deep_nesting_huge,
+    "block-nesting-huge": _block_nesting_huge,
+    "hidden-nesting": _hidden_nesting,
+    "too-many-nodes": _too_many_nodes,
 }
 
 

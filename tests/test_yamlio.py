@@ -7,6 +7,8 @@ import pytest
 from configurator import yamlio
 from configurator.yamlio import (
     MAX_DEPTH,
+    MAX_EVENTS,
+    MAX_PROBLEMS,
     YamlDocument,
     YamlProblem,
     YamlReadError,
@@ -109,6 +111,36 @@ def test_keys_that_are_not_text_are_refused(key: str, read_as: str) -> None:
     (problem,) = _refused(f"a: 1\n{key}: value\n".encode())
     assert (problem.line, problem.col, problem.code) == (2, 1, "RC009")
     assert read_as in problem.message
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [
+        (b"!!binary aGk=: 1\n", "key 'aGk=' has the tag '!!binary'; keys must be text"),
+        (b'!foo "a\\nb": 1\n', "key 'a\\nb' has the tag '!foo'"),
+        (b"!!int 7: 1\n", "key '7' is read as an integer, and keys must be text; quote it: '7'"),
+    ],
+)
+def test_a_key_message_is_one_line_and_says_what_to_do(raw: bytes, message: str) -> None:
+    (problem,) = _refused(raw)
+    assert (problem.line, problem.col, problem.code) == (1, 1, "RC009")
+    assert message in problem.message and "\n" not in problem.message
+
+
+def test_a_duplicate_key_is_quoted_and_cut_in_its_message() -> None:
+    long_key = "k" * 100_000
+    raw = f'"a\\nb": 1\n"a\\nb": 2\n? {long_key}\n: 1\n? {long_key}\n: 2\n'.encode()
+    first, second = _refused(raw)
+    assert (first.line, first.code) == (2, "RC004")
+    assert "duplicate key 'a\\nb' (first at line 1)" in first.message
+    assert (second.line, second.code) == (5, "RC004")
+    assert "'kkkk" in second.message and len(second.message) < 200
+
+
+def test_an_anchor_defined_twice_says_so() -> None:
+    (problem,) = _refused(b"a: &x 1\nb: &x 2\n")
+    assert (problem.line, problem.col, problem.code) == (2, 4, "RC005")
+    assert "anchor (&name) defined twice (first at line 1)" in problem.message
 
 
 @pytest.mark.parametrize("key", ["'yes'", '"1"', "'2024-05-01'", '"quoted"', "plain"])
@@ -223,14 +255,15 @@ def test_nesting_limit_is_exact() -> None:
 
 
 def test_runaway_nesting_is_refused_before_composing(monkeypatch: pytest.MonkeyPatch) -> None:
-    """libyaml's composer recurses in C (tens of thousands of levels crash the process), so a
-    text that could nest deep is refused from its events, located as the builder would."""
+    """libyaml's composer recurses in C (tens of thousands of levels crash the process) and
+    takes time quadratic in flow nesting, so a text that could nest deep is refused from its
+    events, located as the builder would."""
 
     def must_not_compose(text: str) -> None:
         raise AssertionError("composed a runaway nesting")
 
     monkeypatch.setattr(yamlio, "_compose", must_not_compose)
-    depth = 5000
+    depth = 60_000
     raw = b"k: " + b"{a: " * depth + b"1" + b"}" * depth + b"\n"
     assert _problems(raw) == [(1, 4 + 4 * MAX_DEPTH, "RC009")]
 
@@ -275,16 +308,74 @@ def test_tags_are_refused(raw: bytes) -> None:
     "text",
     [
         "x:\n" + "- " * 50_000 + "1\n",  # block sequences on one line: segfaulted libyaml
-        "x:\n" + "".join("  " * i + "-\n" for i in range(200)) + "1\n",
+        "x:\n" + "".join("  " * i + "-\n" for i in range(200)) + "  " * 200 + "1\n",
+        "x:\n" + "".join("  " * i + "-\n" for i in range(600)) + "  " * 600 + "1\n",
         "".join(" " * i + "k:\n" for i in range(2_000)) + "x: 1\n",
         "x: " + "[" * 50_000,
-        "x:\n" + "- " * 40 + "[" * 40 + "1\n",  # block and flow together
+        "x:\n" + "- " * 40 + "[" * 40 + "1" + "]" * 40 + "\n",  # block and flow together
     ],
 )
 def test_nesting_of_every_kind_is_refused_before_composing(text: str) -> None:
     problems = _refused(text.encode())
     assert [p.code for p in problems] == ["RC009"]
     assert problems[0].line >= 1
+
+
+@pytest.mark.parametrize(
+    "step",
+    [
+        "[" * 20 + " #" + "]" * 20 + "\n",  # closing brackets in comments close nothing
+        "[" * 20 + '"' + "]" * 20 + '", ',  # nor in quoted strings
+        "[" * 20 + "'" + "]" * 20 + "', ",
+    ],
+)
+def test_closing_brackets_that_close_nothing_cannot_hide_nesting(
+    monkeypatch: pytest.MonkeyPatch, step: str
+) -> None:
+    """The brackets balance out, the real nesting runs away: 60,000 levels crashed libyaml's
+    composer. Refused from events, never composed."""
+
+    def must_not_compose(text: str) -> None:
+        raise AssertionError("composed a runaway nesting")
+
+    monkeypatch.setattr(yamlio, "_compose", must_not_compose)
+    problems = _refused(("x: " + step * 3_000 + "\n").encode())
+    assert [(p.line, p.code) for p in problems] == [(1 + step.count("\n") * 3, "RC009")]
+
+
+def test_a_file_of_too_many_nodes_is_refused_before_composing(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """8 MiB of `[],` took 27 s and 1.4 GB to compose: the nodes are counted first."""
+
+    def must_not_compose(text: str) -> None:
+        raise AssertionError("composed too many nodes")
+
+    monkeypatch.setattr(yamlio, "_compose", must_not_compose)
+    (problem,) = _refused(b"x: [" + b"[]," * (MAX_EVENTS // 2) + b"]\n")
+    assert (problem.line, problem.col, problem.code) == (1, 1, "RC008")
+    assert f"over {MAX_EVENTS:,} YAML nodes" in problem.message
+
+
+def test_a_file_of_many_nodes_within_the_limit_is_read() -> None:
+    items = MAX_EVENTS // 2 - 10  # each item one event, the mappings and the stream a few
+    assert len(_doc(b"x: [" + b"a," * items + b"]\n").data["x"]) == items
+
+
+@pytest.mark.parametrize(
+    ("raw", "code"),
+    [
+        (b"a:\n" + b"\tb: 1\n" * 50_000, "RC002"),
+        (b"k: 1\n" * 50_000, "RC004"),
+        (b"".join(b"%d: 1\n" % i for i in range(50_000)), "RC009"),
+    ],
+)
+def test_a_file_lists_at_most_so_many_problems(raw: bytes, code: str) -> None:
+    problems = _refused(raw)
+    assert len(problems) == MAX_PROBLEMS
+    assert {p.code for p in problems} == {code}
+    assert problems[-1].message.endswith("(further problems in this file are not listed)")
+    assert problems[-2].line < problems[-1].line
 
 
 def test_moderate_indentation_is_still_read() -> None:
@@ -309,15 +400,22 @@ def test_moderate_indentation_is_still_read() -> None:
         ("0x" + "f" * 5_000, "beyond the 64-bit integer range"),
         ("1:" * 3_000 + "1", "beyond the 64-bit integer range"),
         ("9223372036854775808", "beyond the 64-bit integer range"),
-        ("1.0e+999", "cannot be represented in JSON"),
-        ("1" * 500 + ".5", "cannot be represented in JSON"),
+        ("1.0e+999", "beyond the range of a number"),
+        ("1" * 500 + ".5", "beyond the range of a number"),
+        ("59:" * 3_000 + "1.5", "beyond the range of a number"),  # base 60, untagged
+        ("!!float '1e999'", "beyond the range of a number"),
+        ("!!str {c: 1}", "'!!str' does not fit a mapping; drop the tag"),
+        ("!!int [1]", "'!!int' does not fit a list; drop the tag"),
+        ("!!map x", "'!!map' does not fit one value; drop the tag"),
+        ("!foo%0Abar x", "YAML tag '!foo\\nbar' is not supported"),  # a line break in a tag
+        ("!<tag:x," + "y" * 100_000 + "> 1", "YAML tag 'tag:x,yyyyy"),  # cut, not echoed
     ],
 )
 def test_every_tag_and_number_is_data_or_rc009(value: str, says: str) -> None:
     (problem,) = _refused(f"a: 1\nb: {value}\n".encode())
     assert (problem.line, problem.col, problem.code) == (2, 4, "RC009")
     assert says in problem.message
-    assert len(problem.message) < 300
+    assert len(problem.message) < 300 and "\n" not in problem.message
 
 
 @pytest.mark.parametrize(
@@ -348,6 +446,27 @@ def test_line_breaks_only_yaml_sees_are_refused_on_the_real_line(br: str, name: 
     (problem,) = _refused(f"a: 1\nb: x{br}c: [\nd: 2\n".encode())
     assert (problem.line, problem.col, problem.code) == (2, 5, "RC003")
     assert name in problem.message
+
+
+@pytest.mark.parametrize(
+    ("raw", "where"),
+    [
+        (b"a: 1\n\xef\xbb\xbfb: 2\n", (2, 1)),  # files joined together
+        (b"a: x\xef\xbb\xbfy\n", (1, 5)),
+        (b'a: 1\nb: "x\xef\xbb\xbf"\n', (2, 6)),
+        (b"\xef\xbb\xbf\xef\xbb\xbfa: 1\n", (1, 1)),  # only the first one is a BOM
+    ],
+)
+def test_a_byte_order_mark_inside_the_file_is_refused_where_it_is(
+    raw: bytes, where: tuple[int, int]
+) -> None:
+    (problem,) = _refused(raw)
+    assert (problem.line, problem.col, problem.code) == (*where, "RC003")
+    assert "byte order mark (U+FEFF) inside the file" in problem.message
+
+
+def test_an_escaped_byte_order_mark_or_line_separator_is_text() -> None:
+    assert _doc(b'a: "x\\ufeffy\\u2028z"\n').data == {"a": "x\ufeffy\u2028z"}
 
 
 def test_an_error_at_the_end_of_an_unterminated_last_line_is_on_that_line() -> None:
