@@ -12,8 +12,9 @@ from enum import Enum
 from typing import Literal
 from urllib.parse import unquote, urlsplit
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from configurator.diagnostics import Diagnostic
 from configurator.types import ROBOT_ID_PATTERN
 
 DEFAULT_PREFIX = "robotconf"
@@ -145,8 +146,24 @@ class AgentState(str, Enum):
     REJECTED = "rejected"
 
 
+# A brain is up, or about to be, in these states: the robot runs (or is made to run) something.
+ACTIVE_STATES = frozenset(
+    {AgentState.STARTING, AgentState.RUNNING, AgentState.STOPPING, AgentState.BACKOFF}
+)
+
+
 def now() -> float:
     return round(time.time(), 3)
+
+
+def short_rev(revision: str | None) -> str:
+    """A commit as people read it: its first 12 hex digits ("-" for none)."""
+    return revision[:12] if revision else "-"
+
+
+def short_digest(digest: str | None) -> str:
+    """A request digest as people read it: its first 12 hex digits ("-" for none)."""
+    return digest.removeprefix("sha256:")[:12] if digest else "-"
 
 
 class _Message(BaseModel):
@@ -179,6 +196,44 @@ class AgentStatus(_Message):
     seq: int = 0
 
 
+class StatusDiagnostic(_Message):
+    """One problem in the reconciler status, structured like the validator's diagnostics.
+
+    A rule finding has its file and position and an RC code; a problem with no place in a
+    file (the source is unreachable, a build crashed) has no path and the reason as its code."""
+
+    path: str | None = None
+    line: int | None = None
+    column: int | None = None
+    severity: Literal["error", "warning"] = "error"
+    code: str = ""
+    message: str
+
+    @classmethod
+    def of(cls, diagnostic: Diagnostic) -> StatusDiagnostic:
+        return cls(
+            path=diagnostic.path,
+            line=diagnostic.line,
+            column=diagnostic.col,
+            severity=diagnostic.severity.value,
+            code=diagnostic.code,
+            message=diagnostic.message,
+        )
+
+    def __str__(self) -> str:
+        """`path:line:col: severity CODE message`, as `robotconf validate` prints it."""
+        where = ""
+        if self.path is not None:
+            where = ":".join(
+                [self.path, *(str(n) for n in (self.line, self.column) if n is not None)]
+            )
+            where += ": "
+        if not where and not self.code:  # the text form of older reconcilers
+            return self.message
+        code = f" {self.code}" if self.code else ""
+        return f"{where}{self.severity}{code} {self.message}"
+
+
 class ReconcilerReason(str, Enum):
     """Why the reconciler's status is what it is (like a Flux condition's reason)."""
 
@@ -197,10 +252,13 @@ class ReconcilerReason(str, Enum):
 STALE_INTERVALS, STALE_MIN = 3, 60.0
 
 
+ReconcilerState = Literal["Ready", "Stalled", "Progressing", "Offline"]
+
+
 class ReconcilerStatus(_Message):
     """The reconciler's retained status (Flux-style: ready or stalled, with why)."""
 
-    state: Literal["Ready", "Stalled", "Progressing", "Offline"]
+    state: ReconcilerState
     ready: bool
     # A ReconcilerReason value; kept as text so that a reader older than a new reason still
     # reads the status.
@@ -210,7 +268,8 @@ class ReconcilerStatus(_Message):
     last_applied_revision: str | None = None
     last_attempted_revision: str | None = None
     failed_revision: str | None = Field(None, description="the revision the reason is about")
-    diagnostics: list[str] = Field(default_factory=list)
+    diagnostics: list[StatusDiagnostic] = Field(default_factory=list)
+    more_diagnostics: int = Field(0, description="diagnostics left out to keep the message small")
     message: str = ""
     robots: int = 0
     published: int = 0
@@ -221,6 +280,14 @@ class ReconcilerStatus(_Message):
     ignored_payloads: dict[str, int] = Field(
         default_factory=dict, description="unreadable MQTT payloads skipped, by topic kind"
     )
+
+    @field_validator("diagnostics", mode="before")
+    @classmethod
+    def _older_text_form(cls, value: object) -> object:
+        """Reconcilers before structured diagnostics published lines of text."""
+        if isinstance(value, list):
+            return [{"message": v} if isinstance(v, str) else v for v in value]
+        return value
 
     def stale(self, at: float) -> bool:
         """True when its heartbeat is overdue; unknown (an older reconciler) is not stale."""

@@ -20,6 +20,7 @@ from configurator.signing import Signed, SigningKeyError
 from configurator.source import SourceError
 from configurator.wire import DEFAULT_BROKER, ReconcilerStatus, Topics, validate_prefix
 from configurator.workspace import check
+from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 from reconciler.status import (
@@ -29,7 +30,6 @@ from reconciler.status import (
     desired_from_fleet,
     desired_from_retained,
     format_text,
-    parse_retained,
     short_rev,
 )
 

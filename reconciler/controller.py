@@ -1,6 +1,8 @@
-"""The control loop: on a commit, a reconnect or every interval: source -> build -> diff -> apply.
+"""The control loop: on a commit, a reconnect or every interval, one reconcile step.
 
-Level-triggered and stateless: what is published is learned from the broker at every
+A step is Flux-shaped: observe (the branch's head and its build, the retained topics) ->
+decide (pure, `reconciler.decide`) -> apply (publish and clear) -> report (the one status
+writer). Level-triggered and stateless: what is published is learned from the broker at every
 (re)connection, so a restart or a broker that lost its retained messages is harmless.
 """
 
@@ -13,7 +15,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import Protocol
 
 from pydantic import ValidationError
 
@@ -22,9 +24,11 @@ from configurator.mqtt import Connection
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.signing import Signed
 from configurator.source import SourceError
-from configurator.wire import ReconcilerReason, ReconcilerStatus, Topics, now
-from reconciler.desired import Desired, load_desired
-from reconciler.diff import Actions, diff
+from configurator.wire import ReconcilerStatus, StatusDiagnostic, Topics, now, short_rev
+from reconciler.decide import Condition, Decision, Observation, Reason, decide
+from reconciler.desired import FLEET_FILE, Desired, load_desired
+from reconciler.diff import Actions
+from reconciler.observed import RECONCILER_STATUS, parse_retained
 from reconciler.retained import Ignored, Presence, RetainedView, read_object, take_snapshot
 from reconciler.source import BranchSource
 
@@ -40,7 +44,6 @@ WILL_TIMEOUT = 10.0  # seconds to wait for the broker to take a new Last Will
 MAX_REQUEST_BYTES = MAX_PAYLOAD_BYTES - 4096
 
 Builder = Callable[[Path, str], Desired]
-Reason = ReconcilerReason
 
 
 class Signer(Protocol):
@@ -53,68 +56,6 @@ class Outcome(enum.Enum):
     DONE = "done"  # the broker holds what the serving revision asks for
     WAIT = "wait"  # not connected: the next (re)connection wakes the loop
     RETRY = "retry"  # a failure worth retrying with backoff
-
-
-def short(revision: str | None) -> str:
-    return revision[:12] if revision else "none"
-
-
-_BRAIN_STATES = {"starting", "running", "backoff", "stopping"}
-
-
-def running_robots(
-    retained: dict[str, bytes], topics: Topics, ignored: Ignored | None = None
-) -> set[str]:
-    """Robots whose retained status says a brain is up or about to be (online agents only)."""
-    found = set()
-    for topic, payload in retained.items():
-        where = topics.robot_of(topic)
-        if where is None or where[1] != "status" or not payload:
-            continue
-        try:
-            state = read_object(payload).get("state")
-        except PayloadError as exc:
-            if ignored is not None:
-                ignored.note("status", topic, payload, str(exc))
-            continue
-        if isinstance(state, str) and state in _BRAIN_STATES:
-            found.add(where[0])
-    return found
-
-
-def observed_digests(
-    retained: dict[str, bytes], topics: Topics, ignored: Ignored | None = None
-) -> dict[str, str | None]:
-    """robot -> digest of its retained launch request (None: retained but unreadable).
-
-    A retained signed stop (a StopRequest for that robot) counts as nothing retained: the
-    robot is cleared."""
-    found: dict[str, str | None] = {}
-    for topic, payload in retained.items():
-        where = topics.robot_of(topic)
-        if where is None or where[1] != "launch":
-            continue
-        try:
-            raw = read_object(payload)
-        except PayloadError as exc:
-            if ignored is not None:
-                ignored.note("launch", topic, payload, str(exc))
-            found[where[0]] = None
-            continue
-        if _is_stop(raw, where[0]):
-            continue
-        digest = raw.get("digest")
-        found[where[0]] = digest if isinstance(digest, str) else None
-    return found
-
-
-def _is_stop(raw: dict[str, object], robot_id: str) -> bool:
-    if raw.get("kind") != "Stop":
-        return False
-    try:
-        return StopRequest.model_validate(raw).robot_id == robot_id
-    except ValidationError:
-        return False
 
 
 class Controller:
@@ -235,16 +176,13 @@ class Controller:
     def _report_internal_error(self, exc: Exception) -> None:
         try:
             message = f"internal error: {type(exc).__name__}: {exc}"[:500]
-            self._publish_status(
-                self._status(
-                    "Stalled",
-                    Reason.INTERNAL_ERROR,
-                    attempted=self._head,
-                    failed=self._head,
-                    message=f"{message} (see the reconciler's log); retrying",
-                    errors=[message],
-                )
+            condition = Condition(
+                Reason.INTERNAL_ERROR,
+                f"{message} (see the reconciler's log); retrying",
+                self._head,
+                (StatusDiagnostic(code=Reason.INTERNAL_ERROR.value, message=message),),
             )
+            self._report(condition, None)
         except Exception:
             log.exception("cannot report the internal error either")
 
@@ -258,8 +196,10 @@ class Controller:
         if not payload or payload == self._status_payload:
             return
         try:
-            offline = read_object(payload).get("state") == "Offline"
-        except PayloadError:
+            offline = ReconcilerStatus.model_validate(read_object(payload)).state == "Offline"
+        except (PayloadError, ValidationError) as exc:
+            # Counted as it arrives: our next status may replace it before a step reads it.
+            self.ignored.note(RECONCILER_STATUS, topic, payload, _one_line(exc))
             return
         if offline and not self._stop.is_set():
             self._wake.set()
@@ -267,134 +207,86 @@ class Controller:
     # ------------------------------------------------------------------ one step
 
     def reconcile_once(self, *, fetch: bool = False) -> Outcome:
-        """Source -> build -> diff -> apply -> status, once."""
+        """Observe (source, broker) -> decide (pure) -> apply -> report, once."""
+        seen = self._observe(fetch)
+        if seen is None:
+            return Outcome.WAIT
+        decision = decide(seen)
+        condition = decision.condition
+        if decision.changes:
+            condition = self._apply(decision)
+        if decision.target is not None and condition.reason is not Reason.BROKER_UNAVAILABLE:
+            self.serving = decision.target
+        self._report(condition, decision.actions, heartbeat=fetch)
+        if condition.reason is Reason.BROKER_UNAVAILABLE or seen.head is None:
+            return Outcome.RETRY
+        return Outcome.DONE
+
+    def _observe(self, fetch: bool) -> Observation | None:
+        """The head commit and its build, and what the broker holds; None until the broker's
+        retained messages are known (the next (re)connection wakes the loop)."""
         if fetch:
             self._refresh()
         head: str | None = None
         try:
-            resolved = self.source.head()
+            head = self.source.head()
         except SourceError as exc:
             self._say(f"source: {exc}", logging.WARNING)
-            desired = Desired("", None, [f"source unavailable: {exc}"])
+            build = Desired(
+                "",
+                None,
+                [StatusDiagnostic(code=Reason.SOURCE_UNAVAILABLE.value, message=str(exc))],
+            )
         else:
-            head = resolved
-            desired = self._build(resolved)
+            build = self._build(head)
         self._head = head
         if not self.view.synced:
             if not self._waiting_logged:
                 log.info("waiting for the broker at %s", self.connection.address.url)
                 self._waiting_logged = True
-            return Outcome.WAIT
+            return None
         self._waiting_logged = False
         self._recover_serving(head)
-
-        snapshot = self.view.snapshot()
-        observed = observed_digests(snapshot, self.topics, self.ignored)
-        running = self._sample_running(fetch)
-        errors = list(desired.errors)
-        reason = self._failure(head)
-        actions: Actions[LaunchRequest] | None = None
-        if desired.fleet is not None:
-            actions = diff(
-                desired.fleet.requests,
-                observed,
-                desired.fleet.suspended,
-                desired.fleet.allow_empty,
-                running,
-            )
-            if actions.refused:
-                errors = [actions.refused]
-                reason = Reason.EMPTY_FLEET_REFUSED
-                actions = None
-        target = desired if actions is not None else self.serving
-        if actions is None and target is not None and target.fleet is not None:
-            # The head cannot be applied: keep serving (and refilling) the last good revision.
-            actions = diff(target.fleet.requests, observed, target.fleet.suspended, True, running)
-        if actions is not None and target is not None and not actions.empty:
-            self._publish_status(
-                self._status(
-                    "Progressing",
-                    Reason.PROGRESSING,
-                    attempted=head,
-                    failed=head if errors else None,
-                    message=f"applying {short(target.revision)}",
-                    errors=errors,
-                )
-            )
-            started = time.monotonic()
-            if not self._apply(actions, target.revision):
-                self._publish_status(
-                    self._status(
-                        "Stalled",
-                        Reason.BROKER_UNAVAILABLE,
-                        attempted=head,
-                        failed=target.revision,
-                        message="the broker did not acknowledge every message; retrying: "
-                        + (self.view.last_error or "timeout"),
-                        errors=errors,
-                    )
-                )
-                return Outcome.RETRY
-            log.info(
-                "applied %s: %d published, %d cleared, %d unchanged%s (%.3f s)",
-                short(target.revision),
-                len(actions.publish),
-                len(actions.clear),
-                actions.unchanged,
-                f", {len(actions.held)} suspended left as they are" if actions.held else "",
-                time.monotonic() - started,
-            )
-        if target is not None:
-            self.serving = target
-        self._publish_status(self._outcome(head, errors, reason, actions), heartbeat=fetch)
-        return Outcome.RETRY if head is None else Outcome.DONE
-
-    def _outcome(
-        self,
-        head: str | None,
-        errors: list[str],
-        reason: Reason,
-        actions: Actions[LaunchRequest] | None,
-    ) -> ReconcilerStatus:
-        """The status after a step: stalled with why, stale after a failed fetch, or ready."""
-        if errors:
-            serving = f"; serving {short(self.serving.revision)}" if self.serving else ""
-            what = f"revision {short(head)}" if head else "the branch"
-            self._say(f"{what} is not applied ({len(errors)} error(s)){serving}", logging.WARNING)
-            return self._status(
-                "Stalled",
-                reason,
-                attempted=head,
-                failed=head,
-                message=f"{what} is not applied ({reason.value}){serving}",
-                errors=errors,
-                actions=actions,
-            )
-        if self._fetch_error:
-            return self._status(
-                "Stalled",
-                Reason.SOURCE_UNAVAILABLE,
-                attempted=head,
-                message=f"applied {short(head)}, but the last fetch failed: it may be stale",
-                errors=[self._fetch_error],
-                actions=actions,
-            )
-        self._say(f"in sync with {short(head)} ({self.source.branch})", logging.INFO)
-        return self._status(
-            "Ready",
-            Reason.APPLIED,
-            attempted=head,
-            message=f"applied {short(head)}",
-            actions=actions,
+        retained = parse_retained(
+            self.view.snapshot(), self.topics, requests=False, ignored=self.ignored
+        )
+        return Observation(
+            head=head,
+            build=build,
+            build_crashed=head in self._crashed,
+            fetch_error=self._fetch_error,
+            serving=self.serving,
+            launches=retained.launch_digests(),
+            active=self._sample_active(fetch),
         )
 
-    def _failure(self, head: str | None) -> Reason:
-        """Why the head is not applicable, if it is not."""
-        if head is None:
-            return Reason.SOURCE_UNAVAILABLE
-        if head in self._crashed:
-            return Reason.INTERNAL_ERROR
-        return Reason.BUILD_FAILED
+    def _apply(self, decision: Decision) -> Condition:
+        """Publishes what differs and clears what is no longer assigned; the outcome."""
+        actions, target = decision.actions, decision.target
+        assert actions is not None and target is not None
+        self._report(decision.progressing(), actions)
+        started = time.monotonic()
+        # Signed at publish time: issued_at is when the robot was told, not when it was built.
+        sign = self._sign
+        items = [
+            (self.topics.launch(r), (sign(req) if sign else req).payload())
+            for r, req in actions.publish.items()
+        ]
+        items += [
+            (self.topics.launch(r), self._stop_payload(r, target.revision)) for r in actions.clear
+        ]
+        if not self.view.publish_retained(items, self.publish_timeout):
+            return decision.unacknowledged(self.view.last_error)
+        log.info(
+            "applied %s: %d published, %d cleared, %d unchanged%s (%.3f s)",
+            short_rev(target.revision),
+            len(actions.publish),
+            len(actions.clear),
+            actions.unchanged,
+            f", {len(actions.held)} suspended left as they are" if actions.held else "",
+            time.monotonic() - started,
+        )
+        return decision.condition
 
     # ------------------------------------------------------------------ helpers
 
@@ -416,7 +308,7 @@ class Controller:
         if built is None:
             started = time.monotonic()
             built = self._build_safely(revision)
-            log.info("built %s in %.3f s", short(revision), time.monotonic() - started)
+            log.info("built %s in %.3f s", short_rev(revision), time.monotonic() - started)
             self._built[revision] = built
             while len(self._built) > 4:
                 self._built.popitem(last=False)
@@ -427,23 +319,31 @@ class Controller:
         try:
             built = self._builder(self.source.root, revision)
         except Exception as exc:
-            log.exception("internal error while building %s", short(revision))
+            log.exception("internal error while building %s", short_rev(revision))
             self._crashed.add(revision)
-            message = f"internal error while building {short(revision)}: {type(exc).__name__}"
-            return Desired(revision, None, [f"{message}: {exc}"[:500]])
+            message = f"internal error while building {short_rev(revision)}: {type(exc).__name__}"
+            problem = StatusDiagnostic(
+                code=Reason.INTERNAL_ERROR.value, message=f"{message}: {exc}"[:500]
+            )
+            return Desired(revision, None, [problem])
         if built.fleet is None:
             return built
-        errors = [
-            f"the launch request of {robot_id} is {size:,} bytes, over the {MAX_REQUEST_BYTES:,} "
-            "an agent accepts; make its settings or environment knowledge smaller"
+        problems = [
+            StatusDiagnostic(
+                path=FLEET_FILE,
+                code=Reason.BUILD_FAILED.value,
+                message=f"the launch request of {robot_id} is {size:,} bytes, over the "
+                f"{MAX_REQUEST_BYTES:,} an agent accepts; make its settings or environment "
+                "knowledge smaller",
+            )
             for robot_id, request in sorted(built.fleet.requests.items())
             if (size := len(request.payload())) > MAX_REQUEST_BYTES
         ]
-        return Desired(revision, None, errors) if errors else built
+        return Desired(revision, None, problems) if problems else built
 
-    def _sample_running(self, resync: bool) -> set[str]:
-        """Robots whose agent says it runs a brain, sampled at each resync and after each
-        (re)connection (when the broker may have lost the clears); empty otherwise.
+    def _sample_active(self, resync: bool) -> set[str]:
+        """Robots whose agent says a brain is up or about to be, sampled at each resync and
+        after each (re)connection (when the broker may have lost the clears); empty otherwise.
 
         Only a robot that is running but no longer assigned is acted on (cleared again), so
         a sample is used once: between samples, a commit never clears anything twice."""
@@ -461,7 +361,7 @@ class Controller:
         if statuses is None:
             log.info("no status sample from the broker this time")
             return set()
-        return running_robots(statuses, self.topics, self.ignored)
+        return parse_retained(statuses, self.topics, ignored=self.ignored).active()
 
     def _recover_serving(self, head: str | None) -> None:
         """After a restart, the last good revision is the one the retained status names."""
@@ -487,18 +387,8 @@ class Controller:
         try:
             return ReconcilerStatus.model_validate(read_object(payload))
         except (PayloadError, ValidationError) as exc:
-            self.ignored.note("reconciler-status", topic, payload, _one_line(exc))
+            self.ignored.note(RECONCILER_STATUS, topic, payload, _one_line(exc))
             return None
-
-    def _apply(self, actions: Actions[LaunchRequest], revision: str) -> bool:
-        # Signed at publish time: issued_at is when the robot was told, not when it was built.
-        sign = self._sign
-        items = [
-            (self.topics.launch(r), (sign(req) if sign else req).payload())
-            for r, req in actions.publish.items()
-        ]
-        items += [(self.topics.launch(r), self._stop_payload(r, revision)) for r in actions.clear]
-        return self.view.publish_retained(items, self.publish_timeout)
 
     def _stop_payload(self, robot_id: str, revision: str) -> bytes:
         """Empty (DESIGN §7), or a signed StopRequest when requests are signed: an agent that
@@ -507,52 +397,21 @@ class Controller:
             return b""
         return self._sign(StopRequest(robot_id=robot_id, revision=revision)).payload()
 
-    def _status(
-        self,
-        state: Literal["Ready", "Stalled", "Progressing"],
-        reason: Reason,
-        *,
-        attempted: str | None,
-        message: str,
-        failed: str | None = None,
-        errors: list[str] | None = None,
-        actions: Actions[LaunchRequest] | None = None,
-    ) -> ReconcilerStatus:
-        previous = self.status
-        serving = self.serving
-        fleet = serving.fleet if serving is not None else None
-        applied = serving.revision if serving is not None else None
-        if applied is None and previous is not None:
-            applied = previous.last_applied_revision
-        published = len(actions.publish) if actions else 0
-        cleared = len(actions.clear) if actions else 0
-        quiet = not published and not cleared and state != "Progressing"
-        if quiet and previous is not None and previous.last_applied_revision == applied:
-            # A resync that changed nothing keeps the counts of the apply that did.
-            published, cleared = previous.published, previous.cleared
-        return ReconcilerStatus(
-            state=state,
-            ready=state == "Ready",
-            reason=reason.value,
-            branch=self.source.branch,
-            source=self.source.description,
-            last_applied_revision=applied,
-            last_attempted_revision=attempted
-            or (previous.last_attempted_revision if previous else None),
-            failed_revision=failed,
-            diagnostics=errors or [],
-            message=message,
-            robots=len(fleet.requests) if fleet is not None else 0,
-            published=published,
-            cleared=cleared,
-            interval=self.interval,
-        )
+    # ------------------------------------------------------------------ report
 
-    def _publish_status(self, status: ReconcilerStatus, *, heartbeat: bool = False) -> None:
-        """Retained; published when its content differs from what the broker holds, and at
-        every resync (`heartbeat`) so that readers can tell a live reconciler from a dead one.
-        `since` moves only when the content does."""
-        status = status.model_copy(
+    def _report(
+        self,
+        condition: Condition,
+        actions: Actions[LaunchRequest] | None,
+        *,
+        heartbeat: bool = False,
+    ) -> None:
+        """The one writer of the reconciler status (retained).
+
+        Published when its content differs from what the broker holds, and at every resync
+        (`heartbeat`) so that readers can tell a live reconciler from a dead one. `since`
+        moves only when the content does."""
+        status = self._status_of(condition, actions).model_copy(
             update={"heartbeat": now(), "ignored_payloads": self.ignored.counts()}
         )
         retained = self._retained_status()
@@ -568,6 +427,44 @@ class Controller:
         self._status_payload = payload
         self.view.publish_retained([(self.topics.reconciler_status, payload)], 10.0)
         self._notify(status)
+
+    def _status_of(
+        self, condition: Condition, actions: Actions[LaunchRequest] | None
+    ) -> ReconcilerStatus:
+        previous = self.status
+        serving = self.serving
+        fleet = serving.fleet if serving is not None else None
+        applied = serving.revision if serving is not None else None
+        if applied is None and previous is not None:
+            applied = previous.last_applied_revision
+        published = len(actions.publish) if actions else 0
+        cleared = len(actions.clear) if actions else 0
+        quiet = not published and not cleared and condition.reason is not Reason.PROGRESSING
+        if quiet and previous is not None and previous.last_applied_revision == applied:
+            # A resync that changed nothing keeps the counts of the apply that did.
+            published, cleared = previous.published, previous.cleared
+        if condition.state == "Stalled" and condition.reason is not Reason.BROKER_UNAVAILABLE:
+            self._say(f"{condition.message}", logging.WARNING)
+        elif condition.reason is Reason.APPLIED:
+            self._say(f"in sync with {short_rev(self._head)} ({self.source.branch})", logging.INFO)
+        return ReconcilerStatus(
+            state=condition.state,
+            ready=condition.reason is Reason.APPLIED,
+            reason=condition.reason.value,
+            branch=self.source.branch,
+            source=self.source.description,
+            last_applied_revision=applied,
+            last_attempted_revision=self._head
+            or (previous.last_attempted_revision if previous else None),
+            failed_revision=condition.failed_revision,
+            diagnostics=list(condition.diagnostics),
+            more_diagnostics=condition.more_diagnostics,
+            message=condition.message,
+            robots=len(fleet.requests) if fleet is not None else 0,
+            published=published,
+            cleared=cleared,
+            interval=self.interval,
+        )
 
     def _offline(self, status: ReconcilerStatus, message: str) -> ReconcilerStatus:
         """The status that says the reconciler is gone; it keeps what it had applied."""

@@ -7,22 +7,32 @@ from pathlib import Path
 
 from configurator.render import FleetRender, RenderError, render_fleet
 from configurator.source import SourceError
+from configurator.wire import ReconcilerReason, StatusDiagnostic
 from configurator.workspace import check
 
 MAX_DIAGNOSTICS = 50  # a retained status message must stay small
+FLEET_FILE = "configs/fleet.yaml"
 
 
 @dataclass
 class Desired:
-    """What one commit asks for: `fleet` when it is applicable, else the errors that stop it."""
+    """What one commit asks for: `fleet` when it is applicable, else the problems that stop it
+    (at most MAX_DIAGNOSTICS of them; `omitted` counts the rest)."""
 
     revision: str
     fleet: FleetRender | None
-    errors: list[str] = field(default_factory=list)
+    problems: list[StatusDiagnostic] = field(default_factory=list)
+    omitted: int = 0
 
     @property
     def ok(self) -> bool:
         return self.fleet is not None
+
+
+def build_failure(revision: str, message: str, *, path: str | None = None) -> Desired:
+    """A commit that cannot be applied for one reason that is not a rule's finding."""
+    problem = StatusDiagnostic(path=path, code=ReconcilerReason.BUILD_FAILED.value, message=message)
+    return Desired(revision, None, [problem])
 
 
 def load_desired(root: Path, revision: str) -> Desired:
@@ -30,18 +40,13 @@ def load_desired(root: Path, revision: str) -> Desired:
     try:
         checked = check(root, revision)
     except SourceError as exc:
-        return Desired(revision, None, [f"cannot read {revision}: {exc}"])
+        return build_failure(revision, f"cannot read {revision}: {exc}")
     if not checked.ok:
-        errors = [str(d) for d in checked.errors]
-        if len(errors) > MAX_DIAGNOSTICS:
-            more = len(errors) - MAX_DIAGNOSTICS
-            errors = [
-                *errors[:MAX_DIAGNOSTICS],
-                f"... and {more} more (robotconf validate --rev {revision})",
-            ]
-        return Desired(revision, None, errors)
+        errors = checked.errors
+        problems = [StatusDiagnostic.of(d) for d in errors[:MAX_DIAGNOSTICS]]
+        return Desired(revision, None, problems, max(0, len(errors) - MAX_DIAGNOSTICS))
     try:
         fleet = render_fleet(checked.repo)
     except RenderError as exc:
-        return Desired(revision, None, [f"configs/fleet.yaml: {exc}"])
+        return build_failure(revision, str(exc), path=FLEET_FILE)
     return Desired(revision, fleet)

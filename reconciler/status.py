@@ -11,14 +11,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from pydantic import ValidationError
-
-from configurator.launch import LaunchRequest, StopRequest
 from configurator.render import FleetRender
-from configurator.safejson import PayloadError
 from configurator.textsafe import printable
-from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
-from reconciler.retained import read_object
+from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus
+from configurator.wire import short_digest as _short_digest
+from configurator.wire import short_rev as _short_rev
+from reconciler.observed import Retained, RobotSeen
 
 
 class Verdict(str, enum.Enum):
@@ -33,7 +31,6 @@ class Verdict(str, enum.Enum):
 WORST_FIRST = list(Verdict)
 # Suspended and unassigned robots are not the reconciler's to converge: they do not fail status.
 SETTLED = {Verdict.IN_SYNC, Verdict.SUSPENDED, Verdict.UNASSIGNED}
-_ACTIVE = {AgentState.STARTING, AgentState.RUNNING, AgentState.STOPPING, AgentState.BACKOFF}
 
 
 @dataclass(frozen=True)
@@ -58,73 +55,6 @@ def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
         )
         for robot_id, request in fleet.requests.items()
     }
-
-
-@dataclass
-class Observed:
-    """One robot as the retained topics show it."""
-
-    launch: LaunchRequest | None = None
-    launch_digest: str | None = None  # also set when the payload is not a valid request
-    stopped: bool = False  # the launch topic holds a (signed) StopRequest: nothing assigned
-    status: AgentStatus | None = None
-    description: RobotDescription | None = None
-
-
-@dataclass
-class Retained:
-    robots: dict[str, Observed] = field(default_factory=dict)
-    reconciler: ReconcilerStatus | None = None
-    ignored: dict[str, int] = field(default_factory=dict)  # unreadable payloads, by topic kind
-
-
-def _kind(topic: str, topics: Topics) -> str | None:
-    """Which retained message a topic holds: "reconciler-status" or a robot topic's leaf."""
-    if topic == topics.reconciler_status:
-        return "reconciler-status"
-    where = topics.robot_of(topic)
-    return where[1] if where is not None and where[1] in _ROBOT_LEAVES else None
-
-
-_ROBOT_LEAVES = {"launch", "status", "description"}
-
-
-def parse_retained(messages: Mapping[str, bytes], topics: Topics) -> Retained:
-    """Sorts retained messages by robot; unreadable ones (size, depth, JSON, schema) are
-    skipped and counted, never fatal."""
-    out = Retained()
-    for topic, payload in messages.items():
-        kind = _kind(topic, topics)
-        if kind is None or not payload:
-            continue
-        where = topics.robot_of(topic)
-        # A robot is known to the broker even when what it published cannot be read.
-        robot = out.robots.setdefault(where[0], Observed()) if where is not None else None
-        try:
-            raw = read_object(payload)
-            if robot is None:
-                out.reconciler = ReconcilerStatus.model_validate(raw)
-            else:
-                _sort(robot, kind, raw)
-        except (PayloadError, ValidationError):
-            out.ignored[kind] = out.ignored.get(kind, 0) + 1
-    return out
-
-
-def _sort(robot: Observed, kind: str, raw: dict[str, Any]) -> None:
-    """One robot topic's parsed object into `robot`; raises ValidationError when invalid."""
-    if kind == "launch":
-        if raw.get("kind") == "Stop":
-            StopRequest.model_validate(raw)
-            robot.stopped = True
-            return
-        digest = raw.get("digest")
-        robot.launch_digest = digest if isinstance(digest, str) else None
-        robot.launch = LaunchRequest.model_validate(raw)
-    elif kind == "status":
-        robot.status = AgentStatus.model_validate(raw)
-    else:
-        robot.description = RobotDescription.model_validate(raw)
 
 
 def desired_from_retained(retained: Retained) -> dict[str, DesiredRobot]:
@@ -171,14 +101,14 @@ class RobotRow:
         }
 
 
-def verdict(desired: DesiredRobot | None, robot: Observed) -> tuple[Verdict, str]:
+def verdict(desired: DesiredRobot | None, robot: RobotSeen) -> tuple[Verdict, str]:
     """The sync verdict of one robot, and a few words of why."""
     status = robot.status
     state = status.state if status is not None else AgentState.OFFLINE
     if desired is None:
-        if state in _ACTIVE and robot.launch_digest is not None:
+        if state in ACTIVE_STATES and robot.launch_digest is not None:
             return Verdict.PROGRESSING, "not in fleet.yaml: its request is still published"
-        if state in _ACTIVE:
+        if state in ACTIVE_STATES:
             return Verdict.PROGRESSING, "not in fleet.yaml: its brain is being stopped"
         return Verdict.UNASSIGNED, "not in fleet.yaml"
     if desired.suspended:
@@ -196,7 +126,7 @@ def verdict(desired: DesiredRobot | None, robot: Observed) -> tuple[Verdict, str
     return Verdict.PROGRESSING, state.value
 
 
-def template_warning(desired: DesiredRobot | None, robot: Observed) -> str | None:
+def template_warning(desired: DesiredRobot | None, robot: RobotSeen) -> str | None:
     recommended = robot.description.recommended_template if robot.description else None
     if desired is None or not desired.template or not recommended:
         return None
@@ -213,7 +143,7 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
     rows = []
     for robot_id in sorted(set(desired) | set(retained.robots)):
         want = desired.get(robot_id)
-        robot = retained.robots.get(robot_id, Observed())
+        robot = retained.robots.get(robot_id, RobotSeen())
         found, reason = verdict(want, robot)
         status = robot.status
         warnings = [w for w in [template_warning(want, robot)] if w]
@@ -310,13 +240,11 @@ def clean(text: str) -> str:
 
 
 def short_digest(digest: str | None) -> str:
-    if not digest:
-        return "-"
-    return clean(digest.removeprefix("sha256:")[:12])
+    return clean(_short_digest(digest))
 
 
 def short_rev(revision: str | None) -> str:
-    return clean(revision[:12]) if revision else "-"
+    return clean(_short_rev(revision))
 
 
 def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -> list[str]:
@@ -345,9 +273,10 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
             f"every {status.interval or 0:g} s: is the reconciler still running?"
         )
     shown = status.diagnostics[:10]
-    lines += [f"  {clean(d)}" for d in shown]
-    if len(status.diagnostics) > len(shown):
-        lines.append(f"  ... {len(status.diagnostics) - len(shown)} more")
+    lines += [f"  {clean(str(d))}" for d in shown]
+    more = len(status.diagnostics) - len(shown) + status.more_diagnostics
+    if more > 0:
+        lines.append(f"  ... {more} more")
     return lines
 
 

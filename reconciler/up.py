@@ -29,6 +29,7 @@ from configurator.wire import Topics, redact_url
 from reconciler.commands import UsageError, connection_from, make_signer, open_view
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
+from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch, open_repo
 from reconciler.status import (
@@ -36,7 +37,6 @@ from reconciler.status import (
     build_rows,
     desired_from_fleet,
     format_text,
-    parse_retained,
 )
 
 log = logging.getLogger("robotconf.up")
@@ -92,7 +92,7 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:
         raise UsageError(str(exc)) from None
     desired = load_desired(root, head)
     if desired.fleet is None:
-        shown = "\n  ".join(desired.errors[:20])
+        shown = "\n  ".join(str(p) for p in desired.problems[:20])
         raise UsageError(
             f"the head commit {head[:12]} of '{branch}' cannot be applied:\n  {shown}\n"
             "fix it (robotconf validate), commit, and run robotconf up again"

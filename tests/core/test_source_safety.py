@@ -44,7 +44,7 @@ def test_a_link_to_a_file_outside_is_refused_and_never_read(lab: Lab, tmp_path: 
     revision = lab.commit("a link")
     assert lines(lab, "--rev", revision) == (code, out)
     desired = load_desired(lab.root, revision)
-    assert desired.fleet is None and desired.errors == out
+    assert desired.fleet is None and [str(p) for p in desired.problems] == out
 
 
 @pytest.mark.parametrize("target", ["/dev/zero", "/dev/null", "/dev/random"])
@@ -101,7 +101,7 @@ def test_validate_and_the_reconciler_agree_on_a_missing_fleet(lab: Lab) -> None:
     assert out[0].startswith("configs/fleet.yaml:1:1: error RC106 configs/fleet.yaml is missing")
     revision = lab.commit("no fleet")
     assert lines(lab, "--rev", revision) == (code, out)
-    assert load_desired(lab.root, revision).errors == out
+    assert [str(p) for p in load_desired(lab.root, revision).problems] == out
 
 
 def test_a_folder_that_is_not_a_configuration_repository(tmp_path: Path) -> None:
@@ -196,4 +196,4 @@ def test_a_shallow_clone_without_the_revision(lab: Lab, tmp_path: Path) -> None:
     )
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "no such revision" in done.stderr
-    assert load_desired(shallow, first).errors[0].startswith(f"cannot read {first}")
+    assert load_desired(shallow, first).problems[0].message.startswith(f"cannot read {first}")

@@ -40,7 +40,7 @@ def test_robot_ids_are_matched_in_full(lab: Lab, robot_id: str) -> None:
 def test_a_commit_with_a_trailing_newline_id_is_a_build_error_not_a_crash(lab: Lab) -> None:
     lab.replace(FLEET, "tb3-01:", '"tb3-01\\n":')
     desired = load_desired(lab.root, lab.commit("newline id"))
-    assert desired.fleet is None and "RC501" in desired.errors[0]
+    assert desired.fleet is None and desired.problems[0].code == "RC501"
 
 
 @pytest.mark.parametrize("robot_id", ["reconciler", "viewer", "Reconciler", "VIEWER"])

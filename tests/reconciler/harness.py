@@ -78,7 +78,7 @@ class GitLab(Lab):
 
     def requests(self, revision: str | None = None) -> dict[str, LaunchRequest]:
         desired = load_desired(self.root, revision or self.head())
-        assert desired.fleet is not None, desired.errors
+        assert desired.fleet is not None, desired.problems
         return desired.fleet.requests
 
     def robots(self) -> list[str]:

@@ -60,7 +60,7 @@ def test_a_commit_that_empties_the_fleet_is_refused_unless_allowed(
         empty = lab.commit("oops: nobody assigned")
         status = watch.wait_reconciler(lambda s: s.last_attempted_revision == empty, "attempted")
         assert status.state == "Stalled" and status.last_applied_revision == good
-        assert any("allow_empty" in d for d in status.diagnostics)
+        assert any("allow_empty" in d for d in map(str, status.diagnostics))
         assert published(watch, lab, good)
 
         lab.write("configs/fleet.yaml", "robots: {}\nallow_empty: true\n")
@@ -141,7 +141,7 @@ def test_remote_repository_is_polled(lab: GitLab, mosquitto: Mosquitto, watch: W
         try:
             status = watch.wait_reconciler(lambda s: not s.ready, "the fetch failure reported")
             assert status.state == "Stalled" and status.last_applied_revision == head
-            assert any("fetching" in d for d in status.diagnostics)
+            assert any("fetching" in d for d in map(str, status.diagnostics))
         finally:
             hidden.rename(lab.root)
         watch.wait_reconciler(lambda s: s.ready, "ready again once the remote is back")

@@ -109,7 +109,7 @@ def test_invalid_commit_changes_nothing_and_is_reported(fleet: Fleet) -> None:
     assert status.state == "Stalled" and not status.ready
     assert status.reason == "BuildFailed" and status.failed_revision == bad
     assert status.last_applied_revision == good
-    assert any("nope" in d and "delivery-gazebo.yaml" in d for d in status.diagnostics)
+    assert any("nope" in d and "delivery-gazebo.yaml" in d for d in map(str, status.diagnostics))
     for robot_id, request in fleet.requests(good).items():
         launch = fleet.watch.launch(robot_id)
         assert launch is not None and launch["digest"] == request.digest

@@ -100,7 +100,7 @@ def test_a_build_that_raises_is_stalled_and_the_next_good_commit_applied(
         status = watch.wait_reconciler(lambda s: s.last_attempted_revision == failed, "tried")
         assert status.state == "Stalled" and status.reason == "InternalError"
         assert status.failed_revision == failed and status.last_applied_revision == good
-        assert any("RecursionError" in d for d in status.diagnostics)
+        assert any("RecursionError" in d for d in map(str, status.diagnostics))
         assert serves(watch, lab, good)
         assert running.thread.is_alive()
 
@@ -162,7 +162,7 @@ def test_a_request_too_large_for_an_agent_is_a_build_error(
         status = watch.wait_reconciler(lambda s: s.last_attempted_revision == big, "tried")
         assert status.state == "Stalled" and status.reason == "BuildFailed"
         assert status.last_applied_revision == lab.first
-        assert any("tb3-03" in d and "bytes, over the" in d for d in status.diagnostics)
+        assert any("tb3-03" in d and "bytes, over the" in d for d in map(str, status.diagnostics))
     finally:
         running.stop()
 

@@ -55,7 +55,7 @@ def test_desired_state_comes_from_the_commit_not_the_work_tree(lab: GitLab) -> N
     bad = lab.commit("broken fleet")
     desired = load_desired(lab.root, bad)
     assert not desired.ok
-    assert any("configs/fleet.yaml" in e and "nope" in e for e in desired.errors)
+    assert any(p.path == "configs/fleet.yaml" and "nope" in p.message for p in desired.problems)
 
 
 def test_remote_branch_is_fetched_into_a_cache_clone(lab: GitLab, tmp_path: Path) -> None:

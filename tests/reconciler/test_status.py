@@ -4,17 +4,15 @@ from __future__ import annotations
 
 from configurator.launch import StopRequest
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+from reconciler.observed import Retained, RobotSeen, parse_retained
 from reconciler.retained import oversized
 from reconciler.status import (
     DesiredRobot,
     FleetStatus,
     Health,
-    Observed,
-    Retained,
     Verdict,
     build_rows,
     format_text,
-    parse_retained,
     verdict,
 )
 
@@ -26,9 +24,11 @@ def want(digest: str = D1, suspended: bool = False) -> DesiredRobot:
     return DesiredRobot("r1", "delivery", digest, suspended)
 
 
-def seen(state: AgentState | None, digest: str | None = D1, published: str | None = D1) -> Observed:
+def seen(
+    state: AgentState | None, digest: str | None = D1, published: str | None = D1
+) -> RobotSeen:
     status = None if state is None else AgentStatus(robot_id="r1", state=state, digest=digest)
-    return Observed(launch_digest=published, status=status)
+    return RobotSeen(launch_digest=published, status=status)
 
 
 def test_running_the_desired_request_is_in_sync() -> None:
@@ -72,16 +72,16 @@ def test_rows_are_worst_first_and_warn_about_templates() -> None:
     }
     retained = Retained(
         robots={
-            "a-ok": Observed(
+            "a-ok": RobotSeen(
                 launch_digest=D1,
                 status=AgentStatus(robot_id="a-ok", state=AgentState.RUNNING, digest=D1),
                 description=RobotDescription(id="a-ok", recommended_template="turtlebot3-burger"),
             ),
-            "c-bad": Observed(
+            "c-bad": RobotSeen(
                 launch_digest=D1,
                 status=AgentStatus(robot_id="c-bad", state=AgentState.FAILED, restarts=5),
             ),
-            "z-gone": Observed(
+            "z-gone": RobotSeen(
                 status=AgentStatus(robot_id="z-gone", state=AgentState.IDLE),
             ),
         }

@@ -1,0 +1,137 @@
+"""The retained topics read into models: what the broker says each robot holds, runs and is.
+
+Pure and shared: the reconciler's observe step and the fleet status parse payloads here, and
+only here. Unreadable payloads (size, depth, JSON, schema) are skipped and counted, never fatal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from configurator.launch import LaunchRequest, StopRequest
+from configurator.safejson import PayloadError
+from configurator.wire import (
+    ACTIVE_STATES,
+    AgentStatus,
+    ReconcilerStatus,
+    RobotDescription,
+    Topics,
+)
+from reconciler.retained import Ignored, read_object
+
+RECONCILER_STATUS = "reconciler-status"
+_ROBOT_LEAVES = ("launch", "status", "description")
+
+
+@dataclass
+class RobotSeen:
+    """One robot as the retained topics show it."""
+
+    launch: LaunchRequest | None = None  # only when read in full (`requests=True`)
+    launch_digest: str | None = None  # the digest a launch payload carries, valid or not
+    launch_retained: bool = False  # the launch topic holds a request (readable or not)
+    stopped: bool = False  # the launch topic holds a Stop for this robot: nothing assigned
+    status: AgentStatus | None = None
+    description: RobotDescription | None = None
+
+    @property
+    def brain_active(self) -> bool:
+        """Its agent says a brain is up or about to be."""
+        return self.status is not None and self.status.state in ACTIVE_STATES
+
+
+@dataclass
+class Retained:
+    robots: dict[str, RobotSeen] = field(default_factory=dict)
+    reconciler: ReconcilerStatus | None = None
+    ignored: dict[str, int] = field(default_factory=dict)  # unreadable payloads, by kind
+
+    def launch_digests(self) -> dict[str, str | None]:
+        """robot -> digest of its retained request; None when that request is unreadable.
+        Robots with nothing retained, or a Stop, are absent: they are cleared."""
+        return {
+            robot_id: robot.launch_digest
+            for robot_id, robot in self.robots.items()
+            if robot.launch_retained
+        }
+
+    def active(self) -> set[str]:
+        """Robots whose agent says a brain is up or about to be."""
+        return {robot_id for robot_id, robot in self.robots.items() if robot.brain_active}
+
+
+def _kind(topic: str, topics: Topics) -> tuple[str | None, str] | None:
+    """(robot id or None, kind) of a topic whose retained message we read, else None."""
+    if topic == topics.reconciler_status:
+        return None, RECONCILER_STATUS
+    where = topics.robot_of(topic)
+    if where is not None and where[1] in _ROBOT_LEAVES:
+        return where
+    return None
+
+
+class LaunchHeader(BaseModel):
+    """What the reconciler reads of a launch payload: which request it is, not all of it."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    kind: str | None = None
+    digest: str | None = None
+
+
+def parse_retained(
+    messages: Mapping[str, bytes],
+    topics: Topics,
+    *,
+    requests: bool = True,
+    ignored: Ignored | None = None,
+) -> Retained:
+    """Sorts retained messages by robot and reads each with its model.
+
+    `requests=False` reads only the kind, robot and digest of launch payloads (the reconciler
+    needs no more, and a full validation of 10,000 requests would cost it at every step)."""
+    out = Retained()
+    for topic, payload in messages.items():
+        found = _kind(topic, topics)
+        if found is None or not payload:
+            continue
+        robot_id, kind = found
+        # A robot is known to the broker even when what it published cannot be read.
+        robot = out.robots.setdefault(robot_id, RobotSeen()) if robot_id is not None else None
+        if robot is not None and kind == "launch":
+            # Unreadable is still retained: it is replaced (or cleared), never trusted.
+            robot.launch_retained = True
+        try:
+            raw = read_object(payload)
+            if robot is None:
+                out.reconciler = ReconcilerStatus.model_validate(raw)
+            elif kind == "launch":
+                _read_launch(robot, robot_id or "", raw, requests)
+            elif kind == "status":
+                robot.status = AgentStatus.model_validate(raw)
+            else:
+                robot.description = RobotDescription.model_validate(raw)
+        except (PayloadError, ValidationError, ValueError) as exc:
+            out.ignored[kind] = out.ignored.get(kind, 0) + 1
+            if ignored is not None:
+                ignored.note(kind, topic, payload, " ".join(str(exc).split())[:300])
+    return out
+
+
+def _read_launch(robot: RobotSeen, robot_id: str, raw: dict[str, Any], full: bool) -> None:
+    """A launch payload: a Stop for this robot clears it; anything else is a request, whose
+    digest counts even when the rest is invalid (what differs is republished anyway)."""
+    header = LaunchHeader.model_validate(raw)
+    if header.kind == "Stop":
+        if StopRequest.model_validate(raw).robot_id != robot_id:
+            raise ValueError(f"a Stop for another robot on the launch topic of {robot_id}")
+        robot.launch_retained = False
+        robot.stopped = True
+        return
+    robot.launch_digest = header.digest
+    if full:
+        robot.launch = LaunchRequest.model_validate(raw)
