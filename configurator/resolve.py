@@ -26,10 +26,6 @@ class ResolvedCapability:
     scheme: MappingScheme | None
     selections: dict[str, Selection] = field(default_factory=dict)
 
-    @property
-    def selected_actions(self) -> list[str]:
-        return list(self.config.actions)
-
 
 def resolve_capability(repo: Repository, config: CapabilityConfiguration) -> ResolvedCapability:
     platform = repo.platform(config.platform)

@@ -121,10 +121,6 @@ class Controller:
         self._stop.set()
         self._wake.set()
 
-    @property
-    def stopped(self) -> bool:
-        return self._stop.is_set()
-
     def run(self) -> None:
         """Runs until `stop()`; never raises for broker or repository trouble, nor for a bug in
         one step: that is logged with its traceback, reported, and retried with backoff."""
