@@ -24,11 +24,12 @@ from configurator.mqtt import Connection
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.signing import Signed
 from configurator.source import SourceError
-from configurator.wire import ReconcilerStatus, StatusDiagnostic, Topics, now, short_rev
+from configurator.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
 from reconciler.decide import Condition, Decision, Observation, Reason, decide
 from reconciler.desired import FLEET_FILE, Desired, load_desired
 from reconciler.diff import Actions
 from reconciler.observed import RECONCILER_STATUS, parse_retained
+from reconciler.report import Followed, StatusWriter, one_line, status_of
 from reconciler.retained import Ignored, Presence, RetainedView, read_object, take_snapshot
 from reconciler.source import BranchSource
 
@@ -37,7 +38,6 @@ log = logging.getLogger("robotconf.reconciler")
 BACKOFF_INITIAL, BACKOFF_MAX = 1.0, 30.0
 LOCAL_POLL = 1.0  # when refs cannot be watched, look at the branch this often
 SAMPLE_TIMEOUT = 10.0  # seconds to wait for a sample of the robots' statuses
-WILL_TIMEOUT = 10.0  # seconds to wait for the broker to take a new Last Will
 # A request the agents would refuse for its size is a build error, not a publish: the echo of
 # an oversized message is dropped on arrival and would be republished at every pass. The
 # margin leaves room for the signature.
@@ -80,7 +80,6 @@ class Controller:
         self.topics = Topics(prefix)
         self.interval = interval
         self.publish_timeout = publish_timeout
-        self._on_reconciled = on_reconciled
         self._sign = signer
         self._builder = builder
         self._wake = threading.Event()
@@ -98,14 +97,13 @@ class Controller:
         )
         # The Last Will (state Offline) lives on a connection of its own: a will is fixed at
         # connect time, and this one must name the revision applied last.
-        self.presence = Presence(connection, self.topics.reconciler_status, "reconciler-will")
-        self._will_key: tuple[object, ...] | None = None
+        presence = Presence(connection, self.topics.reconciler_status, "reconciler-will")
+        self.writer = StatusWriter(self.view, self.topics, presence, self.ignored, on_reconciled)
+        self.followed = Followed(source.branch, source.description, interval)
         self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
         self.serving: Desired | None = None  # the last good revision, applied or being applied
-        self.status: ReconcilerStatus | None = None
-        self._status_payload: bytes | None = None  # what was published last, to know its echo
         self._head: str | None = None
         self._last_log: str | None = None
         self._waiting_logged = False
@@ -150,7 +148,7 @@ class Controller:
                     backoff = BACKOFF_INITIAL
                 self._wake.wait(min(waits))
         finally:
-            self._go_offline()
+            self.writer.go_offline()
             self.view.stop()
 
     def _watch_source(self) -> bool:
@@ -189,13 +187,13 @@ class Controller:
         if topic != self.topics.reconciler_status:
             return
         payload = self.view.get(topic)
-        if not payload or payload == self._status_payload:
+        if not payload or self.writer.is_echo(payload):
             return
         try:
             offline = ReconcilerStatus.model_validate(read_object(payload)).state == "Offline"
         except (PayloadError, ValidationError) as exc:
             # Counted as it arrives: our next status may replace it before a step reads it.
-            self.ignored.note(RECONCILER_STATUS, topic, payload, _one_line(exc))
+            self.ignored.note(RECONCILER_STATUS, topic, payload, one_line(exc))
             return
         if offline and not self._stop.is_set():
             self._wake.set()
@@ -364,27 +362,16 @@ class Controller:
         if self._recovered:
             return
         self._recovered = True
-        previous = self._retained_status()
+        previous = self.writer.retained()
         if previous is None:
             return
-        if self.status is None:
-            self.status = previous
+        if self.writer.status is None:
+            self.writer.status = previous
         revision = previous.last_applied_revision
         if self.serving is None and revision and revision != head:
             candidate = self._build(revision)
             if candidate.ok:
                 self.serving = candidate
-
-    def _retained_status(self) -> ReconcilerStatus | None:
-        topic = self.topics.reconciler_status
-        payload = self.view.get(topic)
-        if not payload:
-            return None
-        try:
-            return ReconcilerStatus.model_validate(read_object(payload))
-        except (PayloadError, ValidationError) as exc:
-            self.ignored.note(RECONCILER_STATUS, topic, payload, _one_line(exc))
-            return None
 
     def _stop_payload(self, robot_id: str, revision: str) -> bytes:
         """Empty (DESIGN §7), or a signed StopRequest when requests are signed: an agent that
@@ -395,6 +382,11 @@ class Controller:
 
     # ------------------------------------------------------------------ report
 
+    @property
+    def status(self) -> ReconcilerStatus | None:
+        """The reconciler status last written (or found on the broker at start)."""
+        return self.writer.status
+
     def _report(
         self,
         condition: Condition,
@@ -402,132 +394,23 @@ class Controller:
         *,
         heartbeat: bool = False,
     ) -> None:
-        """The one writer of the reconciler status (retained).
-
-        Published when its content differs from what the broker holds, and at every resync
-        (`heartbeat`) so that readers can tell a live reconciler from a dead one. `since`
-        moves only when the content does."""
-        status = self._status_of(condition, actions).model_copy(
-            update={"heartbeat": now(), "ignored_payloads": self.ignored.counts()}
-        )
-        retained = self._retained_status()
-        if retained is not None and _same(retained, status):
-            status = status.model_copy(update={"since": retained.since})
-            if not heartbeat and _same(retained, status, but={"heartbeat"}):
-                self.status = retained
-                self._notify(retained)
-                return
-        self._hold_will(status)
-        self.status = status
-        payload = status.model_dump_json().encode()
-        self._status_payload = payload
-        self.view.publish_retained([(self.topics.reconciler_status, payload)], 10.0)
-        self._notify(status)
-
-    def _status_of(
-        self, condition: Condition, actions: Actions[LaunchRequest] | None
-    ) -> ReconcilerStatus:
-        previous = self.status
-        serving = self.serving
-        fleet = serving.fleet if serving is not None else None
-        applied = serving.revision if serving is not None else None
-        if applied is None and previous is not None:
-            applied = previous.last_applied_revision
-        published = len(actions.publish) if actions else 0
-        cleared = len(actions.clear) if actions else 0
-        quiet = not published and not cleared and condition.reason is not Reason.PROGRESSING
-        if quiet and previous is not None and previous.last_applied_revision == applied:
-            # A resync that changed nothing keeps the counts of the apply that did.
-            published, cleared = previous.published, previous.cleared
+        """The step's outcome, logged once and written to the retained status."""
         if condition.state == "Stalled" and condition.reason is not Reason.BROKER_UNAVAILABLE:
-            self._say(f"{condition.message}", logging.WARNING)
+            self._say(condition.message, logging.WARNING)
         elif condition.reason is Reason.APPLIED:
             self._say(f"in sync with {short_rev(self._head)} ({self.source.branch})", logging.INFO)
-        return ReconcilerStatus(
-            state=condition.state,
-            ready=condition.reason is Reason.APPLIED,
-            reason=condition.reason.value,
-            branch=self.source.branch,
-            source=self.source.description,
-            last_applied_revision=applied,
-            last_attempted_revision=self._head
-            or (previous.last_attempted_revision if previous else None),
-            failed_revision=condition.failed_revision,
-            diagnostics=list(condition.diagnostics),
-            more_diagnostics=condition.more_diagnostics,
-            message=condition.message,
-            robots=len(fleet.requests) if fleet is not None else 0,
-            published=published,
-            cleared=cleared,
-            interval=self.interval,
+        status = status_of(
+            condition,
+            actions,
+            serving=self.serving,
+            head=self._head,
+            previous=self.writer.status,
+            followed=self.followed,
         )
-
-    def _offline(self, status: ReconcilerStatus, message: str) -> ReconcilerStatus:
-        """The status that says the reconciler is gone; it keeps what it had applied."""
-        return ReconcilerStatus(
-            state="Offline",
-            ready=False,
-            reason=Reason.OFFLINE.value,
-            branch=status.branch,
-            source=status.source,
-            last_applied_revision=status.last_applied_revision,
-            last_attempted_revision=status.last_attempted_revision,
-            message=message,
-            robots=status.robots,
-            interval=self.interval,
-        )
-
-    def _hold_will(self, status: ReconcilerStatus) -> None:
-        """Keeps the Last Will naming the revision applied: a new will is a new connection, so
-        only when what it says changes."""
-        key = (status.last_applied_revision, status.robots, status.branch, status.source)
-        if key == self._will_key:
-            return
-        will = self._offline(
-            status, "the reconciler is offline: it died or lost the broker (its Last Will)"
-        )
-        if self.presence.hold(will.model_dump_json().encode(), WILL_TIMEOUT):
-            self._will_key = key
-        else:
-            log.warning("the broker did not take the reconciler's Last Will; trying again later")
-
-    def _go_offline(self) -> None:
-        """On a clean stop the will is not sent: say offline ourselves, then leave."""
-        try:
-            if self.status is not None and self.view.synced:
-                offline = self._offline(self.status, "the reconciler was stopped")
-                payload = offline.model_dump_json().encode()
-                self._status_payload = payload
-                self.view.publish_retained([(self.topics.reconciler_status, payload)], 5.0)
-        except Exception:
-            log.exception("cannot publish the offline status")
-        finally:
-            self.presence.release()
-
-    def _notify(self, status: ReconcilerStatus) -> None:
-        if self._on_reconciled is None:
-            return
-        try:
-            self._on_reconciled(status)
-        except Exception:
-            log.exception("the on_reconciled callback failed; ignored")
+        self.writer.write(status, heartbeat=heartbeat)
 
     def _say(self, message: str, level: int) -> None:
         """Logs a line once, not at every resync."""
         if message != self._last_log:
             log.log(level, "%s", message)
             self._last_log = message
-
-
-_NOT_CONTENT = {"since", "published", "cleared", "heartbeat", "ignored_payloads"}
-
-
-def _same(a: ReconcilerStatus, b: ReconcilerStatus, but: set[str] | None = None) -> bool:
-    """Equal but for the fields in `but` (default: counts and times: `since` marks the last
-    change that matters, and a heartbeat or a skipped payload is not one)."""
-    exclude = _NOT_CONTENT if but is None else but
-    return a.model_dump(exclude=exclude) == b.model_dump(exclude=exclude)
-
-
-def _one_line(exc: Exception) -> str:
-    return " ".join(str(exc).split())[:300]

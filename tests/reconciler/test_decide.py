@@ -12,6 +12,7 @@ from configurator.wire import AgentState, AgentStatus, StatusDiagnostic, Topics
 from reconciler.decide import Observation, Reason, decide
 from reconciler.desired import Desired, build_failure
 from reconciler.observed import parse_retained
+from reconciler.report import Followed, offline_status, status_of
 from tests.lab import Lab
 
 ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
@@ -116,3 +117,25 @@ def test_the_retained_topics_read_into_what_the_broker_holds() -> None:
     assert retained.launch_digests() == {"r1": "sha256:1", "r3": None, "r5": None}
     assert retained.active() == {"r4"}
     assert retained.ignored == {"launch": 2}
+
+
+def test_a_quiet_resync_keeps_the_counts_of_the_apply_that_changed_something(lab: Lab) -> None:
+    serving = desired(lab, HEAD)
+    followed = Followed("main", "/lab", 30.0)
+    applied = decide(Observation(head=HEAD, build=serving, launches={}))
+    first = status_of(
+        applied.condition,
+        applied.actions,
+        serving=serving,
+        head=HEAD,
+        previous=None,
+        followed=followed,
+    )
+    assert (first.state, first.published, first.robots) == ("Ready", 5, 5)
+    quiet = decide(Observation(head=None, build=build_failure("", "gone"), serving=serving))
+    later = status_of(
+        quiet.condition, None, serving=serving, head=None, previous=first, followed=followed
+    )
+    assert later.published == 5 and later.last_attempted_revision == HEAD
+    assert later.state == "Stalled" and later.reason == "SourceUnavailable"
+    assert offline_status(later, "bye").last_applied_revision == HEAD
