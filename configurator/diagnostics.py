@@ -6,14 +6,10 @@ import difflib
 import json
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
-from enum import Enum
 
+from configurator.codes import Severity as Severity
+from configurator.codes import require
 from configurator.textsafe import printable
-
-
-class Severity(str, Enum):
-    ERROR = "error"
-    WARNING = "warning"
 
 
 @dataclass(frozen=True, order=True)
@@ -26,6 +22,9 @@ class Diagnostic:
     severity: Severity
     code: str
     message: str
+
+    def __post_init__(self) -> None:
+        require(self.code, self.severity)
 
     def __str__(self) -> str:
         # Names and values come from the files: escaped, so that none can forge a line.
