@@ -59,13 +59,16 @@ def format_text(diagnostics: list[Diagnostic]) -> str:
     return "".join(f"{d}\n" for d in diagnostics)
 
 
+def _tally(diagnostics: list[Diagnostic]) -> tuple[int, int]:
+    """How many errors and how many warnings."""
+    errors = sum(d.is_error for d in diagnostics)
+    return errors, len(diagnostics) - errors
+
+
 def format_json(diagnostics: list[Diagnostic]) -> str:
     rows = [dict(asdict(d), severity=d.severity.value) for d in diagnostics]
-    summary = {
-        "errors": sum(d.is_error for d in diagnostics),
-        "warnings": sum(not d.is_error for d in diagnostics),
-        "diagnostics": rows,
-    }
+    errors, warnings = _tally(diagnostics)
+    summary = {"errors": errors, "warnings": warnings, "diagnostics": rows}
     return json.dumps(summary, indent=2) + "\n"
 
 
@@ -93,8 +96,7 @@ def format_github(diagnostics: list[Diagnostic]) -> str:
 
 
 def summary_line(diagnostics: list[Diagnostic], files: int) -> str:
-    errors = sum(d.is_error for d in diagnostics)
-    warnings = len(diagnostics) - errors
+    errors, warnings = _tally(diagnostics)
     if not diagnostics:
         return f"{files} files checked: no problems"
     return f"{files} files checked: {errors} error(s), {warnings} warning(s)"
