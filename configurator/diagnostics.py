@@ -6,14 +6,10 @@ import difflib
 import json
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
-from enum import Enum
 
+from configurator.codes import Severity as Severity
+from configurator.codes import require
 from configurator.textsafe import printable
-
-
-class Severity(str, Enum):
-    ERROR = "error"
-    WARNING = "warning"
 
 
 @dataclass(frozen=True, order=True)
@@ -26,6 +22,9 @@ class Diagnostic:
     severity: Severity
     code: str
     message: str
+
+    def __post_init__(self) -> None:
+        require(self.code, self.severity)
 
     def __str__(self) -> str:
         # Names and values come from the files: escaped, so that none can forge a line.
@@ -60,13 +59,16 @@ def format_text(diagnostics: list[Diagnostic]) -> str:
     return "".join(f"{d}\n" for d in diagnostics)
 
 
+def _tally(diagnostics: list[Diagnostic]) -> tuple[int, int]:
+    """How many errors and how many warnings."""
+    errors = sum(d.is_error for d in diagnostics)
+    return errors, len(diagnostics) - errors
+
+
 def format_json(diagnostics: list[Diagnostic]) -> str:
     rows = [dict(asdict(d), severity=d.severity.value) for d in diagnostics]
-    summary = {
-        "errors": sum(d.is_error for d in diagnostics),
-        "warnings": sum(not d.is_error for d in diagnostics),
-        "diagnostics": rows,
-    }
+    errors, warnings = _tally(diagnostics)
+    summary = {"errors": errors, "warnings": warnings, "diagnostics": rows}
     return json.dumps(summary, indent=2) + "\n"
 
 
@@ -94,8 +96,7 @@ def format_github(diagnostics: list[Diagnostic]) -> str:
 
 
 def summary_line(diagnostics: list[Diagnostic], files: int) -> str:
-    errors = sum(d.is_error for d in diagnostics)
-    warnings = len(diagnostics) - errors
+    errors, warnings = _tally(diagnostics)
     if not diagnostics:
         return f"{files} files checked: no problems"
     return f"{files} files checked: {errors} error(s), {warnings} warning(s)"

@@ -19,6 +19,8 @@ import yaml
 from yaml.constructor import SafeConstructor
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
+from configurator.codes import require
+
 try:  # the C parser is several times faster; fall back where libyaml is missing
     from yaml import CSafeLoader as _Loader
 except ImportError:  # pragma: no cover - depends on the PyYAML build
@@ -111,6 +113,9 @@ class YamlProblem:
     col: int
     code: str
     message: str
+
+    def __post_init__(self) -> None:
+        require(self.code)
 
 
 class YamlReadError(Exception):

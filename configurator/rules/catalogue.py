@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import Any
 
 from configurator.composition import definition_problems
-from configurator.diagnostics import did_you_mean
 from configurator.repository import Entry, Repository
 from configurator.rules.report import Reporter
 from configurator.types import SettingDefinition
@@ -19,12 +18,11 @@ def _settings(
 ) -> None:
     for name, definition in settings.items():
         for field, code, message in definition_problems(definition):
-            report.error(entry, [*base, name, field], code, f"setting '{name}': {message}")
+            report.add(entry, [*base, name, field], code, f"setting '{name}': {message}")
 
 
 def check_catalogue(repo: Repository, report: Reporter) -> None:
     actions = repo.actions
-    known_actions = set(actions) | repo.broken.get("action", set())
 
     for platform in repo.platforms.values():
         for template in platform.templates.values():
@@ -32,14 +30,14 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
             seen: set[str] = set()
             for i, mapping in enumerate(template.model.mappings):
                 if mapping in seen:
-                    report.error(
+                    report.add(
                         template, ["mappings", i], "RC607", f"mapping '{mapping}' is listed twice"
                     )
                 seen.add(mapping)
             for scheme in platform.schemes.values():
                 unbound = [m for m in template.model.mappings if m not in scheme.model.mappings]
                 if unbound:
-                    report.warning(
+                    report.add(
                         scheme,
                         ["mappings"],
                         "RC608",
@@ -52,22 +50,26 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
         model = action.model
         for i, platform_name in enumerate(model.platforms):
             if platform_name not in repo.platforms:
-                report.error(
+                report.unknown(
                     action,
                     ["platforms", i],
                     "RC605",
-                    f"unknown platform '{platform_name}'"
-                    f"{did_you_mean(platform_name, repo.platforms)}",
+                    f"unknown platform '{platform_name}'",
+                    platform_name,
+                    repo.platforms,
                 )
         for i, required in enumerate(model.requires):
             if required == name:
-                report.error(action, ["requires", i], "RC604", f"action '{name}' requires itself")
-            elif required not in known_actions:
-                report.error(
+                report.add(action, ["requires", i], "RC604", f"action '{name}' requires itself")
+            elif required not in actions:
+                report.unknown(
                     action,
                     ["requires", i],
                     "RC604",
-                    f"requires unknown action '{required}'{did_you_mean(required, actions)}",
+                    f"requires unknown action '{required}'",
+                    required,
+                    actions,
+                    unreadable=repo.is_broken("action", required),
                 )
         for logic_name, logic in model.logics.items():
             _settings(report, action, ["logics", logic_name, "settings"], logic.settings)
@@ -75,16 +77,19 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
     for task in repo.tasks.values():
         for i, implementation in enumerate(task.model.implementations):
             if not implementation:
-                report.error(
+                report.add(
                     task, ["implementations", i], "RC603", "an implementation lists no actions"
                 )
             for j, action_name in enumerate(implementation):
-                if action_name not in known_actions:
-                    report.error(
+                if action_name not in actions:
+                    report.unknown(
                         task,
                         ["implementations", i, j],
                         "RC603",
-                        f"unknown action '{action_name}'{did_you_mean(action_name, actions)}",
+                        f"unknown action '{action_name}'",
+                        action_name,
+                        actions,
+                        unreadable=repo.is_broken("action", action_name),
                     )
 
     for environment in repo.environments.values():
@@ -92,7 +97,7 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
         for i, obj in enumerate(environment.model.objects):
             if obj.id in first:
                 line, _ = environment.doc.locate(["objects", first[obj.id], "id"])
-                report.error(
+                report.add(
                     environment,
                     ["objects", i, "id"],
                     "RC606",

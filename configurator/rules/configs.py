@@ -12,7 +12,6 @@ from configurator.composition import (
     setting_problem,
     template_gaps,
 )
-from configurator.diagnostics import did_you_mean
 from configurator.repository import Entry, Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
@@ -33,52 +32,55 @@ def check_capability(
     resolved = resolve_capability(repo, config)
     platform = resolved.platform
     if platform is None:
-        report.error(
+        report.unknown(
             entry,
             ["platform"],
             "RC201",
-            f"unknown platform '{config.platform}'{did_you_mean(config.platform, repo.platforms)}",
+            f"unknown platform '{config.platform}'",
+            config.platform,
+            repo.platforms,
         )
         return resolved
-    if resolved.scheme is None and not repo.is_broken(
-        "mapping-scheme", f"{platform.name}/{config.mapping_scheme}"
-    ):
-        report.error(
+    scheme_name = config.mapping_scheme
+    if resolved.scheme is None:
+        report.unknown(
             entry,
             ["mapping_scheme"],
             "RC202",
-            f"platform {platform.name} has no mapping scheme '{config.mapping_scheme}'"
-            f"{did_you_mean(config.mapping_scheme, platform.schemes)}",
+            f"platform {platform.name} has no mapping scheme '{scheme_name}'",
+            scheme_name,
+            platform.schemes,
+            unreadable=repo.is_broken("mapping-scheme", f"{platform.name}/{scheme_name}"),
         )
     template_name = config.robot_template
-    if (
-        template_name is not None
-        and resolved.template is None
-        and not repo.is_broken("robot-template", f"{platform.name}/{template_name}")
-    ):
-        report.error(
+    if template_name is not None and resolved.template is None:
+        report.unknown(
             entry,
             ["robot_template"],
             "RC203",
-            f"platform {platform.name} has no robot template '{template_name}'"
-            f"{did_you_mean(template_name, platform.templates)}",
+            f"platform {platform.name} has no robot template '{template_name}'",
+            template_name,
+            platform.templates,
+            unreadable=repo.is_broken("robot-template", f"{platform.name}/{template_name}"),
         )
 
     for action_name, logic_name in config.actions.items():
         action_entry = repo.actions.get(action_name)
         if action_entry is None:
-            if not repo.is_broken("action", action_name):
-                report.error(
-                    entry,
-                    ["actions", action_name],
-                    "RC204",
-                    f"unknown action '{action_name}'{did_you_mean(action_name, repo.actions)}",
-                    key=True,
-                )
+            report.unknown(
+                entry,
+                ["actions", action_name],
+                "RC204",
+                f"unknown action '{action_name}'",
+                action_name,
+                repo.actions,
+                unreadable=repo.is_broken("action", action_name),
+                key=True,
+            )
             continue
         action = action_entry.model
         if platform.name not in action.platforms:
-            report.error(
+            report.add(
                 entry,
                 ["actions", action_name],
                 "RC204",
@@ -88,16 +90,17 @@ def check_capability(
             )
         selection = resolved.selections.get(action_name)
         if selection is None:
-            report.error(
+            report.unknown(
                 entry,
                 ["actions", action_name],
                 "RC205",
-                f"action '{action_name}' has no logic '{logic_name}'"
-                f"{did_you_mean(logic_name, action.logics)}",
+                f"action '{action_name}' has no logic '{logic_name}'",
+                logic_name,
+                action.logics,
             )
             continue
         for required in missing_requires(action, config.actions):
-            report.error(
+            report.add(
                 entry,
                 ["actions", action_name],
                 "RC303",
@@ -122,7 +125,7 @@ def _check_mappings(
                 needers.setdefault(mapping, []).append(selection.logic_name)
         if needers:
             listing = "; ".join(f"'{m}' needed by {', '.join(ls)}" for m, ls in needers.items())
-            report.error(
+            report.add(
                 entry,
                 ["robot_template"],
                 "RC301",
@@ -133,7 +136,7 @@ def _check_mappings(
         for action_name, selection in resolved.selections.items():
             unbound = scheme_gaps(selection.logic, resolved.scheme)
             if unbound:
-                report.error(
+                report.add(
                     entry,
                     ["actions", action_name],
                     "RC302",
@@ -153,17 +156,13 @@ def _check_setting(
 ) -> None:
     definition = definitions.get(name)
     if definition is None:
-        report.error(
-            entry,
-            loc,
-            "RC401",
-            f"{owner} has no setting '{name}'{did_you_mean(name, definitions)}",
-            key=True,
+        report.unknown(
+            entry, loc, "RC401", f"{owner} has no setting '{name}'", name, definitions, key=True
         )
         return
     problem = setting_problem(definition, value)
     if problem is not None:
-        report.error(entry, loc, problem[0], f"setting '{name}' {problem[1]}")
+        report.add(entry, loc, problem[0], f"setting '{name}' {problem[1]}")
 
 
 def check_scenario(
@@ -174,19 +173,21 @@ def check_scenario(
 ) -> None:
     scenario = entry.model
     resolved = capabilities.get(scenario.capability)
-    if resolved is None and not repo.is_broken("capability", scenario.capability):
-        report.error(
+    if resolved is None:
+        report.unknown(
             entry,
             ["capability"],
             "RC206",
-            f"unknown capability configuration '{scenario.capability}'"
-            f"{did_you_mean(scenario.capability, repo.capabilities)}",
+            f"unknown capability configuration '{scenario.capability}'",
+            scenario.capability,
+            repo.capabilities,
+            unreadable=repo.is_broken("capability", scenario.capability),
         )
 
     if resolved is not None:
         template = resolved.template
         if scenario.robot_settings and resolved.config.robot_template is None:
-            report.error(
+            report.add(
                 entry,
                 ["robot_settings"],
                 "RC405",
@@ -211,12 +212,13 @@ def check_scenario(
             if selection is None and logic_name in resolved.config.actions.values():
                 continue  # its action is unknown or unreadable: reported at the capability
             if selection is None:
-                report.error(
+                report.unknown(
                     entry,
                     ["logic_settings", logic_name],
                     "RC406",
-                    f"logic '{logic_name}' is not selected by capability "
-                    f"'{scenario.capability}'{did_you_mean(logic_name, selected_logics)}",
+                    f"logic '{logic_name}' is not selected by capability '{scenario.capability}'",
+                    logic_name,
+                    selected_logics,
                     key=True,
                 )
                 continue
@@ -235,44 +237,48 @@ def check_scenario(
     if scenario.environment is not None:
         env_entry = repo.environments.get(scenario.environment)
         if env_entry is None:
-            if not repo.is_broken("environment", scenario.environment):
-                report.error(
-                    entry,
-                    ["environment"],
-                    "RC207",
-                    f"unknown environment '{scenario.environment}'"
-                    f"{did_you_mean(scenario.environment, repo.environments)}",
-                )
+            report.unknown(
+                entry,
+                ["environment"],
+                "RC207",
+                f"unknown environment '{scenario.environment}'",
+                scenario.environment,
+                repo.environments,
+                unreadable=repo.is_broken("environment", scenario.environment),
+            )
         else:
             environment = env_entry.model
 
     for i, set_name in enumerate(scenario.knowledge_sets):
         if scenario.environment is None:
-            report.error(
+            report.add(
                 entry,
                 ["knowledge_sets", i],
                 "RC208",
                 f"knowledge set '{set_name}' needs an environment; set 'environment'",
             )
         elif environment is not None and set_name not in environment.knowledge_sets:
-            report.error(
+            report.unknown(
                 entry,
                 ["knowledge_sets", i],
                 "RC208",
-                f"environment '{scenario.environment}' has no knowledge set '{set_name}'"
-                f"{did_you_mean(set_name, environment.knowledge_sets)}",
+                f"environment '{scenario.environment}' has no knowledge set '{set_name}'",
+                set_name,
+                environment.knowledge_sets,
             )
 
     for i, goal in enumerate(scenario.goals):
         task_entry = repo.tasks.get(goal.task)
         if task_entry is None:
-            if not repo.is_broken("task", goal.task):
-                report.error(
-                    entry,
-                    ["goals", i, "task"],
-                    "RC210",
-                    f"unknown task '{goal.task}'{did_you_mean(goal.task, repo.tasks)}",
-                )
+            report.unknown(
+                entry,
+                ["goals", i, "task"],
+                "RC210",
+                f"unknown task '{goal.task}'",
+                goal.task,
+                repo.tasks,
+                unreadable=repo.is_broken("task", goal.task),
+            )
         elif (
             resolved is not None
             and implementation_for(task_entry.model, resolved.config.actions) is None
@@ -280,7 +286,7 @@ def check_scenario(
             options = " or ".join(
                 "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations
             )
-            report.error(
+            report.add(
                 entry,
                 ["goals", i, "task"],
                 "RC304",
@@ -290,7 +296,7 @@ def check_scenario(
         if goal.location is None:
             continue
         if scenario.environment is None:
-            report.error(
+            report.add(
                 entry,
                 ["goals", i, "location"],
                 "RC306",
@@ -300,16 +306,16 @@ def check_scenario(
             matches = find_location(environment, goal.location)
             locations = [o for o in environment.objects if o.type == "Location"]
             if not matches:
-                names = [o.name for o in locations] + [o.id for o in locations]
-                report.error(
+                report.unknown(
                     entry,
                     ["goals", i, "location"],
                     "RC305",
-                    f"environment '{scenario.environment}' has no object '{goal.location}'"
-                    f"{did_you_mean(goal.location, names)}",
+                    f"environment '{scenario.environment}' has no object '{goal.location}'",
+                    goal.location,
+                    [o.name for o in locations] + [o.id for o in locations],
                 )
             elif len(matches) > 1:
-                report.error(
+                report.add(
                     entry,
                     ["goals", i, "location"],
                     "RC305",
@@ -317,7 +323,7 @@ def check_scenario(
                     f"'{scenario.environment}'; use the object's id",
                 )
             elif matches[0].type != "Location":
-                report.error(
+                report.add(
                     entry,
                     ["goals", i, "location"],
                     "RC305",
@@ -331,7 +337,7 @@ def check_fleet(repo: Repository, report: Reporter) -> None:
         return
     for robot_id, assignment in fleet.model.robots.items():
         if not is_robot_id(robot_id):
-            report.error(
+            report.add(
                 fleet,
                 ["robots", robot_id],
                 "RC501",
@@ -340,7 +346,7 @@ def check_fleet(repo: Repository, report: Reporter) -> None:
                 key=True,
             )
         elif (user := reserved_robot_id(robot_id)) is not None:
-            report.error(
+            report.add(
                 fleet,
                 ["robots", robot_id],
                 "RC501",
@@ -348,13 +354,13 @@ def check_fleet(repo: Repository, report: Reporter) -> None:
                 "service side, and a robot logs in as its id; choose another id",
                 key=True,
             )
-        if assignment.scenario not in repo.scenarios and not repo.is_broken(
-            "scenario", assignment.scenario
-        ):
-            report.error(
+        if assignment.scenario not in repo.scenarios:
+            report.unknown(
                 fleet,
                 ["robots", robot_id, "scenario"],
                 "RC209",
-                f"unknown scenario '{assignment.scenario}'"
-                f"{did_you_mean(assignment.scenario, repo.scenarios)}",
+                f"unknown scenario '{assignment.scenario}'",
+                assignment.scenario,
+                repo.scenarios,
+                unreadable=repo.is_broken("scenario", assignment.scenario),
             )

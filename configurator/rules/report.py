@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
-from configurator.diagnostics import Diagnostic, Severity
+from configurator.codes import severity_of
+from configurator.diagnostics import Diagnostic, did_you_mean
 from configurator.repository import Entry
 
 
@@ -13,7 +14,7 @@ class Reporter:
     def __init__(self) -> None:
         self.found: list[Diagnostic] = []
 
-    def error(
+    def add(
         self,
         entry: Entry[Any],
         loc: Sequence[str | int],
@@ -22,27 +23,26 @@ class Reporter:
         *,
         key: bool = False,
     ) -> None:
-        self._add(entry, loc, Severity.ERROR, code, message, key)
-
-    def warning(
-        self,
-        entry: Entry[Any],
-        loc: Sequence[str | int],
-        code: str,
-        message: str,
-        *,
-        key: bool = False,
-    ) -> None:
-        self._add(entry, loc, Severity.WARNING, code, message, key)
-
-    def _add(
-        self,
-        entry: Entry[Any],
-        loc: Sequence[str | int],
-        severity: Severity,
-        code: str,
-        message: str,
-        key: bool,
-    ) -> None:
+        """A finding at `loc` (the key itself with `key`), as severe as configurator/codes.py
+        declares its code."""
+        severity = severity_of(code)
         line, col = entry.doc.locate(loc, key=key)
         self.found.append(Diagnostic(entry.path, line, col, severity, code, message))
+
+    def unknown(
+        self,
+        entry: Entry[Any],
+        loc: Sequence[str | int],
+        code: str,
+        message: str,
+        name: str,
+        known: Iterable[str],
+        *,
+        unreadable: bool = False,
+        key: bool = False,
+    ) -> None:
+        """A reference to `name`, which is not among `known`: `message` and a did-you-mean hint.
+        Nothing when the file `name` refers to exists but is `unreadable`: that file is reported
+        itself, once."""
+        if not unreadable:
+            self.add(entry, loc, code, f"{message}{did_you_mean(name, known)}", key=key)

@@ -1,0 +1,203 @@
+"""Every diagnostic code, declared once: its severity and the rule it stands for.
+
+Diagnostics refuse a code that is not declared here, and README.md's table of rule codes is
+generated from it: `python -m configurator.codes README.md` rewrites the table.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+
+class Severity(str, Enum):
+    ERROR = "error"
+    WARNING = "warning"
+
+
+@dataclass(frozen=True)
+class Rule:
+    code: str
+    severity: Severity
+    summary: str  # README's row for the code: what it refuses, in a line
+
+
+RULES: dict[str, Rule] = {
+    rule.code: rule
+    for rule in (
+        Rule("RC001", Severity.ERROR, "file is not valid UTF-8"),
+        Rule("RC002", Severity.ERROR, "tab in indentation"),
+        Rule(
+            "RC003",
+            Severity.ERROR,
+            "YAML syntax error; also a line break only YAML sees (lone CR, NEL, U+2028, U+2029), "
+            "refused so that every reported line is the line editors and git show",
+        ),
+        Rule("RC004", Severity.ERROR, "duplicate key"),
+        Rule(
+            "RC005",
+            Severity.ERROR,
+            "YAML alias (`*name`, `<<: *name`): refused, so an alias bomb fails at once in bounded "
+            "memory",
+        ),
+        Rule("RC006", Severity.ERROR, "more than one YAML document in a file"),
+        Rule("RC007", Severity.ERROR, "empty file, or the top level is not a mapping"),
+        Rule(
+            "RC008",
+            Severity.ERROR,
+            "not read: larger than 8 MiB (checked before reading), unreadable, or not a regular "
+            "file — a symbolic link, FIFO, device, socket or git submodule is refused and never "
+            "opened, in the work tree and in a commit alike",
+        ),
+        Rule(
+            "RC009",
+            Severity.ERROR,
+            "unsupported YAML value: tags (a standard tag only when its value fits it: `!!float "
+            "abc` is refused), keys that are not text (`1:`, `yes:`, `~:` — quote them), integers "
+            "beyond 64 bits, NaN/infinity, nesting deeper than 64 (block or flow; checked before "
+            "parsing)",
+        ),
+        Rule("RC101", Severity.ERROR, 'unknown field (with the allowed fields, or "did you mean")'),
+        Rule("RC102", Severity.ERROR, "missing required field"),
+        Rule("RC103", Severity.ERROR, "wrong type or value for a field"),
+        Rule("RC104", Severity.ERROR, "`name:` differs from the file name"),
+        Rule(
+            "RC105",
+            Severity.ERROR,
+            "YAML file in an unknown place, or ending in `.yml`, `.YAML` or any spelling but "
+            "`.yaml` (not read)",
+        ),
+        Rule(
+            "RC106",
+            Severity.ERROR,
+            "`configs/fleet.yaml` is missing (the reconciler would refuse the commit too)",
+        ),
+        Rule("RC201", Severity.ERROR, "capability: unknown platform"),
+        Rule("RC202", Severity.ERROR, "capability: the platform has no such mapping scheme"),
+        Rule("RC203", Severity.ERROR, "capability: the platform has no such robot template"),
+        Rule(
+            "RC204",
+            Severity.ERROR,
+            "capability: unknown action, or an action not available on the platform",
+        ),
+        Rule("RC205", Severity.ERROR, "capability: the action has no such logic"),
+        Rule("RC206", Severity.ERROR, "scenario: unknown capability configuration"),
+        Rule("RC207", Severity.ERROR, "scenario: unknown environment"),
+        Rule(
+            "RC208",
+            Severity.ERROR,
+            "scenario: the environment has no such knowledge set (or there is no environment)",
+        ),
+        Rule("RC209", Severity.ERROR, "fleet: unknown scenario"),
+        Rule("RC210", Severity.ERROR, "scenario: a goal names an unknown task"),
+        Rule(
+            "RC301",
+            Severity.ERROR,
+            "a selected logic needs a mapping the robot template lacks (lists each missing mapping "
+            "and the logics needing it)",
+        ),
+        Rule(
+            "RC302",
+            Severity.ERROR,
+            "a selected logic needs a mapping the mapping scheme does not bind",
+        ),
+        Rule("RC303", Severity.ERROR, "a selected action requires an action that is not selected"),
+        Rule(
+            "RC304",
+            Severity.ERROR,
+            "a goal's task is not achievable: no implementation is a subset of the selected "
+            "actions",
+        ),
+        Rule(
+            "RC305",
+            Severity.ERROR,
+            "a goal's location is not a `Location` object of the environment",
+        ),
+        Rule("RC306", Severity.ERROR, "a goal has a location but the scenario has no environment"),
+        Rule("RC401", Severity.ERROR, "unknown robot or logic setting"),
+        Rule("RC402", Severity.ERROR, "setting value of the wrong type"),
+        Rule("RC403", Severity.ERROR, "setting value out of range"),
+        Rule("RC404", Severity.ERROR, "setting value not one of the choices"),
+        Rule("RC405", Severity.ERROR, "robot settings without a robot template"),
+        Rule("RC406", Severity.ERROR, "logic settings for a logic the capability does not select"),
+        Rule(
+            "RC501",
+            Severity.ERROR,
+            "robot id not usable as an MQTT topic level (matched in full: a trailing newline is not"
+            " an id), or reserved: a service user name (`reconciler`, `viewer`, in any case)",
+        ),
+        Rule("RC601", Severity.ERROR, "a setting's default does not fit its own definition"),
+        Rule(
+            "RC602",
+            Severity.ERROR,
+            "a setting definition contradicts itself (minimum > maximum, enum without choices, "
+            "bounds on text)",
+        ),
+        Rule("RC603", Severity.ERROR, "a task implementation names an unknown action"),
+        Rule("RC604", Severity.ERROR, "an action requires an unknown action, or itself"),
+        Rule("RC605", Severity.ERROR, "an action lists an unknown platform"),
+        Rule("RC606", Severity.ERROR, "an object id is used twice in an environment"),
+        Rule("RC607", Severity.ERROR, "a robot template lists a mapping twice"),
+        Rule(
+            "RC608",
+            Severity.WARNING,
+            "a mapping scheme does not bind a mapping of a robot template of its platform",
+        ),
+    )
+}
+
+
+class UnregisteredCode(ValueError):
+    """A diagnostic with a code that is not in RULES, or with another severity than its rule's."""
+
+
+def severity_of(code: str) -> Severity:
+    """The severity RULES declares for a code; an undeclared code is refused."""
+    rule = RULES.get(code)
+    if rule is None:
+        raise UnregisteredCode(f"{code!r} is not declared in configurator/codes.py")
+    return rule.severity
+
+
+def require(code: str, severity: Severity = Severity.ERROR) -> None:
+    """Refuse a code RULES does not declare with this severity: a new rule is declared first."""
+    declared = severity_of(code)
+    if declared is not severity:
+        raise UnregisteredCode(f"{code} is declared as {declared.value}, not {severity.value}")
+
+
+TABLE_HEAD = "| code | rule |\n| --- | --- |\n"
+
+
+def readme_table() -> str:
+    """README's table of rule codes, a row per declared code; a warning says so."""
+    rows = [
+        f"| {r.code} | {'warning: ' if r.severity is Severity.WARNING else ''}{r.summary} |\n"
+        for r in RULES.values()
+    ]
+    return TABLE_HEAD + "".join(rows)
+
+
+def with_readme_table(readme: str) -> str:
+    """The README text with its table of rule codes (head and following rows) generated anew."""
+    start = readme.index(TABLE_HEAD)
+    end = start + len(TABLE_HEAD)
+    while readme.startswith("| RC", end):
+        end = readme.index("\n", end) + 1
+    return readme[:start] + readme_table() + readme[end:]
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 1:
+        print("usage: python -m configurator.codes README.md", file=sys.stderr)
+        return 2
+    path = Path(argv[0])
+    text = path.read_text(encoding="utf-8")
+    path.write_text(with_readme_table(text), encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
