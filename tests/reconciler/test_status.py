@@ -221,3 +221,19 @@ def test_parse_retained_sorts_topics_and_skips_garbage() -> None:
     assert parsed.robots["r1"].launch_digest == D1 and parsed.robots["r1"].launch is None
     assert parsed.robots["r2"].status is None
     assert parsed.reconciler is not None and parsed.reconciler.ready
+
+
+def test_text_from_the_broker_is_never_rich_markup_and_never_wrapped() -> None:
+    long_reason = "brain failed: " + "x" * 400
+    status = AgentStatus(
+        robot_id="[bold]r1", state=AgentState.FAILED, message=f"[red]{long_reason}[/red]"
+    )
+    retained = Retained(robots={"[bold]r1": Observed(launch_digest=D1, status=status)})
+    desired = {"[bold]r1": DesiredRobot("[bold]r1", "[link=http://x]s[/link]", D1)}
+    text = fleet_status_text(FleetStatus(build_rows(desired, retained), None, "[i]repo[/i]"))
+    assert "\x1b" not in text
+    row = next(line for line in text.splitlines() if "Degraded" in line)
+    assert row.startswith("[bold]r1 ")
+    assert "[link=http://x]s[/link]" in row and f"[red]{long_reason}[/red]" in row
+    assert "desired: [i]repo[/i]" in text
+    assert all(line == line.rstrip() for line in text.splitlines())
