@@ -26,7 +26,7 @@ def fleet_table(fleet: FleetStatus) -> Table:
     table = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
     for name in COLUMNS:
         table.add_column(name, no_wrap=name != "SCENARIO")
-    table.add_column("", overflow="fold")  # why a robot is not in sync
+    table.add_column("", overflow="fold")  # why a robot is not in sync: wraps on a terminal
     for r in fleet.rows:
         style = _STYLE[r.verdict]
         table.add_row(

@@ -8,6 +8,8 @@ import threading
 from pathlib import Path
 
 import click
+from rich.live import Live
+from rich.text import Text
 
 from configurator.cli.broker_options import BrokerOptions, broker_options
 from configurator.cli.errors import CliError, ExitCode
@@ -91,9 +93,6 @@ def _follow(
                 sys.stdout.write(plain_text(fleet_status_view(fleet)) + "---\n")
                 sys.stdout.flush()
         return code
-
-    from rich.live import Live
-    from rich.text import Text
 
     with Live(console=terminal_console(), auto_refresh=False, transient=False) as live:
         for fleet in watch(view, topics, desired, changed, stop):

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import click
 from rich.console import Group
+from rich.live import Live
 
 from configurator.cli.broker_options import BrokerOptions, broker_options
 from configurator.cli.errors import ExitCode
@@ -22,7 +22,7 @@ class Screen:
     def __init__(self, live: bool) -> None:
         self.live = live
         self._header: list[str] = []
-        self._live: Any = None  # rich.live.Live while the fleet is shown on a terminal
+        self._live: Live | None = None  # while the fleet is shown on a terminal
 
     def say(self, line: str) -> None:
         text = f"robotconf up: {line}"
@@ -34,8 +34,6 @@ class Screen:
     def begin(self, header: list[str]) -> None:
         self._header = header
         if self.live:
-            from rich.live import Live
-
             self._live = Live(console=terminal_console(), auto_refresh=False)
             self._live.start()
 
