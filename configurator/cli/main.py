@@ -57,6 +57,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+# What the `server` extra installs: a command that needs one of them says so in one line.
+SERVER_EXTRA = {"rich", "git", "watchfiles", "amqtt"}
+
+
 class LazyGroup(click.Group):
     """click's documented lazy-loading group: a command's module is imported when it runs (or
     its own --help is asked for); the group's help comes from the table."""
@@ -72,7 +76,17 @@ class LazyGroup(click.Group):
         if cmd_name not in self.lazy:
             return super().get_command(ctx, cmd_name)
         module_name, attribute = self.lazy[cmd_name][0].split(":")
-        command = getattr(import_module(module_name), attribute)
+        try:
+            module = import_module(module_name)
+        except ModuleNotFoundError as exc:
+            missing = (exc.name or "").split(".")[0]
+            if missing not in SERVER_EXTRA:
+                raise
+            raise CliError(
+                f"robotconf {cmd_name} needs the server extra ({missing} is not installed): "
+                "pip install 'robotconf[server]'"
+            ) from None
+        command = getattr(module, attribute)
         if not isinstance(command, click.Command):
             raise TypeError(f"{module_name}:{attribute} is not a click command")
         return command

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import click
@@ -331,6 +332,21 @@ def test_a_cli_error_is_one_line_with_its_code(capsys: pytest.CaptureFixture[str
     finally:
         cli.commands.pop("fails-for-test")
         cli.commands.pop("crashes-for-test")
+
+
+def test_a_command_without_the_server_extra_says_what_to_install() -> None:
+    code = (
+        "import sys; sys.modules['rich'] = None  # as if rich were not installed\n"
+        "from configurator.cli import main; sys.exit(main(['catalog', '--repo', sys.argv[1]]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(ROOT)], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 2
+    assert done.stderr == (
+        "robotconf: robotconf catalog needs the server extra (rich is not installed): "
+        "pip install 'robotconf[server]'\n"
+    )
 
 
 def test_version() -> None:
