@@ -1,11 +1,11 @@
-"""What exists: a plain summary of the catalogue for `robotconf catalog`."""
+"""What exists: a summary of the catalogue for `robotconf catalog` (JSON, and the words of its
+text form, which configurator/cli/views.py draws)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from configurator.repository import Repository
-from configurator.textsafe import printable_lines
 
 
 def catalogue_summary(repo: Repository) -> dict[str, Any]:
@@ -46,30 +46,49 @@ def catalogue_summary(repo: Repository) -> dict[str, Any]:
     }
 
 
-def format_catalogue(summary: dict[str, Any]) -> str:
-    out: list[str] = []
-    out.append("Platforms")
-    for name, p in summary["platforms"].items():
-        out.append(f"  {name}" + (f"  - {p['description']}" if p["description"] else ""))
-        for t, info in p["robot_templates"].items():
-            out.append(f"    template {t}: {', '.join(info['mappings'])}")
-        for s, mappings in p["mapping_schemes"].items():
-            out.append(f"    scheme   {s}: binds {', '.join(mappings)}")
-    out.append("Tasks")
-    for name, impls in summary["tasks"].items():
-        alternatives = " | ".join("[" + ", ".join(i) + "]" for i in impls)
-        out.append(f"  {name}: {alternatives}")
-    out.append("Actions")
-    for name, a in summary["actions"].items():
-        req = f"  requires {', '.join(a['requires'])}" if a["requires"] else ""
-        out.append(f"  {name} ({', '.join(a['platforms'])}){req}")
-        for logic, info in a["logics"].items():
-            needs = ", ".join(info["mappings"]) or "no mappings"
-            out.append(f"    logic {logic}: needs {needs}")
-    out.append("Environments")
-    for name, e in summary["environments"].items():
-        out.append(
-            f"  {name} ({e['type']}): locations {', '.join(e['locations']) or '-'}; "
-            f"knowledge sets {', '.join(e['knowledge_sets']) or '-'}"
+Entry = tuple[str, list[str]]  # a line, and the lines beneath it
+Section = tuple[str, list[Entry]]
+
+
+def catalogue_sections(summary: dict[str, Any]) -> list[Section]:
+    """The summary in words: per section, each entry's line and the lines beneath it."""
+    platforms = [
+        (
+            name + (f"  - {p['description']}" if p["description"] else ""),
+            [
+                f"template {t}: {', '.join(info['mappings'])}"
+                for t, info in p["robot_templates"].items()
+            ]
+            + [f"scheme   {s}: binds {', '.join(m)}" for s, m in p["mapping_schemes"].items()],
         )
-    return printable_lines(out)
+        for name, p in summary["platforms"].items()
+    ]
+    tasks: list[Entry] = [
+        (f"{name}: {' | '.join('[' + ', '.join(i) + ']' for i in impls)}", [])
+        for name, impls in summary["tasks"].items()
+    ]
+    actions = [
+        (
+            f"{name} ({', '.join(a['platforms'])})"
+            + (f"  requires {', '.join(a['requires'])}" if a["requires"] else ""),
+            [
+                f"logic {logic}: needs {', '.join(info['mappings']) or 'no mappings'}"
+                for logic, info in a["logics"].items()
+            ],
+        )
+        for name, a in summary["actions"].items()
+    ]
+    environments: list[Entry] = [
+        (
+            f"{name} ({e['type']}): locations {', '.join(e['locations']) or '-'}; "
+            f"knowledge sets {', '.join(e['knowledge_sets']) or '-'}",
+            [],
+        )
+        for name, e in summary["environments"].items()
+    ]
+    return [
+        ("Platforms", platforms),
+        ("Tasks", tasks),
+        ("Actions", actions),
+        ("Environments", environments),
+    ]

@@ -7,6 +7,7 @@ from typing import Any, Literal
 
 from configurator.render import FleetRender
 from configurator.textsafe import markdown_code, markdown_text, printable_lines
+from configurator.wire import short_rev
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
 
@@ -84,7 +85,7 @@ def _counts(plan: Plan) -> str:
 
 
 def _short(rev: str) -> str:
-    return rev[:12] if len(rev) >= 40 and "+" not in rev else rev
+    return short_rev(rev) if len(rev) >= 40 and "+" not in rev else rev
 
 
 _SIGN = {"added": "+", "removed": "-", "changed": "~", "held": "="}

@@ -1,4 +1,7 @@
-"""The capability tree (tasks > actions > logics): what is chosen, what could be, and why not."""
+"""The capability tree (tasks > actions > logics): what is chosen, what could be, and why not.
+
+The words of each node are here; `robotconf tree` draws them (configurator/cli/views.py).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +10,6 @@ from dataclasses import dataclass, field
 from configurator.composition import implementation_for, missing_requires, why_unavailable
 from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
-from configurator.textsafe import printable_lines
 
 
 @dataclass
@@ -88,58 +90,33 @@ def build_tree(repo: Repository, capability: str) -> CapabilityTree:
     )
 
 
-def _action_lines(node: ActionNode, prefix: str, last: bool) -> list[str]:
-    branch, cont = ("└─ ", "   ") if last else ("├─ ", "│  ")
+def heading(tree: CapabilityTree) -> str:
+    template = tree.robot_template or "no robot template"
+    return f"{tree.name}  (platform {tree.platform}, scheme {tree.mapping_scheme}, {template})"
+
+
+def task_label(task: TaskNode) -> str:
+    if task.achieved_by is not None:
+        return f"✔ task {task.name}: achieved by {', '.join(task.achieved_by)}"
+    return f"○ task {task.name}: not achievable with the selected actions"
+
+
+def alternative_label(index: int, actions: list[ActionNode]) -> str:
+    return f"alternative {index + 1}: {', '.join(a.name for a in actions)}"
+
+
+def action_label(node: ActionNode) -> str:
     mark = "✔" if node.selected and not node.reasons else ("✗" if node.reasons else "○")
     state = "selected" if node.selected else "not selected"
     why = f"; {'; '.join(node.reasons)}" if node.reasons else ""
-    lines = [f"{prefix}{branch}{mark} action {node.name} ({state}{why})"]
-    for i, logic in enumerate(node.logics):
-        lb = "└─ " if i == len(node.logics) - 1 else "├─ "
-        if logic.chosen:
-            text = f"● {logic.name} (chosen"
-            text += f"; but {'; '.join(logic.reasons)})" if logic.reasons else ")"
-        elif logic.reasons:
-            text = f"✗ {logic.name}: {'; '.join(logic.reasons)}"
-        else:
-            text = f"○ {logic.name} (available)"
-        lines.append(f"{prefix}{cont}{lb}{text}")
-    return lines
+    return f"{mark} action {node.name} ({state}{why})"
 
 
-def format_tree(tree: CapabilityTree) -> str:
-    template = tree.robot_template or "no robot template"
-    lines = [f"{tree.name}  (platform {tree.platform}, scheme {tree.mapping_scheme}, {template})"]
-    groups: list[tuple[str, list[tuple[str | None, list[ActionNode]]]]] = []
-    for task in tree.tasks:
-        if task.achieved_by is not None:
-            head = f"✔ task {task.name}: achieved by {', '.join(task.achieved_by)}"
-        else:
-            head = f"○ task {task.name}: not achievable with the selected actions"
-        if len(task.implementations) == 1:
-            groups.append((head, [(None, task.implementations[0])]))
-        else:
-            groups.append(
-                (
-                    head,
-                    [
-                        (f"alternative {i + 1}: {', '.join(a.name for a in impl)}", impl)
-                        for i, impl in enumerate(task.implementations)
-                    ],
-                )
-            )
-    if tree.other_actions:
-        groups.append(("actions in no task", [(None, tree.other_actions)]))
-    for gi, (head, alternatives) in enumerate(groups):
-        last_group = gi == len(groups) - 1
-        lines.append(("└─ " if last_group else "├─ ") + head)
-        gp = "   " if last_group else "│  "
-        for ai, (title, actions) in enumerate(alternatives):
-            prefix = gp
-            if title is not None:
-                last_alt = ai == len(alternatives) - 1
-                lines.append(gp + ("└─ " if last_alt else "├─ ") + title)
-                prefix = gp + ("   " if last_alt else "│  ")
-            for i, node in enumerate(actions):
-                lines.extend(_action_lines(node, prefix, i == len(actions) - 1))
-    return printable_lines(lines)
+def logic_label(logic: LogicNode) -> str:
+    if logic.chosen:
+        return f"● {logic.name} (chosen" + (
+            f"; but {'; '.join(logic.reasons)})" if logic.reasons else ")"
+        )
+    if logic.reasons:
+        return f"✗ {logic.name}: {'; '.join(logic.reasons)}"
+    return f"○ {logic.name} (available)"

@@ -1,6 +1,7 @@
 """Fleet status (DESIGN §10), pure: desired robots + retained topics -> one verdict per robot.
 
-Formatting for people (a table, worst first) and for machines (JSON) lives here too.
+The JSON form and the words of the reconciler's lines are here; the table for people is drawn
+by configurator/cli/fleet_view.py.
 """
 
 from __future__ import annotations
@@ -231,7 +232,7 @@ class FleetStatus:
         }
 
 
-# ------------------------------------------------------------------ text
+# ------------------------------------------------------------------ words
 
 
 def clean(text: str) -> str:
@@ -278,48 +279,3 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
     if more > 0:
         lines.append(f"  ... {more} more")
     return lines
-
-
-_COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
-
-
-def format_text(fleet: FleetStatus) -> str:
-    lines = reconciler_lines(fleet.reconciler, fleet.checked_at)
-    lines.append(f"desired: {clean(fleet.desired_from)}")
-    lines += [f"note: {clean(n)}" for n in fleet.notes]
-    if fleet.ignored:
-        kinds = ", ".join(f"{n} {kind}" for kind, n in sorted(fleet.ignored.items()))
-        lines.append(f"note: unreadable retained payloads skipped: {kinds}")
-    table = [
-        (
-            clean(r.robot_id),
-            r.verdict.value,
-            "yes" if r.online else "no",
-            r.scenario or "-",
-            short_digest(r.desired),
-            short_digest(r.reported),
-            r.state,
-            str(r.restarts),
-        )
-        for r in fleet.rows
-    ]
-    widths = [max(len(c), *(len(row[i]) for row in table)) for i, c in enumerate(_COLUMNS)]
-    lines.append("")
-    lines.append("  ".join(c.ljust(w) for c, w in zip(_COLUMNS, widths, strict=True)).rstrip())
-    for row, r in zip(table, fleet.rows, strict=True):
-        text = "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True))
-        if r.verdict is not Verdict.IN_SYNC:
-            text += f"  {clean(r.reason)}"
-        lines.append(text.rstrip())
-    if not fleet.rows:
-        lines.append("(no robot is assigned or known to the broker)")
-    warnings = [f"warning: {clean(r.robot_id)}: {clean(w)}" for r in fleet.rows for w in r.warnings]
-    if warnings:
-        lines.append("")
-        lines += warnings
-    counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
-    lines.append("")
-    lines.append(
-        f"{len(fleet.rows)} robots: {counts}" + ("" if fleet.in_sync else " — not in sync")
-    )
-    return "\n".join(lines) + "\n"

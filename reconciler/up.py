@@ -2,11 +2,11 @@
 
 Agents run as `robotconf agent` subprocesses with a stand-in brain; the reconciler runs in this
 process. Ctrl-C stops the agents (and their brains) first, then the reconciler, then the broker.
+What is shown, and how, is the caller's (configurator/cli/up.py): an UpScreen.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import logging
 import os
@@ -15,29 +15,28 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import yaml
 
+from configurator.cli.errors import CliError, ExitCode
 from configurator.mqtt import Connection
 from configurator.render import FleetRender
 from configurator.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from configurator.source import SourceError
-from configurator.wire import Topics, redact_url
-from reconciler.commands import UsageError, connection_from, make_signer, open_view
+from configurator.wire import Topics, redact_url, short_rev
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
+from reconciler.fleet_status import change_key, open_view
+from reconciler.lifecycle import log_to_file, on_stop_signals
 from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
+from reconciler.signer import make_signer
 from reconciler.source import LocalBranch, open_repo
-from reconciler.status import (
-    FleetStatus,
-    build_rows,
-    desired_from_fleet,
-    format_text,
-)
+from reconciler.status import FleetStatus, build_rows, desired_from_fleet
 
 log = logging.getLogger("robotconf.up")
 
@@ -46,7 +45,7 @@ RESYNC_INTERVAL = 10.0
 
 
 @dataclass
-class Plan:
+class UpSetup:
     """What `up` will run, decided before anything starts."""
 
     root: Path
@@ -61,20 +60,20 @@ def _git_repo(root: Path) -> Any:
     try:
         return open_repo(root)
     except SourceError as exc:
-        raise UsageError(str(exc).replace("the reconciler", "robotconf up")) from None
+        raise CliError(str(exc).replace("the reconciler", "robotconf up")) from None
 
 
-def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:
-    """Checks the repository and says what will be applied; raises UsageError."""
+def prepare(root: Path, branch: str | None, workdir: str | None) -> UpSetup:
+    """Checks the repository and says what will be applied; raises CliError."""
     root = root.absolute()
     if not (root / "configs").is_dir():
-        raise UsageError(f"{root} has no configs/ folder; run robotconf up in a lab repository")
+        raise CliError(f"{root} has no configs/ folder; run robotconf up in a lab repository")
     repo = _git_repo(root)
     notes: list[str] = []
     try:
         if branch is None:
             if repo.head.is_detached:
-                raise UsageError("HEAD is detached; say which branch to apply: --branch BRANCH")
+                raise CliError("HEAD is detached; say which branch to apply: --branch BRANCH")
             branch = str(repo.active_branch.name)
         top = Path(repo.working_tree_dir or root)
         rel = [os.path.relpath(root / part, top) for part in ("configs", "models")]
@@ -89,16 +88,16 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> Plan:
     try:
         head = LocalBranch(root, branch).head()
     except SourceError as exc:
-        raise UsageError(str(exc)) from None
+        raise CliError(str(exc)) from None
     desired = load_desired(root, head)
     if desired.fleet is None:
         shown = "\n  ".join(str(p) for p in desired.problems[:20])
-        raise UsageError(
-            f"the head commit {head[:12]} of '{branch}' cannot be applied:\n  {shown}\n"
+        raise CliError(
+            f"the head commit {short_rev(head)} of '{branch}' cannot be applied:\n  {shown}\n"
             "fix it (robotconf validate), commit, and run robotconf up again"
         )
     folder = Path(workdir).absolute() if workdir else root / ".robotconf" / "up"
-    return Plan(root, branch, head, desired.fleet, folder, notes)
+    return UpSetup(root, branch, head, desired.fleet, folder, notes)
 
 
 def agent_yaml(
@@ -194,16 +193,6 @@ class Agents:
                 proc.wait()
 
 
-def _log_to_file(path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(path, encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
-    root = logging.getLogger()
-    root.addHandler(handler)
-    root.setLevel(logging.INFO)
-    logging.getLogger("watchfiles").setLevel(logging.WARNING)
-
-
 def _demo_keys(folder: Path) -> KeyPair:
     """The key pair of this up folder: made once, reused, so restarted agents still verify."""
     pair = KeyPair(folder / PRIVATE_NAME, folder / PUBLIC_NAME)
@@ -212,22 +201,45 @@ def _demo_keys(folder: Path) -> KeyPair:
     return generate_keys(folder, force=True)
 
 
-def run_up(args: argparse.Namespace) -> int:
-    try:
-        plan = prepare(args.repo, args.branch, args.workdir)
-        if args.broker:
-            connection_from(args)  # validates the URL and credentials now
-    except UsageError as exc:
-        print(f"robotconf: {exc}", file=sys.stderr)
-        return 2
-    _log_to_file(plan.workdir / "up.log")
-    say = _printer()
-    for note in plan.notes:
+class UpScreen(Protocol):
+    """Where `up` reports: lines as they happen, and the fleet whenever it changes."""
+
+    @property
+    def live(self) -> bool:
+        """True when the fleet is drawn on a screen (then changes are not said as lines)."""
+        ...
+
+    def say(self, line: str) -> None: ...
+
+    def begin(self, header: list[str]) -> None:
+        """The fleet is about to be shown, under these lines."""
+        ...
+
+    def show(self, fleet: FleetStatus) -> None: ...
+
+    def end(self) -> None:
+        """Nothing more will be shown (the stopping lines are said after)."""
+        ...
+
+
+def run_up(
+    setup: UpSetup,
+    given_broker: str | None,
+    connect: Callable[[str], Connection],
+    prefix: str,
+    signing: bool,
+    screen: UpScreen,
+) -> ExitCode:
+    """Runs the loop until SIGINT or SIGTERM; `connect` makes the connection to a broker URL
+    (raising CliError); without `given_broker`, an embedded broker is started."""
+    log_to_file(setup.workdir / "up.log")
+    say = screen.say
+    for note in setup.notes:
         say(f"note: {note}")
 
     broker: Any = None
-    if args.broker:
-        url = args.broker
+    if given_broker:
+        url = given_broker
         say(f"broker: {redact_url(url)} (given)")
     else:
         from reconciler.broker import BrokerStartError, EmbeddedBroker
@@ -236,62 +248,64 @@ def run_up(args: argparse.Namespace) -> int:
         try:
             broker.start()
         except BrokerStartError as exc:
-            print(f"robotconf: {exc}; or pass --broker mqtt://HOST:PORT", file=sys.stderr)
-            return 2
+            raise CliError(f"{exc}; or pass --broker mqtt://HOST:PORT") from None
         url = broker.url
         taken = "" if broker.port == 1883 else " (port 1883 is taken)"
         say(f"broker: embedded amqtt at {url}{taken}")
-    connection = connection_from(args, url)
+    try:
+        connection = connect(url)
+    except CliError:
+        if broker is not None:
+            broker.stop()
+        raise
     signer, public_key = None, None
-    if not args.no_signing:
-        keys = _demo_keys(plan.workdir / "keys")
+    if signing:
+        keys = _demo_keys(setup.workdir / "keys")
         signer, public_key = make_signer(keys.private), keys.public
         say(f"signing: every request is signed; agents verify with {public_key}")
 
     stop = threading.Event()
     changed = threading.Event()
     controller = Controller(
-        LocalBranch(plan.root, plan.branch),
+        LocalBranch(setup.root, setup.branch),
         connection,
-        args.prefix,
+        prefix,
         RESYNC_INTERVAL,
         on_reconciled=lambda status: changed.set(),
         signer=signer,
     )
-    agents = Agents(plan.workdir, connection, args.prefix, public_key)
-    view = open_view(connection, args.prefix, changed.set)
+    agents = Agents(setup.workdir, connection, prefix, public_key)
+    view = open_view(connection, prefix, changed.set)
 
-    def on_signal(signum: int, frame: object) -> None:
-        if stop.is_set():  # a second Ctrl-C: do not wait for anyone
-            for proc in agents.procs.values():
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(proc.pid, signal.SIGKILL)
-            os._exit(130)
-        stop.set()
-        changed.set()
+    def at_once() -> None:  # a second Ctrl-C: do not wait for anyone
+        for proc in agents.procs.values():
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+        os._exit(ExitCode.INTERRUPTED)
 
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
+    on_stop_signals(stop, changed.set, again=at_once)
 
     say(
-        f"reconciling {plan.root} branch '{plan.branch}' (head {plan.head[:12]}), "
-        f"{len(plan.fleet.requests)} robot(s); agent files and logs in {plan.workdir}"
+        f"reconciling {setup.root} branch '{setup.branch}' (head {short_rev(setup.head)}), "
+        f"{len(setup.fleet.requests)} robot(s); agent files and logs in {setup.workdir}"
     )
     shown = redact_url(url)  # a password in the URL stays out of the terminal
     header = [
-        f"robotconf up: broker {shown}, branch '{plan.branch}' of {plan.root}",
+        f"robotconf up: broker {shown}, branch '{setup.branch}' of {setup.root}",
         f"  another terminal: robotconf status --broker {shown}    Ctrl-C stops everything",
-        *[f"  note: {n}" for n in plan.notes],
+        *[f"  note: {n}" for n in setup.notes],
         "",
     ]
     say(f"another terminal: robotconf status --broker {shown}   Ctrl-C stops everything")
     thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
     thread.start()
     view.start()
-    agents.start(sorted(plan.fleet.requests), plan.fleet)
+    agents.start(sorted(setup.fleet.requests), setup.fleet)
+    screen.begin(header)
     try:
-        _live(controller, agents, view, Topics(args.prefix), stop, changed, say, header)
+        _loop(controller, agents, view, Topics(prefix), stop, changed, screen)
     finally:
+        screen.end()
         say("stopping: agents and their brains ...")
         agents.stop()
         view.stop()
@@ -300,28 +314,20 @@ def run_up(args: argparse.Namespace) -> int:
         if broker is not None:
             broker.stop()
         say("stopped")
-    return 0
+    return ExitCode.OK
 
 
-def _printer() -> Any:
-    def say(line: str) -> None:
-        print(f"robotconf up: {line}" if not line.startswith("\x1b") else line, flush=True)
-
-    return say
-
-
-def _live(
+def _loop(
     controller: Controller,
     agents: Agents,
     view: RetainedView,
     topics: Topics,
     stop: threading.Event,
     changed: threading.Event,
-    say: Any,
-    header: list[str],
+    screen: UpScreen,
 ) -> None:
-    """Redraws the fleet while it changes; starts agents for robots that later commits add."""
-    tty = sys.stdout.isatty()
+    """Shows the fleet while it changes; starts agents for robots that later commits add."""
+    say = screen.say
     shown = ""
     in_sync_at: str | None = None
     reported_dead: set[str] = set()
@@ -345,27 +351,24 @@ def _live(
             fleet = FleetStatus(
                 build_rows(desired_from_fleet(serving.fleet), retained),
                 retained.reconciler,
-                f"{serving.revision[:12]} ({controller.source.branch})",
+                f"{short_rev(serving.revision)} ({controller.source.branch})",
             )
-            text = format_text(fleet)
-            if text != shown:
-                if tty:
-                    sys.stdout.write("\x1b[H\x1b[2J" + "\n".join(header) + "\n" + text)
-                    sys.stdout.flush()
-                shown = text
-                summary = _summary(fleet)
+            key = change_key(fleet)
+            if key != shown:
+                shown = key
+                screen.show(fleet)
                 if fleet.in_sync and in_sync_at != serving.revision:
                     in_sync_at = serving.revision
                     say(
-                        f"all robots InSync with {serving.revision[:12]}; "
+                        f"all robots InSync with {short_rev(serving.revision)}; "
                         f"watching '{controller.source.branch}' (Ctrl-C to stop)"
                     )
-                elif not tty:
-                    say(summary)
+                elif not screen.live:
+                    say(summary(fleet))
         changed.wait(5.0)
         time.sleep(0.2)  # coalesce a burst of status messages into one redraw
 
 
-def _summary(fleet: FleetStatus) -> str:
+def summary(fleet: FleetStatus) -> str:
     counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
     return f"{len(fleet.rows)} robots: {counts}"

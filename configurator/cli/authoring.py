@@ -2,57 +2,67 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
+from pathlib import Path
 
-from configurator.autofill import autofill, to_yaml
+import click
+
+from configurator.autofill import autofill as fill_capability
+from configurator.autofill import to_yaml
+from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.options import repo_option
 from configurator.diagnostics import did_you_mean, format_text
 from configurator.schemas import dump, generate, modeline_ref
 from configurator.workspace import check
 
-EXIT_OK, EXIT_FINDINGS = 0, 1
 
-
-def cmd_autofill(args: argparse.Namespace) -> int:
-    repo = check(args.repo).repo
-    platform = repo.platforms.get(args.platform)
+@click.command("autofill")
+@repo_option
+@click.option("--platform", "platform_name", required=True)
+@click.option("--scheme", required=True, help="mapping scheme")
+@click.option("--template", required=True, help="robot template")
+@click.option("--name", default=None, help="configuration name (default: TEMPLATE-SCHEME)")
+@click.option("--force", is_flag=True, help="overwrite an existing file")
+def autofill(
+    repo: Path, platform_name: str, scheme: str, template: str, name: str | None, force: bool
+) -> ExitCode:
+    """Write a capability configuration that fits a template: per action, the first logic the
+    template and the mapping scheme serve; the file validates."""
+    found = check(repo).repo
+    platform = found.platforms.get(platform_name)
     problems = []
     if platform is None:
         problems.append(
-            f"unknown platform '{args.platform}'{did_you_mean(args.platform, repo.platforms)}"
+            f"unknown platform '{platform_name}'{did_you_mean(platform_name, found.platforms)}"
         )
     else:
-        if args.scheme not in platform.schemes:
+        if scheme not in platform.schemes:
             problems.append(
-                f"platform {args.platform} has no mapping scheme '{args.scheme}'"
-                f"{did_you_mean(args.scheme, platform.schemes)}"
+                f"platform {platform_name} has no mapping scheme '{scheme}'"
+                f"{did_you_mean(scheme, platform.schemes)}"
             )
-        if args.template not in platform.templates:
+        if template not in platform.templates:
             problems.append(
-                f"platform {args.platform} has no robot template '{args.template}'"
-                f"{did_you_mean(args.template, platform.templates)}"
+                f"platform {platform_name} has no robot template '{template}'"
+                f"{did_you_mean(template, platform.templates)}"
             )
     if problems:
-        for p in problems:
-            print(f"robotconf: {p}", file=sys.stderr)
-        return EXIT_FINDINGS
-    name = args.name or f"{args.template}-{args.scheme}"
-    target = args.repo / "configs" / "capabilities" / f"{name}.yaml"
-    if target.exists() and not args.force:
-        print(f"robotconf: {target} exists; choose another --name or pass --force", file=sys.stderr)
-        return EXIT_FINDINGS
-    result = autofill(repo, args.platform, args.scheme, args.template)
+        raise CliError("\nrobotconf: ".join(problems), ExitCode.FINDINGS)
+    name = name or f"{template}-{scheme}"
+    target = repo / "configs" / "capabilities" / f"{name}.yaml"
+    if target.exists() and not force:
+        raise CliError(f"{target} exists; choose another --name or pass --force", ExitCode.FINDINGS)
+    result = fill_capability(found, platform_name, scheme, template)
     if not result.config.actions:
-        print(
-            f"robotconf: no action of {args.platform} has a logic that {args.template} "
-            f"can run under scheme {args.scheme}",
-            file=sys.stderr,
+        raise CliError(
+            f"no action of {platform_name} has a logic that {template} "
+            f"can run under scheme {scheme}",
+            ExitCode.FINDINGS,
         )
-        return EXIT_FINDINGS
     text = to_yaml(
         result.config,
         modeline_ref("capability"),
-        f"written by robotconf autofill for {args.template} ({args.platform}, {args.scheme})",
+        f"written by robotconf autofill for {template} ({platform_name}, {scheme})",
     )
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(text, encoding="utf-8")
@@ -62,37 +72,39 @@ def cmd_autofill(args: argparse.Namespace) -> int:
     for action, reasons in sorted(result.skipped.items()):
         print(f"  skipped {action}: {'; '.join(reasons)}")
     # The promise of autofill is a file that validates: prove it.
-    errors = [d for d in check(args.repo).errors if d.path.endswith(f"capabilities/{name}.yaml")]
+    errors = [d for d in check(repo).errors if d.path.endswith(f"capabilities/{name}.yaml")]
     if errors:
         sys.stderr.write(format_text(errors))
-        return EXIT_FINDINGS
-    return EXIT_OK
+        return ExitCode.FINDINGS
+    return ExitCode.OK
 
 
-def cmd_schemas(args: argparse.Namespace) -> int:
-    repo = check(args.repo).repo
-    wanted = {name: dump(schema) for name, schema in generate(repo).items()}
-    folder = args.repo / "schemas"
-    if args.check:
+@click.command("schemas")
+@repo_option
+@click.option("--check", "check_only", is_flag=True, help="fail when schemas/ is stale")
+def schemas(repo: Path, check_only: bool) -> ExitCode:
+    """Write the JSON Schemas under schemas/ (editors use them); --check fails when stale."""
+    wanted = {name: dump(schema) for name, schema in generate(check(repo).repo).items()}
+    folder = repo / "schemas"
+    if check_only:
         stale = [
             name
             for name, text in wanted.items()
             if not (folder / name).is_file() or (folder / name).read_text(encoding="utf-8") != text
         ]
         if stale:
-            print(
-                f"robotconf: schemas/ is stale ({', '.join(stale)}); run: robotconf schemas",
-                file=sys.stderr,
+            raise CliError(
+                f"schemas/ is stale ({', '.join(stale)}); run: robotconf schemas",
+                ExitCode.FINDINGS,
             )
-            return EXIT_FINDINGS
         print(f"schemas/ is current ({len(wanted)} schemas)")
-        return EXIT_OK
+        return ExitCode.OK
     folder.mkdir(parents=True, exist_ok=True)
     written = 0
-    for name, text in wanted.items():
-        path = folder / name
+    for schema_name, text in wanted.items():
+        path = folder / schema_name
         if not path.is_file() or path.read_text(encoding="utf-8") != text:
             path.write_text(text, encoding="utf-8")
             written += 1
     print(f"schemas/: {written} written, {len(wanted) - written} unchanged")
-    return EXIT_OK
+    return ExitCode.OK

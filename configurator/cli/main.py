@@ -1,174 +1,137 @@
-"""`robotconf`: the argument parser and dispatch; each command lives in its own module."""
+"""`robotconf`: the command table and the top-level wrapper that turns every failure into one line.
+
+Each command lives in its own module and is imported only when it runs: `robotconf --help`
+reads the table below and imports no command module.
+"""
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
-from collections.abc import Callable
-from pathlib import Path
+from importlib import import_module
+
+import click
 
 from configurator import __version__
-from configurator.source import SourceError
-from configurator.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX
+from configurator.cli.errors import CliError, ExitCode
 
-EXIT_OK, EXIT_FINDINGS, EXIT_TOOL = 0, 1, 2
-
-Handler = Callable[[argparse.Namespace], int]
-
-
-def _repo_args(parser: argparse.ArgumentParser, *, rev: bool = True) -> None:
-    parser.add_argument(
-        "--repo", type=Path, default=Path("."), help="repository folder (default: current)"
-    )
-    if rev:
-        parser.add_argument(
-            "--rev", default=None, help="read this git revision instead of the work tree"
-        )
-
-
-def _broker_args(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--broker",
-        default=os.environ.get(BROKER_ENV),
-        help=f"mqtt://host:port or mqtts://host:port (default: ${BROKER_ENV}, "
-        f"else {DEFAULT_BROKER})",
-    )
-    parser.add_argument(
-        "--prefix", default=DEFAULT_PREFIX, help="topic prefix (default: %(default)s)"
-    )
-    parser.add_argument("--username", default=None, help="broker user name")
-    parser.add_argument(
-        "--password-file", type=Path, default=None, help="file holding the password"
-    )
-    parser.add_argument("--ca-file", type=Path, default=None, help="CA certificate for mqtts://")
-    parser.add_argument(
-        "--cert-file", type=Path, default=None, help="client certificate (mqtts://)"
-    )
-    parser.add_argument("--key-file", type=Path, default=None, help="client key (mqtts://)")
-    parser.add_argument(
-        "--insecure",
-        action="store_true",
-        help="accept a TLS server whose certificate cannot be verified (test benches only)",
-    )
-
-
-def build_parser() -> argparse.ArgumentParser:
-    from configurator.cli import authoring, inspect, security, server
-
-    parser = argparse.ArgumentParser(
-        prog="robotconf",
-        description="GitOps for a mixed robot fleet: validate, render and deliver Launch Requests.",
-    )
-    parser.add_argument("--version", action="version", version=f"robotconf {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-
-    def add(name: str, handler: Handler, help_text: str) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        p.set_defaults(handler=handler)
-        return p
-
-    p = add("validate", inspect.cmd_validate, "validate the whole repository")
-    _repo_args(p)
-    p.add_argument("--format", choices=["text", "json", "github"], default="text")
-    p.add_argument("files", nargs="*", help=argparse.SUPPRESS)  # pre-commit may pass some
-
-    p = add("catalog", inspect.cmd_catalog, "list what exists in the catalogue")
-    _repo_args(p)
-    p.add_argument("--json", action="store_true", help="machine-readable output")
-
-    p = add("tree", inspect.cmd_tree, "show a capability's tasks > actions > logics")
-    _repo_args(p)
-    p.add_argument("capability", help="capability configuration name")
-
-    p = add("render", inspect.cmd_render, "print a robot's Launch Request as JSON")
-    _repo_args(p)
-    p.add_argument("robot_id")
-
-    p = add("plan", inspect.cmd_plan, "what would change per robot between two revisions")
-    _repo_args(p, rev=False)
-    p.add_argument("--base", required=True, help="the revision robots run now")
-    p.add_argument("--head", default=None, help="the new revision (default: the work tree)")
-    p.add_argument("--format", choices=["text", "markdown", "json"], default="text")
-
-    p = add(
-        "autofill", authoring.cmd_autofill, "write a capability configuration that fits a template"
-    )
-    _repo_args(p, rev=False)
-    p.add_argument("--platform", required=True)
-    p.add_argument("--scheme", required=True, help="mapping scheme")
-    p.add_argument("--template", required=True, help="robot template")
-    p.add_argument("--name", default=None, help="configuration name (default: TEMPLATE-SCHEME)")
-    p.add_argument("--force", action="store_true", help="overwrite an existing file")
-
-    p = add("schemas", authoring.cmd_schemas, "write the JSON Schemas under schemas/")
-    _repo_args(p, rev=False)
-    p.add_argument("--check", action="store_true", help="fail when schemas/ is stale")
-
-    p = add("keys", security.cmd_keys, "make the Ed25519 key pair that signs Launch Requests")
-    p.add_argument("action", choices=["generate"], help="generate a new key pair")
-    p.add_argument("--out", type=Path, default=Path("keys"), help="folder (default: keys/)")
-    p.add_argument("--force", action="store_true", help="replace an existing pair")
-
-    p = add(
-        "broker-config",
-        security.cmd_broker_config,
+# name -> ("module:attribute", the short help `robotconf --help` shows), in the README's order.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "validate": ("configurator.cli.validate:validate", "validate the whole repository"),
+    "catalog": ("configurator.cli.views:catalog", "list what exists in the catalogue"),
+    "tree": ("configurator.cli.views:tree", "show a capability's tasks > actions > logics"),
+    "autofill": (
+        "configurator.cli.authoring:autofill",
+        "write a capability configuration that fits a template",
+    ),
+    "render": ("configurator.cli.views:render", "print a robot's Launch Request as JSON"),
+    "plan": (
+        "configurator.cli.views:plan",
+        "what would change per robot between two revisions",
+    ),
+    "schemas": ("configurator.cli.authoring:schemas", "write the JSON Schemas under schemas/"),
+    "reconcile": (
+        "configurator.cli.reconcile:reconcile",
+        "make the fleet match a git branch (runs until signalled)",
+    ),
+    "agent": (
+        "configurator.cli.robot_agent:agent",
+        "run a robot's agent: --config agent.yaml (see robotconf agent --help)",
+    ),
+    "status": (
+        "configurator.cli.status:status",
+        "show the fleet: desired vs reported, worst first",
+    ),
+    "up": (
+        "configurator.cli.up:up",
+        "the whole loop on this machine: broker, reconciler, agents, status",
+    ),
+    "keys": (
+        "configurator.cli.security:keys",
+        "make the Ed25519 key pair that signs Launch Requests",
+    ),
+    "broker-config": (
+        "configurator.cli.security:broker_config",
         "write Mosquitto ACL, password file and TLS listener from configs/fleet.yaml",
-    )
-    _repo_args(p)
-    p.add_argument("--prefix", default=DEFAULT_PREFIX, help="topic prefix (default: %(default)s)")
-    p.add_argument("--out", type=Path, default=Path("broker"), help="folder (default: broker/)")
-    p.add_argument(
-        "--install-dir",
-        type=Path,
-        default=None,
-        help="where the broker host keeps acl and passwd (default: OUT)",
-    )
-    p.add_argument(
-        "--secrets", type=Path, default=None, help="password files (default: OUT/secrets)"
-    )
-    p.add_argument(
-        "--port", type=int, default=8883, help="robots' listener port (default: %(default)s)"
-    )
-    p.add_argument(
-        "--service-port",
-        type=int,
-        default=None,
-        help="listener port of the reconciler and viewers (default: --port + 1)",
-    )
-    p.add_argument("--bind", default=None, help="listener address (default: all)")
-    p.add_argument("--certfile", type=Path, default=None, help="server certificate (TLS)")
-    p.add_argument("--keyfile", type=Path, default=None, help="server key (TLS)")
-    p.add_argument("--cafile", type=Path, default=None, help="CA for client certificates")
-    p.add_argument("--require-certificate", action="store_true", help="clients must present one")
-    p.add_argument("--reconciler-user", default="reconciler")
-    p.add_argument("--viewer-user", default="viewer")
-    p.add_argument("--check", action="store_true", help="fail when the files are stale")
+    ),
+}
 
-    server.add_commands(add, _repo_args, _broker_args)
-    return parser
+
+# What the `server` extra installs: a command that needs one of them says so in one line.
+SERVER_EXTRA = {"rich", "git", "watchfiles", "amqtt"}
+
+
+class LazyGroup(click.Group):
+    """click's documented lazy-loading group: a command's module is imported when it runs (or
+    its own --help is asked for); the group's help comes from the table."""
+
+    def __init__(self, *args: object, lazy: dict[str, tuple[str, str]], **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self.lazy = lazy
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return [*super().list_commands(ctx), *self.lazy]
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in self.lazy:
+            return super().get_command(ctx, cmd_name)
+        module_name, attribute = self.lazy[cmd_name][0].split(":")
+        try:
+            module = import_module(module_name)
+        except ModuleNotFoundError as exc:
+            missing = (exc.name or "").split(".")[0]
+            if missing not in SERVER_EXTRA:
+                raise
+            raise CliError(
+                f"robotconf {cmd_name} needs the server extra ({missing} is not installed): "
+                "pip install 'robotconf[server]'"
+            ) from None
+        command = getattr(module, attribute)
+        if not isinstance(command, click.Command):
+            raise TypeError(f"{module_name}:{attribute} is not a click command")
+        return command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, short) for name, (_, short) in self.lazy.items()]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(
+    cls=LazyGroup,
+    lazy=COMMANDS,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+@click.version_option(__version__, prog_name="robotconf", message="%(prog)s %(version)s")
+def cli() -> None:
+    """GitOps for a mixed robot fleet: validate, render and deliver Launch Requests."""
 
 
 def main(argv: list[str] | None = None) -> int:
-    args_list = list(sys.argv[1:] if argv is None else argv)
-    if args_list and args_list[0] == "agent":
-        # The robot side parses its own arguments and imports nothing server-side.
-        from agent.cli import main as agent_main
-
-        return agent_main(args_list[1:])
-    parser = build_parser()
-    args = parser.parse_args(args_list)
-    handler: Handler = args.handler
+    """Runs one command; a failure is one line on stderr and an exit code, never a traceback."""
+    args = list(sys.argv[1:] if argv is None else argv)
     try:
-        return handler(args)
-    except SourceError as exc:
-        print(f"robotconf: {exc}", file=sys.stderr)
-        return EXIT_TOOL
-    except KeyboardInterrupt:
-        return 130
-    except BrokenPipeError:
-        return EXIT_OK
+        with cli.make_context("robotconf", args) as ctx:
+            result = cli.invoke(ctx)
+        return int(result) if result is not None else ExitCode.OK
+    except CliError as exc:
+        print(f"robotconf: {exc.message}", file=sys.stderr)
+        return exc.code
+    except click.exceptions.Exit as exc:  # --help, --version
+        return exc.exit_code
+    except click.ClickException as exc:  # usage errors: click prints usage and the problem
+        exc.show()
+        return ExitCode.TOOL if isinstance(exc, click.UsageError) else exc.exit_code
+    except (KeyboardInterrupt, click.Abort):
+        return ExitCode.INTERRUPTED
+    except BrokenPipeError:  # `robotconf ... | head` closed the pipe: nothing left to say
+        return ExitCode.OK
     except Exception as exc:  # a tool failure is exit 2 with one line, never a traceback
+        from configurator.source import SourceError
+
+        if isinstance(exc, SourceError):
+            print(f"robotconf: {exc}", file=sys.stderr)
+            return ExitCode.TOOL
         if os.environ.get("ROBOTCONF_DEBUG"):
             raise
         print(
@@ -176,4 +139,4 @@ def main(argv: list[str] | None = None) -> int:
             "(set ROBOTCONF_DEBUG=1 for the traceback)",
             file=sys.stderr,
         )
-        return EXIT_TOOL
+        return ExitCode.TOOL

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 import secrets
 import shutil
@@ -10,25 +9,33 @@ import subprocess
 import sys
 from pathlib import Path
 
+import click
+
 from configurator.brokerconf import Listener, ServiceUsers, clashes, render_acl, render_conf
+from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.options import repo_option, rev_option
 from configurator.diagnostics import format_text
 from configurator.files import write_atomic
 from configurator.signing import SigningKeyError, generate_keys
-from configurator.wire import validate_prefix
+from configurator.wire import DEFAULT_PREFIX, validate_prefix
 from configurator.workspace import check
 
-EXIT_OK, EXIT_FINDINGS, EXIT_TOOL = 0, 1, 2
 
-
-def cmd_keys(args: argparse.Namespace) -> int:
+@click.command("keys")
+@click.argument("action", type=click.Choice(["generate"]), metavar="ACTION")
+@click.option(
+    "--out", type=click.Path(path_type=Path), default=Path("keys"), help="folder (default: keys/)"
+)
+@click.option("--force", is_flag=True, help="replace an existing pair")
+def keys(action: str, out: Path, force: bool) -> ExitCode:
+    """Make the Ed25519 key pair that signs Launch Requests (ACTION: generate)."""
     try:
-        pair = generate_keys(args.out, force=args.force)
+        pair = generate_keys(out, force=force)
     except SigningKeyError as exc:
-        print(f"robotconf: {exc}", file=sys.stderr)
-        return EXIT_FINDINGS
+        raise CliError(str(exc), ExitCode.FINDINGS) from None
     print(f"private key (reconciler only, mode 0600): {pair.private}")
     print(f"public key (give to every agent as public_key): {pair.public}")
-    return EXIT_OK
+    return ExitCode.OK
 
 
 def _password_for(secrets_dir: Path, user: str) -> str:
@@ -54,45 +61,89 @@ def _mosquitto_passwd() -> str | None:
     )
 
 
-def cmd_broker_config(args: argparse.Namespace) -> int:
+_PATH = click.Path(path_type=Path)
+
+
+@click.command("broker-config")
+@repo_option
+@rev_option
+@click.option("--prefix", default=DEFAULT_PREFIX, help=f"topic prefix (default: {DEFAULT_PREFIX})")
+@click.option("--out", type=_PATH, default=Path("broker"), help="folder (default: broker/)")
+@click.option(
+    "--install-dir",
+    type=_PATH,
+    default=None,
+    help="where the broker host keeps acl and passwd (default: OUT)",
+)
+@click.option("--secrets", type=_PATH, default=None, help="password files (default: OUT/secrets)")
+@click.option("--port", type=int, default=8883, help="robots' listener port (default: 8883)")
+@click.option(
+    "--service-port",
+    type=int,
+    default=None,
+    help="listener port of the reconciler and viewers (default: --port + 1)",
+)
+@click.option("--bind", default=None, help="listener address (default: all)")
+@click.option("--certfile", type=_PATH, default=None, help="server certificate (TLS)")
+@click.option("--keyfile", type=_PATH, default=None, help="server key (TLS)")
+@click.option("--cafile", type=_PATH, default=None, help="CA for client certificates")
+@click.option("--require-certificate", is_flag=True, help="clients must present one")
+@click.option("--reconciler-user", default="reconciler")
+@click.option("--viewer-user", default="viewer")
+@click.option("--check", "check_only", is_flag=True, help="fail when the files are stale")
+def broker_config(
+    repo: Path,
+    rev: str | None,
+    prefix: str,
+    out: Path,
+    install_dir: Path | None,
+    secrets: Path | None,
+    port: int,
+    service_port: int | None,
+    bind: str | None,
+    certfile: Path | None,
+    keyfile: Path | None,
+    cafile: Path | None,
+    require_certificate: bool,
+    reconciler_user: str,
+    viewer_user: str,
+    check_only: bool,
+) -> ExitCode:
+    """Write Mosquitto ACL, password files and TLS listeners from configs/fleet.yaml."""
     try:
-        prefix = validate_prefix(args.prefix)
+        prefix = validate_prefix(prefix)
     except ValueError as exc:
-        print(f"robotconf: {exc}", file=sys.stderr)
-        return EXIT_TOOL
-    checked = check(args.repo, args.rev)
+        raise CliError(str(exc)) from None
+    checked = check(repo, rev)
     if not checked.ok or checked.repo.fleet is None:
         sys.stderr.write(format_text(checked.errors))
-        print("robotconf: broker-config needs a valid configs/fleet.yaml", file=sys.stderr)
-        return EXIT_FINDINGS
+        raise CliError("broker-config needs a valid configs/fleet.yaml", ExitCode.FINDINGS)
     robots = sorted(checked.repo.fleet.model.robots)
-    users = ServiceUsers(args.reconciler_user, args.viewer_user)
+    users = ServiceUsers(reconciler_user, viewer_user)
     clash = clashes(robots, users)
     if clash:
-        print(
-            f"robotconf: robot id(s) {', '.join(clash)} equal a service user name; "
+        raise CliError(
+            f"robot id(s) {', '.join(clash)} equal a service user name; "
             "rename the robot or pass --reconciler-user/--viewer-user",
-            file=sys.stderr,
+            ExitCode.FINDINGS,
         )
-        return EXIT_FINDINGS
-    out: Path = args.out
     acl_file, conf_file = out / "acl", out / "mosquitto.conf"
     listener = Listener(
-        port=args.port,
-        bind=args.bind,
-        certfile=args.certfile.resolve() if args.certfile else None,
-        keyfile=args.keyfile.resolve() if args.keyfile else None,
-        cafile=args.cafile.resolve() if args.cafile else None,
-        require_certificate=args.require_certificate,
+        port=port,
+        bind=bind,
+        certfile=certfile.resolve() if certfile else None,
+        keyfile=keyfile.resolve() if keyfile else None,
+        cafile=cafile.resolve() if cafile else None,
+        require_certificate=require_certificate,
     )
-    service_port = args.service_port or args.port + 1
+    service_port = service_port or port + 1
     acl = render_acl(prefix, robots, users)
     # The broker host may keep the files elsewhere than where they are written now.
-    conf = render_conf(listener, service_port, args.install_dir or out.resolve())
+    conf = render_conf(listener, service_port, install_dir or out.resolve())
     # Robots and services in separate files: each listener knows only its own users.
     passwd = {out / "passwd": set(robots), out / "passwd-services": users.names()}
 
-    if args.check:
+    if check_only:
         stale = []
         if not acl_file.is_file() or acl_file.read_text(encoding="utf-8") != acl:
             stale.append(f"{acl_file} differs from the fleet")
@@ -104,38 +155,33 @@ def cmd_broker_config(args: argparse.Namespace) -> int:
                     f"{passwd_file}: missing {', '.join(missing) or '-'}; "
                     f"extra {', '.join(extra) or '-'}"
                 )
-        for line in stale:
-            print(f"robotconf: {line}", file=sys.stderr)
         if stale:
-            print("robotconf: run robotconf broker-config to update", file=sys.stderr)
-            return EXIT_FINDINGS
+            raise CliError(
+                "\nrobotconf: ".join([*stale, "run robotconf broker-config to update"]),
+                ExitCode.FINDINGS,
+            )
         print(f"{out}: current for {len(robots)} robot(s)")
-        return EXIT_OK
+        return ExitCode.OK
 
     tool = _mosquitto_passwd()
     if tool is None:
-        print(
-            "robotconf: mosquitto_passwd not found; install Debian's mosquitto package",
-            file=sys.stderr,
-        )
-        return EXIT_TOOL
-    secrets_dir: Path = args.secrets or out / "secrets"
+        raise CliError("mosquitto_passwd not found; install Debian's mosquitto package")
+    secrets_dir = secrets or out / "secrets"
     secrets_dir.mkdir(parents=True, exist_ok=True)
     os.chmod(secrets_dir, 0o700)
     out.mkdir(parents=True, exist_ok=True)
     for passwd_file, wanted in passwd.items():
         problem = _write_passwd(tool, passwd_file, wanted, secrets_dir)
         if problem is not None:
-            print(f"robotconf: {problem}", file=sys.stderr)
-            return EXIT_TOOL
+            raise CliError(problem)
     acl_file.write_text(acl, encoding="utf-8")
     conf_file.write_text(conf, encoding="utf-8")
     count = len(robots) + len(users.names())
     print(f"wrote {conf_file}, {acl_file}, {', '.join(str(p) for p in passwd)} ({count} users)")
-    print(f"robots connect on port {args.port}, the reconciler and viewers on {service_port}")
+    print(f"robots connect on port {port}, the reconciler and viewers on {service_port}")
     print(f"passwords: {secrets_dir}/<user>.password (0600); give each robot its own file")
     print("the broker reads passwd and acl: make them readable by its user (chown mosquitto)")
-    return EXIT_OK
+    return ExitCode.OK
 
 
 def _write_passwd(tool: str, passwd_file: Path, users: set[str], secrets_dir: Path) -> str | None:

@@ -1,16 +1,21 @@
-"""The authoring and inspection commands: plan, autofill, tree, catalog, schemas."""
+"""The authoring and inspection commands (plan, autofill, tree, catalog, schemas) and the command
+line itself: help, usage errors, exit codes."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
+import click
 import jsonschema
 import pytest
 
 from configurator.loader import classify
 from configurator.plan import changed_fields
 from configurator.yamlio import parse_document
-from tests.lab import ROOT, Lab
+from tests.lab import ROBOTCONF, ROOT, Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
 FLEET = "configs/fleet.yaml"
@@ -245,3 +250,105 @@ def test_capability_schema_refuses_what_does_not_exist() -> None:
     ):
         with pytest.raises(jsonschema.ValidationError):
             jsonschema.validate(bad, schema)
+
+
+# ------------------------------------------------------------------ the command line itself
+
+
+def robotconf(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [ROBOTCONF, *args], capture_output=True, text=True, timeout=120, cwd=ROOT, env=env
+    )
+
+
+def test_help_lists_every_command_the_table_declares() -> None:
+    from configurator.cli.main import COMMANDS
+
+    done = robotconf("--help")
+    assert done.returncode == 0, done.stderr
+    section = done.stdout.split("Commands:")[1].splitlines()
+    # A command's line starts two spaces in; a wrapped help text continues further in.
+    listed = [line.split()[0] for line in section if line.startswith("  ") and line[2] != " "]
+    assert listed == list(COMMANDS)
+    assert "agent" in listed and "broker-config" in listed
+
+
+def test_every_table_entry_loads_the_command_it_names() -> None:
+    from configurator.cli.main import COMMANDS, cli
+
+    ctx = click.Context(cli)
+    for name in COMMANDS:
+        command = cli.get_command(ctx, name)
+        assert isinstance(command, click.Command) and command.name == name
+
+
+def test_agent_help_is_the_agents_own() -> None:
+    done = robotconf("agent", "--help")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("usage: robotconf agent") and "--config PATH" in done.stdout
+
+
+def test_agent_arguments_pass_through(tmp_path: Path) -> None:
+    done = robotconf("agent", "--config", str(tmp_path / "missing.yaml"), "--check")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "missing.yaml" in done.stderr
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("no-such-command",),
+        ("validate", "--format", "xml"),
+        ("plan",),  # --base is required
+        ("status", "--wait", "soon"),
+        ("keys", "make"),
+    ],
+)
+def test_usage_errors_exit_2(args: tuple[str, ...]) -> None:
+    done = robotconf(*args)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "Usage: robotconf" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_cli_error_is_one_line_with_its_code(capsys: pytest.CaptureFixture[str]) -> None:
+    from configurator.cli.errors import CliError, ExitCode
+    from configurator.cli.main import cli, main
+
+    @cli.command("fails-for-test")
+    def fails() -> None:
+        raise CliError("it went wrong", ExitCode.FINDINGS)
+
+    @cli.command("crashes-for-test")
+    def crashes() -> None:
+        raise RuntimeError("surprise")
+
+    try:
+        assert main(["fails-for-test"]) == 1
+        assert capsys.readouterr().err == "robotconf: it went wrong\n"
+        assert main(["crashes-for-test"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("robotconf: internal error: RuntimeError: surprise")
+        assert len(err.splitlines()) == 1
+    finally:
+        cli.commands.pop("fails-for-test")
+        cli.commands.pop("crashes-for-test")
+
+
+def test_a_command_without_the_server_extra_says_what_to_install() -> None:
+    code = (
+        "import sys; sys.modules['rich'] = None  # as if rich were not installed\n"
+        "from configurator.cli import main; sys.exit(main(['catalog', '--repo', sys.argv[1]]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(ROOT)], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 2
+    assert done.stderr == (
+        "robotconf: robotconf catalog needs the server extra (rich is not installed): "
+        "pip install 'robotconf[server]'\n"
+    )
+
+
+def test_version() -> None:
+    done = robotconf("--version")
+    assert done.returncode == 0 and done.stdout.startswith("robotconf ")

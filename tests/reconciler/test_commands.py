@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
+import pty
+import select
 import signal
+import struct
 import subprocess
+import termios
 import threading
 from pathlib import Path
 
@@ -116,3 +122,40 @@ def test_status_watch_follows_the_fleet(lab: GitLab, mosquitto: Mosquitto, tmp_p
         watch.close()
         controller.stop()
         thread.join(20)
+
+
+def test_status_watch_on_a_terminal_is_a_live_screen(lab: GitLab, mosquitto: Mosquitto) -> None:
+    """On a terminal the fleet is redrawn in place (rich); elsewhere it is plain text."""
+    argv = robotconf_argv("status", "--repo", str(lab.root), "--broker", mosquitto.url, "--watch")
+    terminal, screen = pty.openpty()
+    # A terminal of 40 rows by 160 columns (a fresh pseudo-terminal has no size).
+    fcntl.ioctl(screen, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 160, 0, 0))
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    proc = subprocess.Popen(argv, stdin=screen, stdout=screen, stderr=screen, env=env)
+    os.close(screen)
+    shown = bytearray()
+
+    def read() -> str:
+        while select.select([terminal], [], [], 0.1)[0]:
+            try:
+                chunk = os.read(terminal, 65536)
+            except OSError:  # the process has gone and the terminal is closed
+                break
+            if not chunk:
+                break
+            shown.extend(chunk)
+        return shown.decode("utf-8", errors="replace")
+
+    try:
+        wait_for(lambda: "5 robots: 5 Offline" in read(), "the fleet on the screen")
+        text = read()
+        assert "\x1b[" in text  # drawn for a terminal: cursor movement, colour
+        assert all(f"tb3-0{i}" in text for i in range(1, 6))
+        assert "its agent has never reported" in text
+    finally:
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(60)
+        read()
+        os.close(terminal)
+    assert code == 1  # the robots are offline
+    assert "Traceback" not in shown.decode("utf-8", errors="replace")

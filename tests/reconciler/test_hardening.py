@@ -16,10 +16,10 @@ from configurator.launch import LaunchRequest, StopRequest
 from configurator.mqtt import Connection
 from configurator.signing import Signed, generate_keys, load_public_key, verify
 from configurator.wire import ReconcilerStatus, Topics
-from reconciler.commands import make_signer
 from reconciler.controller import MAX_REQUEST_BYTES, Signer
 from reconciler.desired import Desired, load_desired
 from reconciler.retained import Ignored, RetainedView
+from reconciler.signer import make_signer
 from reconciler.source import LocalBranch
 from tests.lab import ROOT as LAB
 from tests.mosquitto import Mosquitto

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from configurator.cli.fleet_view import fleet_status_text
 from configurator.launch import StopRequest
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
 from reconciler.observed import Retained, RobotSeen, parse_retained
@@ -12,7 +13,6 @@ from reconciler.status import (
     Health,
     Verdict,
     build_rows,
-    format_text,
     verdict,
 )
 
@@ -100,7 +100,7 @@ def test_rows_are_worst_first_and_warn_about_templates() -> None:
     ]
     fleet = FleetStatus(rows, None, "test")
     assert not fleet.in_sync
-    text = format_text(fleet)
+    text = fleet_status_text(fleet)
     assert text.index("c-bad") < text.index("b-off") < text.index("a-ok")
     assert "warning: a-ok: assigned robot template" in text
     assert "no reconciler status on the broker" in text
@@ -121,7 +121,7 @@ def test_in_sync_needs_every_assigned_robot_and_a_ready_reconciler() -> None:
     )
     assert FleetStatus(rows, ready, "t").in_sync
     assert not FleetStatus(rows, stalled, "t").in_sync
-    text = format_text(FleetStatus(rows, stalled, "t"))
+    text = fleet_status_text(FleetStatus(rows, stalled, "t"))
     assert "reconciler: Stalled (BuildFailed)" in text and "error X bad" in text
     assert f"failed on {'b' * 12}" in text
 
@@ -135,19 +135,19 @@ def test_no_dead_or_stale_reconciler_is_in_sync() -> None:
 
     missing = FleetStatus(rows, None, "t", checked_at=at)
     assert missing.health is Health.MISSING and not missing.in_sync
-    assert "reconciler: MISSING" in format_text(missing)
+    assert "reconciler: MISSING" in fleet_status_text(missing)
 
     will = ReconcilerStatus(state="Offline", ready=False, reason="Offline", message="it died")
     offline = FleetStatus(rows, will, "t", checked_at=at)
     assert offline.health is Health.OFFLINE and not offline.in_sync
-    assert "reconciler: Offline" in format_text(offline)
+    assert "reconciler: Offline" in fleet_status_text(offline)
     assert offline.as_json()["reconciler_health"] == "offline"
 
     # Ready, but its heartbeat is 3 intervals (and a minute) overdue: hung or cut off.
     late = beating.model_copy(update={"heartbeat": at - 3 * 30 - 1})
     stale = FleetStatus(rows, late, "t", checked_at=at)
     assert stale.health is Health.STALE and not stale.in_sync
-    assert "STALE: its last heartbeat is 91 s old" in format_text(stale)
+    assert "STALE: its last heartbeat is 91 s old" in fleet_status_text(stale)
     assert stale.as_json()["reconciler_health"] == "stale"
     # An older reconciler without a heartbeat cannot be judged stale.
     old = ReconcilerStatus(state="Ready", ready=True)
@@ -180,7 +180,7 @@ def test_unreadable_payloads_are_counted_and_control_characters_escaped() -> Non
     assert all(parsed.robots[r].status is None for r in ("deep", "dup", "utf8", "big"))
     desired = {"evil": DesiredRobot("evil", "s", D1)}
     fleet = FleetStatus(build_rows(desired, parsed), None, "t", ignored=parsed.ignored)
-    text = format_text(fleet)
+    text = fleet_status_text(fleet)
     assert "\x1b" not in text and "\\x1b[2Jok\\nreconciler: Ready" in text
     assert "\nforged" not in text and "two\\nforged" in text
     assert "unreadable retained payloads skipped: 2 description, 2 launch" in text
@@ -221,3 +221,19 @@ def test_parse_retained_sorts_topics_and_skips_garbage() -> None:
     assert parsed.robots["r1"].launch_digest == D1 and parsed.robots["r1"].launch is None
     assert parsed.robots["r2"].status is None
     assert parsed.reconciler is not None and parsed.reconciler.ready
+
+
+def test_text_from_the_broker_is_never_rich_markup_and_never_wrapped() -> None:
+    long_reason = "brain failed: " + "x" * 400
+    status = AgentStatus(
+        robot_id="[bold]r1", state=AgentState.FAILED, message=f"[red]{long_reason}[/red]"
+    )
+    retained = Retained(robots={"[bold]r1": RobotSeen(launch_digest=D1, status=status)})
+    desired = {"[bold]r1": DesiredRobot("[bold]r1", "[link=http://x]s[/link]", D1)}
+    text = fleet_status_text(FleetStatus(build_rows(desired, retained), None, "[i]repo[/i]"))
+    assert "\x1b" not in text
+    row = next(line for line in text.splitlines() if "Degraded" in line)
+    assert row.startswith("[bold]r1 ")
+    assert "[link=http://x]s[/link]" in row and f"[red]{long_reason}[/red]" in row
+    assert "desired: [i]repo[/i]" in text
+    assert all(line == line.rstrip() for line in text.splitlines())

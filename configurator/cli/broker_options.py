@@ -1,0 +1,108 @@
+"""Options of the commands that talk to a broker, gathered into one checked Connection."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import click
+
+from configurator.cli.errors import CliError
+from configurator.cli.options import F
+from configurator.mqtt import Connection
+from configurator.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX, validate_prefix
+
+
+def prefix_option(command: F) -> F:
+    return click.option(
+        "--prefix", default=DEFAULT_PREFIX, help=f"topic prefix (default: {DEFAULT_PREFIX})"
+    )(command)
+
+
+@dataclass(frozen=True)
+class BrokerOptions:
+    """The broker options of one command line, as given."""
+
+    broker: str | None
+    prefix: str
+    username: str | None
+    password_file: Path | None
+    ca_file: Path | None
+    cert_file: Path | None
+    key_file: Path | None
+    insecure: bool
+
+    def connection(self, url: str | None = None) -> Connection:
+        """The connection to `url` (default: --broker, else the default broker), checked now
+        rather than in a network thread; raises CliError."""
+        connection = Connection(
+            url=url or self.broker or DEFAULT_BROKER,
+            username=self.username,
+            password_file=self.password_file,
+            ca_file=self.ca_file,
+            cert_file=self.cert_file,
+            key_file=self.key_file,
+            insecure=self.insecure,
+        )
+        try:
+            connection.address  # noqa: B018 - parses the URL
+            validate_prefix(self.prefix)
+        except ValueError as exc:
+            raise CliError(str(exc)) from None
+        if connection.password_file is not None:
+            try:
+                connection.password()
+            except OSError as exc:
+                raise CliError(
+                    f"cannot read --password-file {connection.password_file}: {exc.strerror}"
+                ) from None
+        return connection
+
+
+_BROKER_FIELDS = (
+    "broker",
+    "prefix",
+    "username",
+    "password_file",
+    "ca_file",
+    "cert_file",
+    "key_file",
+    "insecure",
+)
+
+
+def broker_options(command: F) -> F:
+    """Declares the broker options and hands them to `command` as one `mqtt: BrokerOptions`."""
+
+    @functools.wraps(command)
+    def gathered(*args: Any, **kwargs: Any) -> Any:
+        mqtt = BrokerOptions(**{name: kwargs.pop(name) for name in _BROKER_FIELDS})
+        return command(*args, mqtt=mqtt, **kwargs)
+
+    path = click.Path(path_type=Path)
+    options = [
+        click.option(
+            "--broker",
+            envvar=BROKER_ENV,
+            default=None,
+            help=f"mqtt://host:port or mqtts://host:port (default: ${BROKER_ENV}, "
+            f"else {DEFAULT_BROKER})",
+        ),
+        prefix_option,
+        click.option("--username", default=None, help="broker user name"),
+        click.option("--password-file", type=path, default=None, help="file holding the password"),
+        click.option("--ca-file", type=path, default=None, help="CA certificate for mqtts://"),
+        click.option("--cert-file", type=path, default=None, help="client certificate (mqtts://)"),
+        click.option("--key-file", type=path, default=None, help="client key (mqtts://)"),
+        click.option(
+            "--insecure",
+            is_flag=True,
+            help="accept a TLS server whose certificate cannot be verified (test benches only)",
+        ),
+    ]
+    decorated: Any = gathered
+    for option in reversed(options):
+        decorated = option(decorated)
+    return decorated  # type: ignore[no-any-return]

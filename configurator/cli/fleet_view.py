@@ -1,0 +1,75 @@
+"""Fleet status for people: the reconciler's lines, then one table row per robot, worst first."""
+
+from __future__ import annotations
+
+from rich.console import Group
+from rich.table import Table
+from rich.text import Text
+
+from configurator.cli.terminal import plain_text, safe
+from reconciler.status import FleetStatus, Verdict, reconciler_lines, short_digest
+
+COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
+
+_STYLE = {
+    Verdict.DEGRADED: "bold red",
+    Verdict.OFFLINE: "red",
+    Verdict.PROGRESSING: "yellow",
+    Verdict.SUSPENDED: "blue",
+    Verdict.UNASSIGNED: "dim",
+    Verdict.IN_SYNC: "green",
+}
+
+
+def fleet_table(fleet: FleetStatus) -> Table:
+    # No box and no edge padding: in plain text each row starts with its robot id.
+    table = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
+    for name in COLUMNS:
+        table.add_column(name, no_wrap=name != "SCENARIO")
+    table.add_column("", overflow="fold")  # why a robot is not in sync: wraps on a terminal
+    for r in fleet.rows:
+        style = _STYLE[r.verdict]
+        table.add_row(
+            safe(r.robot_id),
+            Text(r.verdict.value, style=style),
+            Text("yes" if r.online else "no"),
+            safe(r.scenario or "-"),
+            Text(short_digest(r.desired)),
+            Text(short_digest(r.reported)),
+            safe(r.state),
+            Text(str(r.restarts)),
+            safe("" if r.verdict is Verdict.IN_SYNC else r.reason),
+        )
+    return table
+
+
+def fleet_status_view(fleet: FleetStatus) -> Group:
+    """The whole report as rich renderables (for a terminal or a live screen)."""
+    lines = reconciler_lines(fleet.reconciler, fleet.checked_at)
+    lines.append(f"desired: {fleet.desired_from}")
+    lines += [f"note: {n}" for n in fleet.notes]
+    if fleet.ignored:
+        kinds = ", ".join(f"{n} {kind}" for kind, n in sorted(fleet.ignored.items()))
+        lines.append(f"note: unreadable retained payloads skipped: {kinds}")
+    parts: list[Table | Text] = [safe(line) for line in lines]
+    parts.append(Text(""))
+    if fleet.rows:
+        parts.append(fleet_table(fleet))
+    else:
+        parts.append(Text("  ".join(COLUMNS)))
+        parts.append(Text("(no robot is assigned or known to the broker)"))
+    warnings = [f"warning: {r.robot_id}: {w}" for r in fleet.rows for w in r.warnings]
+    if warnings:
+        parts.append(Text(""))
+        parts += [safe(w, "yellow") for w in warnings]
+    counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
+    parts.append(Text(""))
+    parts.append(
+        Text(f"{len(fleet.rows)} robots: {counts}" + ("" if fleet.in_sync else " — not in sync"))
+    )
+    return Group(*parts)
+
+
+def fleet_status_text(fleet: FleetStatus) -> str:
+    """The report as plain text: what pipes, files and tests see."""
+    return plain_text(fleet_status_view(fleet))

@@ -1,0 +1,104 @@
+"""`robotconf status`: the fleet once (exit 0 when in sync), or live until interrupted (--watch)."""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+from pathlib import Path
+
+import click
+from rich.live import Live
+from rich.text import Text
+
+from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.fleet_view import fleet_status_view
+from configurator.cli.options import repo_option, rev_option
+from configurator.cli.terminal import is_terminal, plain_text, show, terminal_console
+from configurator.wire import Topics
+from reconciler.fleet_status import DesiredCache, fleet_status, open_view, watch
+from reconciler.lifecycle import on_stop_signals
+from reconciler.retained import RetainedView
+from reconciler.status import FleetStatus
+
+
+def _verdict(fleet: FleetStatus) -> ExitCode:
+    return ExitCode.OK if fleet.in_sync else ExitCode.FINDINGS
+
+
+@click.command("status")
+@repo_option
+@rev_option
+@broker_options
+@click.option("--watch", "follow", is_flag=True, help="keep showing until interrupted")
+@click.option("--json", "as_json", is_flag=True, help="machine-readable output")
+@click.option(
+    "--wait",
+    type=float,
+    default=5.0,
+    help="give up when the broker's retained messages have not arrived after S seconds",
+)
+def status(
+    repo: Path, rev: str | None, mqtt: BrokerOptions, follow: bool, as_json: bool, wait: float
+) -> ExitCode:
+    """Show the fleet: desired vs reported, worst first (exit 0 when every robot is in sync)."""
+    connection = mqtt.connection()
+    topics = Topics(mqtt.prefix)
+    desired = DesiredCache(repo, rev)
+    changed = threading.Event()
+    view = open_view(connection, mqtt.prefix, changed.set)
+    view.start()
+    try:
+        if not view.wait_synced(wait):
+            reason = view.last_error or "no answer"
+            raise CliError(
+                f"no retained messages from {connection.address.url} within {wait:g} s "
+                f"({reason}); is the broker running? (--broker URL, --wait S)"
+            )
+        if not follow:
+            fleet = fleet_status(view.snapshot(), topics, desired)
+            if as_json:
+                print(json.dumps(fleet.as_json(), indent=2))
+            else:
+                show(fleet_status_view(fleet))
+            return _verdict(fleet)
+        return _follow(view, topics, desired, changed, as_json)
+    finally:
+        view.stop()
+
+
+def _follow(
+    view: RetainedView,
+    topics: Topics,
+    desired: DesiredCache,
+    changed: threading.Event,
+    as_json: bool,
+) -> ExitCode:
+    """Per change: one JSON line, or one plain report ended by `---`; on a terminal, a screen."""
+    stop = threading.Event()
+    on_stop_signals(stop, changed.set)
+    code = ExitCode.FINDINGS
+    offline = f"(waiting for the broker at {view.connection.address.url}: {{}})"
+    if as_json or not is_terminal():
+        for fleet in watch(view, topics, desired, changed, stop):
+            if fleet is None:
+                if not as_json:
+                    print(offline.format(view.last_error), flush=True)
+                continue
+            code = _verdict(fleet)
+            if as_json:
+                print(json.dumps(fleet.as_json()), flush=True)
+            else:
+                sys.stdout.write(plain_text(fleet_status_view(fleet)) + "---\n")
+                sys.stdout.flush()
+        return code
+
+    with Live(console=terminal_console(), auto_refresh=False, transient=False) as live:
+        for fleet in watch(view, topics, desired, changed, stop):
+            if fleet is None:
+                live.update(Text(offline.format(view.last_error)), refresh=True)
+                continue
+            code = _verdict(fleet)
+            live.update(fleet_status_view(fleet), refresh=True)
+    return code

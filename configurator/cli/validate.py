@@ -1,0 +1,35 @@
+"""`robotconf validate`: the whole repository checked, findings in text, JSON or GitHub form.
+
+Start-up matters here (pre-commit, editors): this module imports the checker and nothing else.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from configurator.cli.errors import ExitCode
+from configurator.cli.options import repo_option, rev_option
+from configurator.diagnostics import format_github, format_json, format_text, summary_line
+from configurator.workspace import check
+
+
+@click.command("validate")
+@repo_option
+@rev_option
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "github"]), default="text")
+@click.argument("files", nargs=-1, type=click.UNPROCESSED)  # pre-commit may pass some
+def validate(repo: Path, rev: str | None, fmt: str, files: tuple[str, ...]) -> ExitCode:
+    """Validate the whole repository (file names given are ignored: one file can break another)."""
+    checked = check(repo, rev)
+    diagnostics = checked.diagnostics
+    if fmt == "json":
+        sys.stdout.write(format_json(diagnostics))
+    else:
+        sys.stdout.write(
+            format_github(diagnostics) if fmt == "github" else format_text(diagnostics)
+        )
+        print(summary_line(diagnostics, checked.repo.files_read), file=sys.stderr)
+    return ExitCode.FINDINGS if checked.errors else ExitCode.OK

@@ -1,0 +1,168 @@
+"""Commands that show the repository: catalog, tree, render and plan (read-only)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+from rich.console import Group
+from rich.tree import Tree
+
+from configurator.catalog import Section, catalogue_sections, catalogue_summary
+from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.options import repo_option, rev_option
+from configurator.cli.terminal import safe, show
+from configurator.diagnostics import did_you_mean, format_text, summary_line
+from configurator.plan import format_plan_markdown, format_plan_text, make_plan, plan_as_json
+from configurator.render import FleetRender, RenderError, render_fleet, render_robot
+from configurator.textsafe import json_printable
+from configurator.tree import (
+    CapabilityTree,
+    action_label,
+    alternative_label,
+    build_tree,
+    heading,
+    logic_label,
+    task_label,
+)
+from configurator.workspace import check
+
+
+def catalogue_view(sections: list[Section]) -> Group:
+    trees = []
+    for title, entries in sections:
+        section = Tree(safe(title, "bold"))
+        for line, details in entries:
+            entry = section.add(safe(line))
+            for detail in details:
+                entry.add(safe(detail))
+        trees.append(section)
+    return Group(*trees)
+
+
+@click.command("catalog")
+@repo_option
+@rev_option
+@click.option("--json", "as_json", is_flag=True, help="machine-readable output")
+def catalog(repo: Path, rev: str | None, as_json: bool) -> ExitCode:
+    """List what exists in the catalogue."""
+    checked = check(repo, rev)
+    summary = catalogue_summary(checked.repo)
+    if as_json:
+        print(json.dumps(summary, indent=2))
+    else:
+        show(catalogue_view(catalogue_sections(summary)))
+    if checked.errors:
+        print(
+            f"note: the repository has {len(checked.errors)} error(s); run robotconf validate",
+            file=sys.stderr,
+        )
+    return ExitCode.OK
+
+
+def capability_view(tree: CapabilityTree) -> Tree:
+    top = Tree(safe(heading(tree), "bold"))
+    groups = [
+        (
+            task_label(task),
+            [(None, task.implementations[0])]
+            if len(task.implementations) == 1
+            else [
+                (alternative_label(i, impl), impl) for i, impl in enumerate(task.implementations)
+            ],
+        )
+        for task in tree.tasks
+    ]
+    if tree.other_actions:
+        groups.append(("actions in no task", [(None, tree.other_actions)]))
+    for label, alternatives in groups:
+        group = top.add(safe(label))
+        for title, actions in alternatives:
+            parent = group if title is None else group.add(safe(title))
+            for node in actions:
+                branch = parent.add(safe(action_label(node)))
+                for logic in node.logics:
+                    branch.add(safe(logic_label(logic)))
+    return top
+
+
+@click.command("tree")
+@repo_option
+@rev_option
+@click.argument("capability")
+def tree(repo: Path, rev: str | None, capability: str) -> ExitCode:
+    """Show a capability's tasks > actions > logics: chosen, available, and why not."""
+    checked = check(repo, rev)
+    found = checked.repo
+    if capability not in found.capabilities:
+        raise CliError(
+            f"no capability configuration '{capability}'"
+            f"{did_you_mean(capability, found.capabilities)}",
+            ExitCode.FINDINGS,
+        )
+    show(capability_view(build_tree(found, capability)))
+    path = found.capabilities[capability].path
+    own = [d for d in checked.errors if d.path == path]
+    if own:
+        sys.stderr.write(format_text(own))
+        return ExitCode.FINDINGS
+    return ExitCode.OK
+
+
+@click.command("render")
+@repo_option
+@rev_option
+@click.argument("robot_id")
+def render(repo: Path, rev: str | None, robot_id: str) -> ExitCode:
+    """Print a robot's Launch Request as JSON."""
+    checked = check(repo, rev)
+    if not checked.ok:
+        sys.stderr.write(format_text(checked.diagnostics))
+        sys.stderr.write(summary_line(checked.diagnostics, checked.repo.files_read) + "\n")
+        raise CliError("not rendering from an invalid repository", ExitCode.FINDINGS)
+    try:
+        request = render_robot(checked.repo, robot_id)
+    except RenderError as exc:
+        raise CliError(str(exc), ExitCode.FINDINGS) from None
+    print(json_printable(json.dumps(request.wire(), indent=2, sort_keys=True, ensure_ascii=False)))
+    return ExitCode.OK
+
+
+def _fleet_at(repo: Path, rev: str | None, label: str) -> FleetRender:
+    checked = check(repo, rev)
+    if not checked.ok:
+        sys.stderr.write(format_text(checked.errors))
+        raise CliError(f"{label} revision {rev or '(work tree)'} is invalid")
+    try:
+        return render_fleet(checked.repo)
+    except RenderError as exc:
+        raise CliError(f"{label}: {exc}") from None
+
+
+@click.command("plan")
+@repo_option
+@click.option("--base", required=True, help="the revision robots run now")
+@click.option("--head", default=None, help="the new revision (default: the work tree)")
+@click.option("--format", "fmt", type=click.Choice(["text", "markdown", "json"]), default="text")
+def plan(repo: Path, base: str, head: str | None, fmt: str) -> ExitCode:
+    """What would change per robot between two revisions (exit 1 when something would)."""
+    # Both revisions are checked before either is reported: each names its own problems.
+    found: dict[str, FleetRender] = {}
+    problems: list[str] = []
+    for label, rev in (("base", base), ("head", head)):
+        try:
+            found[label] = _fleet_at(repo, rev, label)
+        except CliError as exc:
+            problems.append(exc.message)
+    if problems:
+        raise CliError("\nrobotconf: ".join(problems))
+    result = make_plan(found["base"], found["head"])
+    if fmt == "markdown":
+        sys.stdout.write(format_plan_markdown(result))
+    elif fmt == "json":
+        print(json.dumps(plan_as_json(result), indent=2))
+    else:
+        sys.stdout.write(format_plan_text(result))
+    return ExitCode.FINDINGS if result.changes else ExitCode.OK

@@ -1,0 +1,124 @@
+"""The fleet as `status` sees it: a broker client reading the retained topics, compared with the
+repository, as one FleetStatus now or one per change (`--watch`)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+from configurator.mqtt import Connection
+from configurator.render import RenderError, render_fleet
+from configurator.source import SourceError
+from configurator.wire import ReconcilerStatus, Topics
+from configurator.workspace import check
+from reconciler.observed import parse_retained
+from reconciler.retained import RetainedView
+from reconciler.status import (
+    DesiredRobot,
+    FleetStatus,
+    build_rows,
+    desired_from_fleet,
+    desired_from_retained,
+    short_rev,
+)
+
+Desired = tuple[dict[str, DesiredRobot] | None, str, list[str]]
+
+
+class DesiredCache:
+    """The desired robots for `status`, re-read only when the revision to compare with moves."""
+
+    def __init__(self, repo: Path, rev: str | None) -> None:
+        self.repo = repo
+        self.rev = rev
+        self._key: tuple[str | None, str | None] | None = None
+        self._value: Desired = ({}, "", [])
+
+    def get(self, reconciler: ReconcilerStatus | None) -> Desired:
+        applied = reconciler.last_applied_revision if reconciler else None
+        key = (self.rev, applied)
+        if key != self._key:
+            self._value = self._load(applied)
+            self._key = key
+        return self._value
+
+    def _load(self, applied: str | None) -> Desired:
+        notes: list[str] = []
+        # What the reconciler applied is what robots should run; the work tree is the fallback.
+        candidates: list[str | None] = (
+            [self.rev] if self.rev else [applied, None] if applied else [None]
+        )
+        for rev in candidates:
+            try:
+                checked = check(self.repo, rev)
+            except SourceError as exc:
+                notes.append(f"{exc}")
+                continue
+            where = f"{self.repo} at {short_rev(checked.repo.revision)}"
+            if not checked.ok:
+                notes.append(f"{where} has {len(checked.errors)} error(s) (robotconf validate)")
+                continue
+            try:
+                fleet = render_fleet(checked.repo)
+            except RenderError as exc:
+                notes.append(f"{where}: {exc}")
+                continue
+            return desired_from_fleet(fleet), where, notes
+        return None, "the retained launch topics (no valid repository to compare with)", notes
+
+
+def fleet_status(messages: dict[str, bytes], topics: Topics, desired: DesiredCache) -> FleetStatus:
+    retained = parse_retained(messages, topics)
+    robots, where, notes = desired.get(retained.reconciler)
+    if robots is None:
+        robots = desired_from_retained(retained)
+    rows = build_rows(robots, retained)
+    return FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
+
+
+def open_view(
+    connection: Connection, prefix: str, on_change: Callable[[], None] | None = None
+) -> RetainedView:
+    """A (not yet started) view of every retained topic fleet status reads."""
+    topics = Topics(prefix)
+    return RetainedView(
+        connection,
+        [topics.all_launch, topics.all_status, topics.all_description, topics.reconciler_status],
+        f"{prefix}/sync",
+        role="status",
+        on_change=on_change,
+        on_synced=on_change,
+    )
+
+
+def change_key(fleet: FleetStatus) -> str:
+    """What tells one report from the next: a heartbeat alone is not a change."""
+    return json.dumps(fleet.as_json(heartbeat=False), sort_keys=True)
+
+
+def watch(
+    view: RetainedView,
+    topics: Topics,
+    desired: DesiredCache,
+    changed: threading.Event,
+    stop: threading.Event,
+) -> Iterator[FleetStatus | None]:
+    """Each new state of the fleet until `stop` is set; None once when the broker is lost (each
+    time). `changed` is set by the view (and by whoever sets `stop`)."""
+    shown: str | None = None
+    while not stop.is_set():
+        changed.clear()
+        if view.synced:
+            fleet = fleet_status(view.snapshot(), topics, desired)
+            key = change_key(fleet)
+            if key != shown:
+                shown = key
+                yield fleet
+        elif shown != "offline":
+            shown = "offline"
+            yield None
+        changed.wait(5.0)
+        time.sleep(0.2)  # coalesce a burst of status messages into one redraw

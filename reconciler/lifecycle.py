@@ -1,0 +1,55 @@
+"""Long-running commands' process setup: stop signals, and where the logs go."""
+
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from types import FrameType
+
+
+def on_stop_signals(
+    stop: threading.Event | None = None,
+    callback: Callable[[], None] | None = None,
+    again: Callable[[], None] | None = None,
+) -> None:
+    """SIGINT and SIGTERM end the command cleanly instead of raising in a random place; a
+    second one calls `again` (for those who will not wait) when given."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if again is not None and stop is not None and stop.is_set():
+            again()
+            return
+        if stop is not None:
+            stop.set()
+        if callback is not None:
+            callback()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def _quiet_chatty_loggers() -> None:
+    logging.getLogger("watchfiles").setLevel(logging.WARNING)  # it logs every change it sees
+
+
+def log_to_stderr(name: str) -> None:
+    logging.basicConfig(
+        level=logging.INFO,
+        format=f"%(asctime)s {name} %(levelname)s %(message)s",
+        stream=sys.stderr,
+    )
+    _quiet_chatty_loggers()
+
+
+def log_to_file(path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    root = logging.getLogger()
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    _quiet_chatty_loggers()
