@@ -16,7 +16,7 @@ from configurator.wire import ReconcilerStatus, Topics
 from configurator.workspace import check
 from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
-from reconciler.status import (
+from reconciler.verdicts import (
     DesiredRobot,
     FleetStatus,
     build_rows,

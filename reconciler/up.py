@@ -36,7 +36,7 @@ from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.signer import make_signer
 from reconciler.source import LocalBranch, open_repo
-from reconciler.status import FleetStatus, build_rows, desired_from_fleet
+from reconciler.verdicts import FleetStatus, build_rows, desired_from_fleet
 
 log = logging.getLogger("robotconf.up")
 

@@ -7,7 +7,7 @@ from rich.table import Table
 from rich.text import Text
 
 from configurator.cli.terminal import plain_text, safe
-from reconciler.status import FleetStatus, Verdict, reconciler_lines, short_digest
+from reconciler.verdicts import FleetStatus, Verdict, reconciler_lines, short_digest
 
 COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
 

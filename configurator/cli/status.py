@@ -20,7 +20,7 @@ from configurator.wire import Topics
 from reconciler.fleet_status import DesiredCache, fleet_status, open_view, watch
 from reconciler.lifecycle import on_stop_signals
 from reconciler.retained import RetainedView
-from reconciler.status import FleetStatus
+from reconciler.verdicts import FleetStatus
 
 
 def _verdict(fleet: FleetStatus) -> ExitCode:

@@ -13,7 +13,7 @@ from configurator.cli.errors import ExitCode
 from configurator.cli.fleet_view import fleet_status_view
 from configurator.cli.options import repo_option
 from configurator.cli.terminal import is_terminal, safe, terminal_console
-from reconciler.status import FleetStatus
+from reconciler.verdicts import FleetStatus
 
 
 class Screen:

@@ -7,7 +7,7 @@ from configurator.launch import StopRequest
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
 from reconciler.observed import Retained, RobotSeen, parse_retained
 from reconciler.retained import oversized
-from reconciler.status import (
+from reconciler.verdicts import (
     DesiredRobot,
     FleetStatus,
     Health,

@@ -1,4 +1,4 @@
-"""Fleet status (DESIGN §10), pure: desired robots + retained topics -> one verdict per robot.
+"""Fleet status verdicts (DESIGN §10), pure: desired robots + retained topics -> a verdict each.
 
 The JSON form and the words of the reconciler's lines are here; the table for people is drawn
 by configurator/cli/fleet_view.py.
