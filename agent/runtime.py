@@ -18,7 +18,8 @@ from types import FrameType
 
 from pydantic import ValidationError
 
-from agent import process, requests
+from agent import admission, process
+from agent.broker_link import MAX_STATUS_BYTES, BrokerLink
 from agent.config import AgentConfig
 from agent.events import (
     BrainExited,
@@ -31,7 +32,6 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
-from agent.service import MAX_STATUS_BYTES, BrokerLink
 from agent.supervisor import Effect, Kill, Policy, Spawn, Supervisor, Terminate, describe_exit
 from agent.workdir import (
     ISSUED_FILE,
@@ -90,7 +90,7 @@ class Agent:
             self.inbox,
             self.seq,
         )
-        self.verify: requests.Verifier | None = None
+        self.verify: admission.Verifier | None = None
         if config.public_key is not None:
             from configurator.signing import load_public_key, verify_object
 
@@ -260,34 +260,34 @@ class Agent:
 
     def _on_launch(self, payload: bytes, now: float) -> None:
         desired = self.supervisor.desired
-        freshness = requests.Freshness(
+        freshness = admission.Freshness(
             self.issued.newest, desired.request.digest if desired is not None else None
         )
-        verdict = requests.interpret(payload, self.description, self.verify, freshness)
+        outcome = admission.interpret(payload, self.description, self.verify, freshness)
         sup = self.supervisor
-        if isinstance(verdict, requests.Clear):
+        if isinstance(outcome, admission.Clear):
             log.info("launch request cleared")
-            if verdict.issued_at is not None:
-                self.issued.accepted(verdict.issued_at)
+            if outcome.issued_at is not None:
+                self.issued.accepted(outcome.issued_at)
             self._apply(sup.clear(now))
-        elif isinstance(verdict, requests.Reject):
-            log.warning("launch request rejected: %s", verdict.reason)
-            self._apply(sup.reject(verdict.reason, now))
+        elif isinstance(outcome, admission.Reject):
+            log.warning("launch request rejected: %s", outcome.reason)
+            self._apply(sup.reject(outcome.reason, now))
         else:
-            for warning in verdict.warnings:
+            for warning in outcome.warnings:
                 log.warning("%s", warning)
             if self.verify is not None:
-                self.issued.accepted(verdict.request.issued_at)
+                self.issued.accepted(outcome.request.issued_at)
             # The brain gets the bytes as published (validated above), not a re-serialisation.
-            self._accepted_payload = (verdict.request.digest, payload)
+            self._accepted_payload = (outcome.request.digest, payload)
             desired = sup.desired
-            if desired is None or desired.request.digest != verdict.request.digest:
+            if desired is None or desired.request.digest != outcome.request.digest:
                 problem = self._stage(payload)
                 if problem is not None:
                     log.error("%s", problem)
                     self._apply(sup.reject(problem, now))
                     return
-            self._apply(sup.accept(verdict.request, verdict.warnings, now))
+            self._apply(sup.accept(outcome.request, outcome.warnings, now))
 
     def _stage(self, payload: bytes) -> str | None:
         """Writes the next request beside the current one before anything is stopped: a full

@@ -1,4 +1,5 @@
-"""What a payload on the launch topic means for this robot: clear, accept (with warnings), reject.
+"""Admission: whether a launch-topic payload is admitted for this robot (clear, accept with
+warnings, or reject).
 
 Pure: validated with the shared LaunchRequest type, checked against the robot's description.
 """
@@ -35,7 +36,7 @@ class Reject:
     reason: str
 
 
-Verdict = Clear | Accept | Reject
+Admission = Clear | Accept | Reject
 # Checks the signature of the parsed JSON object; None when it is good.
 Verifier = Callable[[dict[str, Any]], "str | None"]
 
@@ -87,8 +88,8 @@ def interpret(
     robot: RobotDescription,
     verify: Verifier | None = None,
     freshness: Freshness | None = None,
-) -> Verdict:
-    """The verdict on one launch-topic payload. Nothing is trusted before it is verified: the
+) -> Admission:
+    """The admission of one launch-topic payload. Nothing is trusted before it is verified: the
     payload is parsed under bounds, addressed and (when `verify` is set) its signature checked
     on the plain JSON object; only then is it validated as a request."""
     if not payload.strip():
@@ -148,7 +149,7 @@ def interpret(
     return Accept(request, warnings)
 
 
-def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Verdict:
+def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Admission:
     try:
         stop = StopRequest.model_validate(data)
     except ValidationError as exc:

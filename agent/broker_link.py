@@ -19,6 +19,7 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.reasoncodes import ReasonCode
 
+from agent.admission import MAX_REQUEST_BYTES
 from agent.events import (
     Connected,
     ConnectFailed,
@@ -27,7 +28,6 @@ from agent.events import (
     LaunchMessage,
     StatusMessage,
 )
-from agent.requests import MAX_REQUEST_BYTES
 from agent.workdir import SeqStore
 from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
@@ -135,7 +135,7 @@ class BrokerLink:
         self._inbox.put_local(Disconnected(str(reason_code)))
 
     def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
-        # Cut to one byte over each limit: the verdict (too large) is the same, the rest of a
+        # Cut to one byte over each limit: the outcome (too large) is the same, the rest of a
         # huge payload is not kept while it waits in the inbox.
         if message.topic == self.launch_topic:
             self._inbox.put_local(LaunchMessage(bytes(message.payload[: MAX_REQUEST_BYTES + 1])))
