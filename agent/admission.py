@@ -13,7 +13,13 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.launch import API_VERSION, LaunchRequest, StopRequest, canonical_json
+from configurator.launch import (
+    API_VERSION,
+    LaunchRequest,
+    StopRequest,
+    canonical_json,
+    template_mismatch,
+)
 from configurator.safejson import PayloadError, parse_object
 from configurator.wire import RobotDescription
 
@@ -138,15 +144,8 @@ def interpret(
             f"the request needs platform {capability.platform!r}, "
             f"this robot runs {robot.platform!r}"
         )
-    warnings = []
-    template = capability.robot_template
-    recommended = robot.recommended_template
-    if recommended is not None and template != recommended:
-        target = f"targets template {template!r}" if template else "names no robot template"
-        warnings.append(
-            f"capability {capability.name!r} {target}; this robot recommends {recommended!r}"
-        )
-    return Accept(request, warnings)
+    warning = template_mismatch(capability.robot_template, robot.recommended_template)
+    return Accept(request, [warning] if warning else [])
 
 
 def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Admission:

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from configurator.diagnostics import did_you_mean
 from configurator.files import read_regular
 from configurator.mqtt import Connection
-from configurator.types import ROBOT_ID_PATTERN
+from configurator.types import ROBOT_ID_PATTERN, StrictModel
 from configurator.wire import (
     BROKER_ENV,
     DEFAULT_BROKER,
@@ -37,13 +37,11 @@ from configurator.yamlio import (
 COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 
 
-class _Strict(BaseModel):
-    # Values of their own type only (`stop_timeout: "10"`, `insecure: "yes"` are mistakes);
-    # paths are the exception: YAML gives them as text.
-    model_config = ConfigDict(extra="forbid", strict=True)
+# Values of their own type only (`stop_timeout: "10"`, `insecure: "yes"` are mistakes); paths
+# are the exception (`Field(strict=False)`): YAML gives them as text.
 
 
-class DescriptionConfig(_Strict):
+class DescriptionConfig(StrictModel):
     """The robot as it describes itself; strict here although the wire type is tolerant."""
 
     id: str = Field(pattern=ROBOT_ID_PATTERN)
@@ -55,7 +53,7 @@ class DescriptionConfig(_Strict):
         return RobotDescription(**self.model_dump())
 
 
-class RestartConfig(_Strict):
+class RestartConfig(StrictModel):
     policy: Literal["on-failure", "always", "never"] = "on-failure"
     max_restarts: int = Field(default=5, ge=0)
     backoff_initial: float = Field(default=1.0, gt=0)
@@ -73,19 +71,19 @@ class RestartConfig(_Strict):
         return self
 
 
-class TlsConfig(_Strict):
+class TlsConfig(StrictModel):
     ca_file: Path | None = Field(None, strict=False)
     cert_file: Path | None = Field(None, strict=False)
     key_file: Path | None = Field(None, strict=False)
     insecure: bool = False  # skip server certificate checks: lab benches only
 
 
-class LogConfig(_Strict):
+class LogConfig(StrictModel):
     max_bytes: int = Field(default=10 * 1024 * 1024, ge=4096)
     backups: int = Field(default=3, ge=0)
 
 
-class AgentConfig(_Strict):
+class AgentConfig(StrictModel):
     broker: str = Field(default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER))
     prefix: str = DEFAULT_PREFIX
     description: DescriptionConfig

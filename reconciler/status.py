@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.launch import LaunchRequest, StopRequest
+from configurator.launch import LaunchRequest, StopRequest, template_mismatch
 from configurator.render import FleetRender
 from configurator.safejson import PayloadError
 from configurator.textsafe import printable
@@ -198,14 +198,12 @@ def verdict(desired: DesiredRobot | None, robot: Observed) -> tuple[Verdict, str
 
 def template_warning(desired: DesiredRobot | None, robot: Observed) -> str | None:
     recommended = robot.description.recommended_template if robot.description else None
-    if desired is None or not desired.template or not recommended:
+    if desired is None:
         return None
-    if desired.template == recommended:
-        return None
-    return (
-        f"assigned robot template '{desired.template}' differs from the robot's recommended "
-        f"'{recommended}'"
-    )
+    warning = template_mismatch(desired.template, recommended)
+    if warning is not None and robot.status is not None and warning in robot.status.warnings:
+        return None  # the agent reports the same words: one line is enough
+    return warning
 
 
 def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[RobotRow]:
