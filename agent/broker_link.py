@@ -29,6 +29,7 @@ from agent.events import (
     StatusMessage,
 )
 from agent.workdir import SeqStore
+from configurator.backoff import Backoff
 from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 
@@ -84,7 +85,7 @@ class BrokerLink:
         self._generation = 0
         self._poller: select.poll | None = None  # readiness of the current socket, no waiting
         self._retry_at = 0.0
-        self._delay = RECONNECT_MIN_DELAY
+        self._backoff = Backoff(RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY)
         self._next_misc = 0.0
         self.client = make_client(connection, client_id=f"robotconf-agent-{robot_id}")
         # A callback that raises must not end the loop: paho logs it and goes on.
@@ -117,7 +118,7 @@ class BrokerLink:
         if reason_code.is_failure:
             self._inbox.put_local(ConnectFailed(f"broker refused the connection: {reason_code}"))
             return
-        self._delay = RECONNECT_MIN_DELAY
+        self._backoff.reset()
         # Subscribing here, not once at start-up, restores the subscriptions after a reconnect.
         # The own status topic is watched for a late Last Will; QoS 0 is enough, since every
         # reconnection delivers the retained status anew, and spares a PUBACK per echo.
@@ -247,8 +248,7 @@ class BrokerLink:
         self._schedule_retry(now)
 
     def _schedule_retry(self, now: float) -> None:
-        self._retry_at = now + self._delay
-        self._delay = min(self._delay * 2, RECONNECT_MAX_DELAY)
+        self._retry_at = now + self._backoff.next()
 
     # ------------------------------------------------------------ publishing
 
