@@ -21,6 +21,7 @@ from configurator.launch import (
     template_mismatch,
 )
 from configurator.safejson import PayloadError, parse_object
+from configurator.typing_errors import error_line
 from configurator.wire import RobotDescription
 
 
@@ -80,10 +81,7 @@ def _iso(stamp: float) -> str:
 
 
 def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
-    parts = []
-    for error in exc.errors()[:limit]:
-        where = ".".join(str(p) for p in error["loc"]) or "(top level)"
-        parts.append(f"{where}: {error['msg']}")
+    parts = [error_line(error) for error in exc.errors(include_url=False)[:limit]]
     more = exc.error_count() - limit
     summary = "; ".join(parts) + (f"; and {more} more" if more > 0 else "")
     return summary if len(summary) <= 400 else summary[:397] + "..."  # keys come from the payload

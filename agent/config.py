@@ -13,11 +13,13 @@ from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
+from pydantic_core import ErrorDetails
 
 from configurator.diagnostics import did_you_mean
 from configurator.files import read_regular
 from configurator.mqtt import Connection
 from configurator.types import ROBOT_ID_PATTERN, StrictModel
+from configurator.typing_errors import error_path, error_text
 from configurator.wire import (
     BROKER_ENV,
     DEFAULT_BROKER,
@@ -221,17 +223,10 @@ _HINTS: dict[str, str] = {
 }
 
 
-def _dotted(loc: Loc) -> str:
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(top level)"
-
-
-def _explain(error: Any) -> tuple[Loc, str]:
+def _explain(error: ErrorDetails) -> tuple[Loc, str]:
     loc: Loc = tuple(error["loc"])
     kind = error["type"]
-    where = _dotted(loc)
+    where = error_path(loc)
     if kind == "extra_forbidden":
         parent, key = loc[:-1], str(loc[-1])
         model = _SECTIONS.get(parent)
@@ -249,9 +244,8 @@ def _explain(error: Any) -> tuple[Loc, str]:
         )
     if kind == "literal_error":
         return loc, f"{where}: {error['input']!r} is not allowed; {error['msg'].lower()}"
-    message = str(error["msg"])
-    if message.startswith("Value error, "):
-        message = message[len("Value error, ") :]
+    message = error_text(error)
+    if kind == "value_error":
         # Our own messages usually name the field already ("broker URL ... must ...").
         if loc == () or str(loc[-1]) in message.split()[:3]:
             return loc, message
@@ -293,7 +287,7 @@ def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc
                 pass
         except OSError as exc:
             reason = exc.strerror or str(exc)
-            yield loc, f"{_dotted(loc)}: cannot read {path} ({reason}); give a readable file"
+            yield loc, f"{error_path(loc)}: cannot read {path} ({reason}); give a readable file"
 
 
 def _workdir_unusable(path: Path) -> str | None:

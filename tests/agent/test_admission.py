@@ -71,6 +71,14 @@ def test_schema_violations_are_rejected_with_the_field() -> None:
     assert "scenario.capability.platform" in text and "surprise" in text
 
 
+def test_a_rejection_names_the_field_as_agent_yaml_and_validate_do() -> None:
+    data = json.loads(make_request().payload())
+    data["scenario"]["capability"]["tasks"] = ["Delivery", 7]
+    assert "scenario.capability.tasks[1]: Input should be a valid string" in reason(
+        json.dumps(data).encode()
+    )
+
+
 def test_tampered_content_is_rejected_by_its_digest() -> None:
     data = json.loads(make_request().payload())
     data["scenario"]["robot_settings"]["max_linear_speed"] = 9.9
