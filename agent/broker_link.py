@@ -33,7 +33,7 @@ from configurator.backoff import Backoff
 from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("robotconf.agent.broker_link")
 
 QOS = 1
 MAX_STATUS_BYTES = 64 * 1024  # an agent status is a few hundred bytes
