@@ -3,10 +3,11 @@ that the agent's admission and the fleet status share."""
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 
 from agent.admission import Accept, interpret
 from configurator.launch import (
@@ -90,3 +91,14 @@ def test_agent_and_fleet_status_warn_in_the_same_words_once(template: str | None
     )
     # Once the agent reports it, the status row carries the agent's line only.
     assert template_warning(desired, Observed(status=status, description=robot)) is None
+
+
+def test_strict_requests_still_take_json_as_the_agent_receives_it() -> None:
+    signed = make_request().model_copy(update={"issued_at": 1.7e9, "signature": "c2ln"})
+    data = json.loads(signed.payload())
+    assert LaunchRequest.model_validate(data) == signed
+    data["issued_at"] = 1700000000  # JSON has one number type: an integral time is an int
+    assert LaunchRequest.model_validate(data).issued_at == 1.7e9
+    data["issued_at"] = "1700000000"  # text is no number, on the wire as in YAML
+    with pytest.raises(ValidationError, match="issued_at"):
+        LaunchRequest.model_validate(data)
