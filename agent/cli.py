@@ -1,6 +1,7 @@
-"""`robotconf agent --config agent.yaml [--broker URL] [--check]`: runs one robot's agent.
+"""`robotconf agent --config agent.yaml [--config ...] [--broker URL] [--check]`: runs one
+robot's agent, or several robots' agents in one process (a simulation host).
 
-Exit 0 after a signal-initiated stop, 2 when the configuration or the machine is unusable.
+Exit 0 after a signal-initiated stop, 2 when a configuration or the machine is unusable.
 """
 
 from __future__ import annotations
@@ -9,10 +10,11 @@ import argparse
 import logging
 import ssl
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
-from agent.config import ConfigInvalid, load_config, with_broker
-from agent.runtime import Agent
+from agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
+from agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
 from agent.workdir import WorkdirLock
 from configurator.signing import SigningKeyError
 
@@ -24,9 +26,16 @@ def _parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Receive this robot's Launch Request over MQTT; supervise its brain service.",
     )
-    parser.add_argument("--config", required=True, type=Path, metavar="PATH", help="agent.yaml")
     parser.add_argument(
-        "--broker", metavar="URL", help="overrides the file's broker: mqtt[s]://host:port"
+        "--config",
+        required=True,
+        type=Path,
+        action="append",
+        metavar="PATH",
+        help="agent.yaml; repeat it to run several robots' agents in this one process",
+    )
+    parser.add_argument(
+        "--broker", metavar="URL", help="overrides every file's broker: mqtt[s]://host:port"
     )
     parser.add_argument("--check", action="store_true", help="validate the configuration and exit")
     parser.add_argument(
@@ -40,38 +49,75 @@ def main(argv: list[str]) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # argparse has printed the usage problem already
         return exc.code if isinstance(exc.code, int) else 2
-    try:
-        config = load_config(args.config, prepare=not args.check)
-        if args.broker:
-            config = with_broker(config, args.broker)
-    except ConfigInvalid as exc:
-        for error in exc.errors:
-            print(error, file=sys.stderr)
+    paths: list[Path] = args.config
+    configs: list[AgentConfig] = []
+    invalid = False
+    for path in paths:  # every file is checked, so that one run lists every problem
+        try:
+            config = load_config(path, prepare=not args.check)
+            if args.broker:
+                config = with_broker(config, args.broker)
+        except ConfigInvalid as exc:
+            for error in exc.errors:
+                print(error, file=sys.stderr)
+            invalid = True
+            continue
+        configs.append(config)
+    if invalid:
+        return 2
+    clash = _clash(paths, configs)
+    if clash:
+        print(f"{PROG}: {clash}", file=sys.stderr)
         return 2
     if args.check:
-        print(f"{args.config}: ok (robot {config.robot_id})")
+        for path, config in zip(paths, configs, strict=True):
+            print(f"{path}: ok (robot {config.robot_id})")
         return 0
-    logging.basicConfig(
-        level=args.log_level.upper(),
-        format=f"%(asctime)s {config.robot_id} %(levelname)s %(message)s",
-        stream=sys.stderr,
-    )
-    lock = WorkdirLock(config.workdir)
-    problem = lock.acquire()
-    if problem:
-        print(f"{PROG}: {problem}", file=sys.stderr)
-        return 2
+    _log_to_stderr(args.log_level, configs)
+    locks: list[WorkdirLock] = []
     try:
+        for config in configs:
+            lock = WorkdirLock(config.workdir)
+            problem = lock.acquire()
+            if problem:
+                print(f"{PROG}: {problem}", file=sys.stderr)
+                return 2
+            locks.append(lock)
         try:
-            agent = Agent(config)
+            agents = [Agent(config) for config in configs]
         except (OSError, ssl.SSLError, ValueError, SigningKeyError) as exc:
             # e.g. a TLS certificate or key that exists but cannot be loaded.
             print(f"{PROG}: cannot set up: {exc}", file=sys.stderr)
             return 2
-        agent.install_signal_handlers()
-        return agent.run()
+        install_signal_handlers(agents)
+        run_agents(agents)
+        return 0
     finally:
-        lock.release()
+        for lock in locks:
+            lock.release()
+
+
+def _clash(paths: Sequence[Path], configs: Sequence[AgentConfig]) -> str | None:
+    """Two files for one robot, or for one work directory: each agent needs its own of both
+    (one robot id is one set of topics; one work directory holds one brain)."""
+    robots: dict[str, Path] = {}
+    workdirs: dict[Path, Path] = {}
+    for path, config in zip(paths, configs, strict=True):
+        robot, workdir = config.robot_id, config.workdir.resolve()
+        if robot in robots:
+            return f"{robots[robot]} and {path} both configure robot {robot!r}; one agent per robot"
+        if workdir in workdirs:
+            return f"{workdirs[workdir]} and {path} share workdir {workdir}; give each its own"
+        robots[robot], workdirs[workdir] = path, path
+    return None
+
+
+def _log_to_stderr(level: str, configs: Sequence[AgentConfig]) -> None:
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(robot_id)s %(levelname)s %(message)s"))
+    # Lines logged outside any one agent's turn name the process's robot, or all of them.
+    handler.addFilter(RobotIdFilter(",".join(config.robot_id for config in configs)))
+    logging.basicConfig(level=level.upper(), handlers=[handler])
 
 
 if __name__ == "__main__":

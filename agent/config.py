@@ -12,12 +12,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
+from pydantic_core import ErrorDetails
 
 from configurator.diagnostics import did_you_mean
 from configurator.files import read_regular
 from configurator.mqtt import Connection
-from configurator.types import ROBOT_ID_PATTERN
+from configurator.types import ROBOT_ID_PATTERN, StrictModel
+from configurator.typing_errors import error_path, error_text
 from configurator.wire import (
     BROKER_ENV,
     DEFAULT_BROKER,
@@ -37,13 +39,11 @@ from configurator.yamlio import (
 COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 
 
-class _Strict(BaseModel):
-    # Values of their own type only (`stop_timeout: "10"`, `insecure: "yes"` are mistakes);
-    # paths are the exception: YAML gives them as text.
-    model_config = ConfigDict(extra="forbid", strict=True)
+# Values of their own type only (`stop_timeout: "10"`, `insecure: "yes"` are mistakes); paths
+# are the exception (`Field(strict=False)`): YAML gives them as text.
 
 
-class DescriptionConfig(_Strict):
+class DescriptionConfig(StrictModel):
     """The robot as it describes itself; strict here although the wire type is tolerant."""
 
     id: str = Field(pattern=ROBOT_ID_PATTERN)
@@ -55,7 +55,7 @@ class DescriptionConfig(_Strict):
         return RobotDescription(**self.model_dump())
 
 
-class RestartConfig(_Strict):
+class RestartConfig(StrictModel):
     policy: Literal["on-failure", "always", "never"] = "on-failure"
     max_restarts: int = Field(default=5, ge=0)
     backoff_initial: float = Field(default=1.0, gt=0)
@@ -73,19 +73,19 @@ class RestartConfig(_Strict):
         return self
 
 
-class TlsConfig(_Strict):
+class TlsConfig(StrictModel):
     ca_file: Path | None = Field(None, strict=False)
     cert_file: Path | None = Field(None, strict=False)
     key_file: Path | None = Field(None, strict=False)
     insecure: bool = False  # skip server certificate checks: lab benches only
 
 
-class LogConfig(_Strict):
+class LogConfig(StrictModel):
     max_bytes: int = Field(default=10 * 1024 * 1024, ge=4096)
     backups: int = Field(default=3, ge=0)
 
 
-class AgentConfig(_Strict):
+class AgentConfig(StrictModel):
     broker: str = Field(default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER))
     prefix: str = DEFAULT_PREFIX
     description: DescriptionConfig
@@ -223,17 +223,10 @@ _HINTS: dict[str, str] = {
 }
 
 
-def _dotted(loc: Loc) -> str:
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(top level)"
-
-
-def _explain(error: Any) -> tuple[Loc, str]:
+def _explain(error: ErrorDetails) -> tuple[Loc, str]:
     loc: Loc = tuple(error["loc"])
     kind = error["type"]
-    where = _dotted(loc)
+    where = error_path(loc)
     if kind == "extra_forbidden":
         parent, key = loc[:-1], str(loc[-1])
         model = _SECTIONS.get(parent)
@@ -251,9 +244,8 @@ def _explain(error: Any) -> tuple[Loc, str]:
         )
     if kind == "literal_error":
         return loc, f"{where}: {error['input']!r} is not allowed; {error['msg'].lower()}"
-    message = str(error["msg"])
-    if message.startswith("Value error, "):
-        message = message[len("Value error, ") :]
+    message = error_text(error)
+    if kind == "value_error":
         # Our own messages usually name the field already ("broker URL ... must ...").
         if loc == () or str(loc[-1]) in message.split()[:3]:
             return loc, message
@@ -295,7 +287,7 @@ def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc
                 pass
         except OSError as exc:
             reason = exc.strerror or str(exc)
-            yield loc, f"{_dotted(loc)}: cannot read {path} ({reason}); give a readable file"
+            yield loc, f"{error_path(loc)}: cannot read {path} ({reason}); give a readable file"
 
 
 def _workdir_unusable(path: Path) -> str | None:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from agent.workdir import write_atomic
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("robotconf.agent.process")
 
 PLACEHOLDER = "{launch_request}"
 

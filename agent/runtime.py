@@ -1,6 +1,7 @@
 """The agent's own thread: takes events from the inbox, drives the supervisor, runs its effects.
 
-The only place where the state machine, the brain process and the broker link meet.
+The only place where the state machine, the brain process and the broker link meet; one thread
+drives one robot's agent or several (`run_agents`: a simulation host's robots).
 """
 
 from __future__ import annotations
@@ -13,12 +14,14 @@ import os
 import selectors
 import signal
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextvars import ContextVar
 from types import FrameType
 
 from pydantic import ValidationError
 
-from agent import process, requests
+from agent import admission, process
+from agent.broker_link import MAX_STATUS_BYTES, BrokerLink
 from agent.config import AgentConfig
 from agent.events import (
     BrainExited,
@@ -31,7 +34,6 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
-from agent.service import MAX_STATUS_BYTES, BrokerLink
 from agent.supervisor import Effect, Kill, Policy, Spawn, Supervisor, Terminate, describe_exit
 from agent.workdir import (
     ISSUED_FILE,
@@ -50,6 +52,9 @@ from configurator.wire import AgentState, AgentStatus
 from configurator.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
+# The robot whose agent runs right now on this thread: one process may host several, and each
+# log line names its robot (`RobotIdFilter`), whichever module logged it.
+_acting_for: ContextVar[str | None] = ContextVar("robotconf_agent_robot", default=None)
 
 LOG_CHECK_INTERVAL = 2.0  # seconds between brain log size checks
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
@@ -90,7 +95,7 @@ class Agent:
             self.inbox,
             self.seq,
         )
-        self.verify: requests.Verifier | None = None
+        self.verify: admission.Verifier | None = None
         if config.public_key is not None:
             from configurator.signing import load_public_key, verify_object
 
@@ -115,12 +120,7 @@ class Agent:
     # ------------------------------------------------------------ lifecycle
 
     def install_signal_handlers(self) -> None:
-        def handler(signum: int, frame: FrameType | None) -> None:
-            # A deque append and a pipe write: safe wherever the signal lands.
-            self.inbox.put(Shutdown(signal.Signals(signum).name))
-
-        signal.signal(signal.SIGTERM, handler)
-        signal.signal(signal.SIGINT, handler)
+        install_signal_handlers([self])
 
     def run(self) -> int:
         """Runs until a signal (or a Shutdown event) has stopped the brain and the link."""
@@ -128,7 +128,7 @@ class Agent:
         return 0
 
     # ------------------------------------------------------------ the loop, in steps
-    # `run_agents` drives these: one agent in production, many in one benchmark process.
+    # `run_agents` drives these: one robot's agent, or a simulation host's several.
 
     def begin(self) -> None:
         # Before connecting: a request must never start a second brain next to an orphan.
@@ -260,34 +260,34 @@ class Agent:
 
     def _on_launch(self, payload: bytes, now: float) -> None:
         desired = self.supervisor.desired
-        freshness = requests.Freshness(
+        freshness = admission.Freshness(
             self.issued.newest, desired.request.digest if desired is not None else None
         )
-        verdict = requests.interpret(payload, self.description, self.verify, freshness)
+        outcome = admission.interpret(payload, self.description, self.verify, freshness)
         sup = self.supervisor
-        if isinstance(verdict, requests.Clear):
+        if isinstance(outcome, admission.Clear):
             log.info("launch request cleared")
-            if verdict.issued_at is not None:
-                self.issued.accepted(verdict.issued_at)
+            if outcome.issued_at is not None:
+                self.issued.accepted(outcome.issued_at)
             self._apply(sup.clear(now))
-        elif isinstance(verdict, requests.Reject):
-            log.warning("launch request rejected: %s", verdict.reason)
-            self._apply(sup.reject(verdict.reason, now))
+        elif isinstance(outcome, admission.Reject):
+            log.warning("launch request rejected: %s", outcome.reason)
+            self._apply(sup.reject(outcome.reason, now))
         else:
-            for warning in verdict.warnings:
+            for warning in outcome.warnings:
                 log.warning("%s", warning)
             if self.verify is not None:
-                self.issued.accepted(verdict.request.issued_at)
+                self.issued.accepted(outcome.request.issued_at)
             # The brain gets the bytes as published (validated above), not a re-serialisation.
-            self._accepted_payload = (verdict.request.digest, payload)
+            self._accepted_payload = (outcome.request.digest, payload)
             desired = sup.desired
-            if desired is None or desired.request.digest != verdict.request.digest:
+            if desired is None or desired.request.digest != outcome.request.digest:
                 problem = self._stage(payload)
                 if problem is not None:
                     log.error("%s", problem)
                     self._apply(sup.reject(problem, now))
                     return
-            self._apply(sup.accept(verdict.request, verdict.warnings, now))
+            self._apply(sup.accept(outcome.request, outcome.warnings, now))
 
     def _stage(self, payload: bytes) -> str | None:
         """Writes the next request beside the current one before anything is stopped: a full
@@ -449,9 +449,45 @@ def publish_delay(status: AgentStatus, last: AgentStatus | None) -> float:
     return STOPPING_QUIET if status.state == AgentState.STOPPING and fresh_stop else 0.0
 
 
+class RobotIdFilter(logging.Filter):
+    """Gives every log record a `robot_id`: the robot whose agent was running when it was
+    logged, else `fallback` (start-up, shutdown of the process)."""
+
+    def __init__(self, fallback: str) -> None:
+        super().__init__()
+        self.fallback = fallback
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.robot_id = _acting_for.get() or self.fallback
+        return True
+
+
+@contextlib.contextmanager
+def _acting(agent: Agent) -> Iterator[None]:
+    token = _acting_for.set(agent.config.robot_id)
+    try:
+        yield
+    finally:
+        _acting_for.reset(token)
+
+
+def install_signal_handlers(agents: Sequence[Agent]) -> None:
+    """SIGTERM and SIGINT stop every agent of this process (and so their brains)."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        # A deque append and a pipe write per agent: safe wherever the signal lands.
+        for agent in agents:
+            agent.inbox.put(Shutdown(signal.Signals(signum).name))
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+
+
 def run_agents(agents: Sequence[Agent]) -> None:
     """Drives agents on this thread, all their descriptors in one selector, until each has
-    finished. A robot runs one; a benchmark hosts many in one process without a thread each."""
+    finished. A robot runs one; a simulation host (`robotconf agent --config a.yaml --config
+    b.yaml`) runs several robots' agents, each with its own broker connection, Last Will,
+    work directory and brain, without a process or a thread each."""
     # What is loaded by now (modules, schemas, the configuration) lives as long as the
     # process: frozen, the cyclic collector stops walking it at every collection, which
     # otherwise costs a large share of the CPU of each restart.
@@ -461,7 +497,8 @@ def run_agents(agents: Sequence[Agent]) -> None:
     due: dict[Agent, float] = {}
     try:
         for agent in agents:
-            agent.begin()
+            with _acting(agent):
+                agent.begin()
             registered[agent] = {}
             _sync(selector, agent, registered)
             due[agent] = agent.due()
@@ -472,14 +509,15 @@ def run_agents(agents: Sequence[Agent]) -> None:
                 ready.setdefault(key.data, {})[key.fd] = mask
             now = time.monotonic()
             for agent in [a for a, when in due.items() if when <= now or a in ready]:
-                agent.step(ready.get(agent, {}))
-                if agent.finished:
-                    _sync(selector, agent, registered, stop=True)
-                    del due[agent]
-                    agent.end()
-                else:
-                    _sync(selector, agent, registered)
-                    due[agent] = agent.due()
+                with _acting(agent):
+                    agent.step(ready.get(agent, {}))
+                    if agent.finished:
+                        _sync(selector, agent, registered, stop=True)
+                        del due[agent]
+                        agent.end()
+                    else:
+                        _sync(selector, agent, registered)
+                        due[agent] = agent.due()
     finally:
         selector.close()
 

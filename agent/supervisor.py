@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
+from configurator.backoff import exponential_delay
 from configurator.launch import LaunchRequest
 from configurator.wire import AgentState, AgentStatus
 
@@ -49,7 +50,7 @@ class Policy:
 
     def backoff(self, streak: int) -> float:
         """Delay before restart number `streak + 1` of a run of failures."""
-        return float(min(self.backoff_max, self.backoff_initial * (2**streak)))
+        return exponential_delay(streak, self.backoff_initial, self.backoff_max)
 
 
 @dataclass

@@ -20,12 +20,13 @@ Agents are the real agent (`agent.runtime.Agent`) with a cheap brain that must s
 the brain is spawned. The brain is --brain: `pause` (default; bench/pause.c, a program that
 only waits for a signal, built with the C compiler, else `sleep`), `sleep`, or any command.
 Up to --process-max robots, each agent is its own `robotconf agent` process; beyond that,
-worker processes host --per-worker agents each, driven by the agent's own loop
-(`run_agents`) on one thread, robots dealt out round-robin. All of them share this machine's
-cores, unlike a real fleet, so the CPU seconds per round are shown for the broker, the
-reconciler, the agents (brains included) and this measuring process. Work folders live on
-/dev/shm when it exists (each robot has its own disk). Targets: 100 robots p50 <= 1 s;
-1,000 robots p50 <= 3 s and <= 10x the floor. Exit 0 when they are met, 1 when one is missed.
+worker processes host --per-worker agents each on one thread, as a simulation host runs its
+robots (`robotconf agent --config a.yaml --config b.yaml ...`), robots dealt out round-robin.
+All of them share this machine's cores, unlike a real fleet, so the CPU seconds per round are
+shown for the broker, the reconciler, the agents (brains included) and this measuring process.
+Work folders live on /dev/shm when it exists (each robot has its own disk). Targets: 100
+robots p50 <= 1 s; 1,000 robots p50 <= 3 s and <= 10x the floor. Exit 0 when they are met, 1
+when one is missed.
 
     python bench/rollout.py [--sizes 10,100,1000] [--rounds 7] [--startsecs 0.1]
                             [--brain pause|sleep|CMD] [--server-priority] [--keep] [--json F]
@@ -280,6 +281,12 @@ def agent_config(folder: Path, robot: str, url: str, startsecs: float, brain: li
     return path
 
 
+def host_command(paths: Sequence[Path]) -> list[str]:
+    """One agent process for several robots: the agent's own `--config` repeated."""
+    configs = [arg for path in paths for arg in ("--config", str(path))]
+    return [sys.executable, "-m", "agent.cli", "--log-level", "warning", *configs]
+
+
 def start_agents(folder: Path, size: int, url: str, options: Options) -> subprocess.Popen[bytes]:
     """The simulated fleet: one launcher process, in a session of its own, and its children."""
     brain = brain_command(options.brain, folder)
@@ -291,10 +298,7 @@ def start_agents(folder: Path, size: int, url: str, options: Options) -> subproc
         # robots in one worker would make each worker busy in turn, unlike robots that each
         # have a computer of their own.
         workers = -(-len(paths) // options.per_worker)
-        commands = [
-            [sys.executable, __file__, "worker", *map(str, paths[k::workers])]
-            for k in range(workers)
-        ]
+        commands = [host_command(paths[k::workers]) for k in range(workers)]
     listing = folder / "fleet.json"
     listing.write_text(json.dumps(commands), encoding="utf-8")
     logs = folder / "agent-logs"
@@ -354,28 +358,6 @@ def stop_fleet(proc: subprocess.Popen[bytes] | None) -> None:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
-
-
-def worker(paths: list[str]) -> int:
-    """Many agents in one process, driven by the agent's own loop (`run_agents`) on one
-    thread, as one agent is on a robot; SIGTERM stops them all."""
-    import logging
-
-    from agent.config import load_config
-    from agent.events import Shutdown
-    from agent.runtime import Agent, run_agents
-
-    logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
-    agents = [Agent(load_config(Path(p))) for p in paths]
-
-    def stop(signum: int, frame: Any) -> None:
-        for a in agents:
-            a.inbox.put(Shutdown(signal.Signals(signum).name))
-
-    signal.signal(signal.SIGTERM, stop)
-    signal.signal(signal.SIGINT, stop)
-    run_agents(agents)
-    return 0
 
 
 # ------------------------------------------------------------------ measurements
@@ -585,8 +567,6 @@ def verdicts(results: list[Result]) -> Iterator[tuple[str, bool]]:
 
 
 def main(argv: list[str]) -> int:
-    if argv[:1] == ["worker"]:
-        return worker(argv[1:])
     if argv[:1] == ["fleet"]:
         return launcher(argv[1], argv[2])
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])

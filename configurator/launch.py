@@ -7,22 +7,25 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-from configurator.types import ROBOT_ID_PATTERN, JsonObject, MappingBinding
+from configurator.types import ROBOT_ID_PATTERN, JsonObject, MappingBinding, StrictModel
 
 API_VERSION = "robotconf/v1"
 DIGEST_PATTERN = r"^sha256:[0-9a-f]{64}$"
-_NOT_CONTENT = {"revision", "digest", "issued_at", "signature"}
+# What the digest leaves out: where the request was rendered from (a new commit with the same
+# content restarts no brain), the digest itself and the signing fields. Every other field of
+# a request, including one added later, is content.
+DIGEST_EXCLUDED = frozenset({"revision", "digest", "issued_at", "signature"})
+# A well-formed placeholder while a request is built; `with_digest` replaces it.
+_PENDING_DIGEST = "sha256:" + "0" * 64
 
 
-class _Wire(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class LaunchCapability(_Wire):
+# Strict as every document type: the agent validates the JSON object it received with these
+# models, and JSON gives every field its own type (strings, numbers, lists, objects) already.
+class LaunchCapability(StrictModel):
     name: str
     platform: str
     robot_template: str | None
@@ -33,12 +36,12 @@ class LaunchCapability(_Wire):
     mappings: dict[str, MappingBinding] = Field(description="mappings the logics need, bound")
 
 
-class LaunchGoal(_Wire):
+class LaunchGoal(StrictModel):
     task: str
     location: JsonObject | None = Field(None, description="the environment object, expanded")
 
 
-class LaunchScenario(_Wire):
+class LaunchScenario(StrictModel):
     name: str
     capability: LaunchCapability
     environment_name: str | None
@@ -49,7 +52,7 @@ class LaunchScenario(_Wire):
     goals: list[LaunchGoal]
 
 
-class _Published(_Wire):
+class _Published(StrictModel):
     """What the reconciler publishes on a launch topic, signed or not."""
 
     issued_at: float | None = Field(None, description="unix time the request was signed")
@@ -79,12 +82,12 @@ class LaunchRequest(_Published):
     scenario: LaunchScenario
 
     def content(self) -> dict[str, Any]:
-        """What the digest covers: everything but revision, digest and the signature fields."""
-        return self.model_dump(mode="json", exclude=_NOT_CONTENT)
-
+        """What the digest covers (see `digest_content`)."""
+        return digest_content(self)
 
     def digest_matches(self) -> bool:
-        return self.digest == content_digest(self.content())
+        """The agent's check: the digest is the one `with_digest` gives this content."""
+        return self.digest == content_digest(digest_content(self))
 
 
 class StopRequest(_Published):
@@ -109,21 +112,44 @@ def content_digest(content: Any) -> str:
     return "sha256:" + hashlib.sha256(canonical_json(content)).hexdigest()
 
 
+def digest_content(request: LaunchRequest) -> dict[str, Any]:
+    """The one definition of what a request's digest covers: every field of the model (of a
+    subclass too) but DIGEST_EXCLUDED. Rendering and the agent's check both come here."""
+    return request.model_dump(mode="json", exclude=set(DIGEST_EXCLUDED))
+
+
+Request = TypeVar("Request", bound=LaunchRequest)
+
+
+def with_digest(request: Request) -> Request:
+    """The request with the digest of its content: how rendering seals every request."""
+    return request.model_copy(update={"digest": content_digest(digest_content(request))})
+
+
 def make_launch_request(
     robot_id: str, robot_name: str, revision: str, scenario: LaunchScenario
 ) -> LaunchRequest:
     """Build a request whose digest covers everything but the revision."""
-    content = {
-        "apiVersion": API_VERSION,
-        "kind": "LaunchRequest",
-        "robot_id": robot_id,
-        "robot_name": robot_name,
-        "scenario": scenario.model_dump(mode="json"),
-    }
-    return LaunchRequest(
+    draft = LaunchRequest(
         robot_id=robot_id,
         robot_name=robot_name,
         revision=revision,
-        digest=content_digest(content),
+        digest=_PENDING_DIGEST,
         scenario=scenario,
+    )
+    return with_digest(draft)
+
+
+def template_mismatch(template: str | None, recommended: str | None) -> str | None:
+    """The warning when a request's robot template is not the one the robot recommends; None
+    when there is nothing to say. The agent's admission and the fleet status both word it so:
+    the status shows it once, whichever of the two raised it."""
+    if recommended is None or template == recommended:
+        return None
+    if template is None:
+        return (
+            f"the assigned capability names no robot template; the robot recommends {recommended!r}"
+        )
+    return (
+        f"assigned robot template {template!r} differs from the robot's recommended {recommended!r}"
     )

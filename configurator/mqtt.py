@@ -16,7 +16,8 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 from configurator.wire import BrokerAddress, parse_broker_url
 
 # Seconds between connection attempts: the first retry after 1 s, doubling up to 30 s. paho's
-# own loop uses them for the reconciler and `status`; the agent, driving paho itself, too.
+# own loop uses them for the reconciler and `status`; the agent, driving paho itself, feeds
+# them to configurator.backoff.Backoff.
 RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY = 1.0, 30.0
 
 

@@ -34,10 +34,10 @@ JsonScalar = bool | int | float | str
 JsonObject = dict[str, Any]
 
 
-class Strict(BaseModel):
-    """Every document type forbids unknown fields (a typo must never pass silently) and takes
-    values only of their own type: `suspended: "yes"`, `minimum: true` or `speed: "0.2"` are
-    mistakes, not conversions."""
+class StrictModel(BaseModel):
+    """The base of every typed document, agent.yaml and the Launch Request: unknown fields are
+    refused (a typo must never pass silently) and values are taken only of their own type:
+    `suspended: "yes"`, `minimum: true` or `speed: "0.2"` are mistakes, not conversions."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
 
@@ -48,7 +48,7 @@ class Strict(BaseModel):
 SettingType = Literal["number", "integer", "boolean", "string", "enum"]
 
 
-class SettingDefinition(Strict):
+class SettingDefinition(StrictModel):
     """A robot or logic setting: its type, default and bounds."""
 
     type: SettingType = Field(description="number, integer, boolean, string or enum")
@@ -63,14 +63,14 @@ class SettingDefinition(Strict):
 # ---------------------------------------------------------------- catalogue: models/
 
 
-class PlatformInfo(Strict):
+class PlatformInfo(StrictModel):
     """Optional `models/platforms/<P>/platform.yaml`: what the platform is."""
 
     name: str | None = Field(None, description="must equal the folder name when given")
     description: str = ""
 
 
-class RobotTemplate(Strict):
+class RobotTemplate(StrictModel):
     """A robot model: the mappings it has and the robot settings it accepts."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -82,7 +82,7 @@ class RobotTemplate(Strict):
 MappingKind = Literal["topic", "service", "action_client"]
 
 
-class MappingBinding(Strict):
+class MappingBinding(StrictModel):
     """How one mapping is bound on a platform (a ROS topic, service or action client)."""
 
     kind: MappingKind
@@ -90,7 +90,7 @@ class MappingBinding(Strict):
     type: str = Field(description="e.g. geometry_msgs/msg/Twist")
 
 
-class MappingScheme(Strict):
+class MappingScheme(StrictModel):
     """How each mapping is bound on one platform (simulation and real robots differ)."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -98,7 +98,7 @@ class MappingScheme(Strict):
     mappings: dict[str, MappingBinding]
 
 
-class Logic(Strict):
+class Logic(StrictModel):
     """One implementation of an action: a code module of the brain service."""
 
     description: str = ""
@@ -106,7 +106,7 @@ class Logic(Strict):
     settings: dict[str, SettingDefinition] = Field(default_factory=dict)
 
 
-class Action(Strict):
+class Action(StrictModel):
     """What a robot can do, on which platforms, by which alternative logics."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -116,7 +116,7 @@ class Action(Strict):
     logics: dict[str, Logic] = Field(min_length=1)
 
 
-class Task(Strict):
+class Task(StrictModel):
     """A platform-free activity, achieved by any one of its alternative action lists."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -134,7 +134,7 @@ class OntologyObject(BaseModel):
     type: str = Field(description="e.g. Location")
 
 
-class Environment(Strict):
+class Environment(StrictModel):
     """The world a scenario runs in: its objects and knowledge sets given to robots."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -147,7 +147,7 @@ class Environment(Strict):
 # ---------------------------------------------------------------- configurations: configs/
 
 
-class CapabilityConfiguration(Strict):
+class CapabilityConfiguration(StrictModel):
     """A robot's composition: platform, scheme, optional template, one logic per action."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -158,14 +158,14 @@ class CapabilityConfiguration(Strict):
     actions: dict[str, str] = Field(description="action -> chosen logic")
 
 
-class Goal(Strict):
+class Goal(StrictModel):
     """An initial task for the robot's planner, optionally at a location of the environment."""
 
     task: str
     location: str | None = Field(None, description="id or name of a Location object")
 
 
-class ScenarioConfiguration(Strict):
+class ScenarioConfiguration(StrictModel):
     """A capability configuration plus the world it runs in, its settings and goals."""
 
     name: str | None = Field(None, description="must equal the file name when given")
@@ -179,7 +179,7 @@ class ScenarioConfiguration(Strict):
     goals: list[Goal] = Field(default_factory=list)
 
 
-class RobotAssignment(Strict):
+class RobotAssignment(StrictModel):
     """Which scenario one robot runs."""
 
     scenario: str
@@ -187,7 +187,7 @@ class RobotAssignment(Strict):
     suspended: bool = Field(False, description="leave the robot as it is")
 
 
-class Fleet(Strict):
+class Fleet(StrictModel):
     """The desired robot assignments."""
 
     robots: dict[str, RobotAssignment] = Field(default_factory=dict)

@@ -1,4 +1,5 @@
-"""Turns pydantic validation errors into located, human diagnostics (RC101-RC103)."""
+"""Turns pydantic validation errors into readable text: `error_path`/`error_line` for any
+error, and located diagnostics (RC101-RC103) for a YAML document."""
 
 from __future__ import annotations
 
@@ -97,11 +98,27 @@ def _data_loc(data: Any, loc: Sequence[str | int]) -> tuple[str | int, ...]:
     return tuple(out)
 
 
-def _dotted(loc: Sequence[str | int]) -> str:
+def error_path(loc: Sequence[str | int], top: str = "(top level)") -> str:
+    """pydantic's loc as a person reads it, `scenario.goals[0].task`; `top` for the whole
+    input."""
     text = ""
     for part in loc:
         text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
-    return text or "the file"
+    return text or top
+
+
+def error_text(error: ErrorDetails) -> str:
+    """pydantic's message; for our own validators' ValueError, their words alone."""
+    return str(error["msg"]).removeprefix("Value error, ")
+
+
+def error_line(error: ErrorDetails) -> str:
+    """One error as one readable line: `where: what`."""
+    return f"{error_path(error['loc'])}: {error_text(error)}"
+
+
+def _dotted(loc: Sequence[str | int]) -> str:
+    return error_path(loc, "the file")
 
 
 def typing_diagnostics(
@@ -141,8 +158,8 @@ def typing_diagnostics(
         for err in errs:
             text = _EXPECTED.get(err["type"])
             if text is None:
-                text = err["msg"][0].lower() + err["msg"][1:]
-                text = text.removeprefix("input should be ").removeprefix("value error, ")
+                text = error_text(err)
+                text = (text[:1].lower() + text[1:]).removeprefix("input should be ")
             if text not in expected:
                 expected.append(text)
         value = errs[0].get("input")

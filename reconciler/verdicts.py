@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from configurator.launch import template_mismatch
 from configurator.render import FleetRender
 from configurator.textsafe import printable
 from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus
@@ -129,14 +130,12 @@ def verdict(desired: DesiredRobot | None, robot: RobotSeen) -> tuple[Verdict, st
 
 def template_warning(desired: DesiredRobot | None, robot: RobotSeen) -> str | None:
     recommended = robot.description.recommended_template if robot.description else None
-    if desired is None or not desired.template or not recommended:
+    if desired is None:
         return None
-    if desired.template == recommended:
-        return None
-    return (
-        f"assigned robot template '{desired.template}' differs from the robot's recommended "
-        f"'{recommended}'"
-    )
+    warning = template_mismatch(desired.template, recommended)
+    if warning is not None and robot.status is not None and warning in robot.status.warnings:
+        return None  # the agent reports the same words: one line is enough
+    return warning
 
 
 def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[RobotRow]:

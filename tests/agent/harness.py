@@ -280,10 +280,13 @@ class AgentProc:
         self.proc: subprocess.Popen[bytes] | None = None
         self.brain_pids: set[int] = set()
 
-    def start(self) -> AgentProc:
+    def start(self, *hosted: AgentProc) -> AgentProc:
+        """Starts the agent process; with `hosted`, their robots' agents run in it too (one
+        `--config` each), and their own `proc` stays None."""
+        configs = [arg for a in (self, *hosted) for arg in ("--config", str(a.config_path))]
         with self.stderr_path.open("ab") as err:
             self.proc = subprocess.Popen(
-                [*agent_argv(), "--config", str(self.config_path), "--log-level", "debug"],
+                [*agent_argv(), *configs, "--log-level", "debug"],
                 stdin=subprocess.DEVNULL,
                 stdout=err,
                 stderr=err,

@@ -10,7 +10,7 @@ from typing import Any
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.requests import Accept, Freshness, Reject, interpret
+from agent.admission import Accept, Freshness, Reject, interpret
 from configurator.signing import (
     generate_keys,
     load_private_key,

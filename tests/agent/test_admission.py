@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from agent.requests import Accept, Clear, Freshness, Reject, Verifier, interpret
+from agent.admission import Accept, Clear, Freshness, Reject, Verifier, interpret
 from agent.workdir import IssuedStore
 from configurator.launch import StopRequest, canonical_json
 from configurator.signing import (
@@ -33,14 +33,14 @@ def test_empty_payload_clears(payload: bytes) -> None:
 
 def test_valid_request_is_accepted_without_warnings() -> None:
     request = make_request()
-    verdict = interpret(request.payload(), ROBOT)
-    assert verdict == Accept(request, [])
+    outcome = interpret(request.payload(), ROBOT)
+    assert outcome == Accept(request, [])
 
 
 def reason(payload: bytes, robot: RobotDescription = ROBOT) -> str:
-    verdict = interpret(payload, robot)
-    assert isinstance(verdict, Reject), verdict
-    return verdict.reason
+    outcome = interpret(payload, robot)
+    assert isinstance(outcome, Reject), outcome
+    return outcome.reason
 
 
 def test_another_robots_request_is_rejected() -> None:
@@ -71,6 +71,14 @@ def test_schema_violations_are_rejected_with_the_field() -> None:
     assert "scenario.capability.platform" in text and "surprise" in text
 
 
+def test_a_rejection_names_the_field_as_agent_yaml_and_validate_do() -> None:
+    data = json.loads(make_request().payload())
+    data["scenario"]["capability"]["tasks"] = ["Delivery", 7]
+    assert "scenario.capability.tasks[1]: Input should be a valid string" in reason(
+        json.dumps(data).encode()
+    )
+
+
 def test_tampered_content_is_rejected_by_its_digest() -> None:
     data = json.loads(make_request().payload())
     data["scenario"]["robot_settings"]["max_linear_speed"] = 9.9
@@ -85,14 +93,14 @@ def test_other_platform_is_rejected_only_when_the_robot_declares_one() -> None:
 
 
 def test_other_template_is_a_warning() -> None:
-    verdict = interpret(make_request(template="turtlebot3-burger").payload(), ROBOT)
-    assert isinstance(verdict, Accept)
-    assert len(verdict.warnings) == 1 and "turtlebot3-burger" in verdict.warnings[0]
-    verdict = interpret(make_request(template=None).payload(), ROBOT)
-    assert isinstance(verdict, Accept) and "names no robot template" in verdict.warnings[0]
+    outcome = interpret(make_request(template="turtlebot3-burger").payload(), ROBOT)
+    assert isinstance(outcome, Accept)
+    assert len(outcome.warnings) == 1 and "turtlebot3-burger" in outcome.warnings[0]
+    outcome = interpret(make_request(template=None).payload(), ROBOT)
+    assert isinstance(outcome, Accept) and "names no robot template" in outcome.warnings[0]
     no_preference = ROBOT.model_copy(update={"recommended_template": None})
-    verdict = interpret(make_request(template="turtlebot3-burger").payload(), no_preference)
-    assert verdict == Accept(make_request(template="turtlebot3-burger"), [])
+    outcome = interpret(make_request(template="turtlebot3-burger").payload(), no_preference)
+    assert outcome == Accept(make_request(template="turtlebot3-burger"), [])
 
 
 def test_signatures_are_checked_when_the_agent_has_a_key(tmp_path: Path) -> None:
@@ -115,9 +123,9 @@ def test_signatures_are_checked_when_the_agent_has_a_key(tmp_path: Path) -> None
 
 
 def reason_with(payload: bytes, check: Verifier) -> str:
-    verdict = interpret(payload, ROBOT, check)
-    assert isinstance(verdict, Reject), verdict
-    return verdict.reason
+    outcome = interpret(payload, ROBOT, check)
+    assert isinstance(outcome, Reject), outcome
+    return outcome.reason
 
 
 def test_an_older_signed_request_is_a_replay_unless_it_is_the_running_one(tmp_path: Path) -> None:
@@ -131,8 +139,8 @@ def test_an_older_signed_request_is_a_replay_unless_it_is_the_running_one(tmp_pa
     new = sign(make_request(template="turtlebot3-burger"), private, issued_at=2000.0)
     assert old.digest != new.digest
     running_new = Freshness(newest_issued_at=2000.0, running_digest=new.digest)
-    verdict = interpret(old.payload(), ROBOT, check, running_new)
-    assert isinstance(verdict, Reject) and "replayed request" in verdict.reason
+    outcome = interpret(old.payload(), ROBOT, check, running_new)
+    assert isinstance(outcome, Reject) and "replayed request" in outcome.reason
     # The request it runs, re-sent (a retained redelivery after a reconnect), is harmless.
     assert isinstance(interpret(new.payload(), ROBOT, check, running_new), Accept)
     # A newer one is accepted; so is anything when nothing was accepted yet.
@@ -197,9 +205,9 @@ def test_hostile_payloads_are_rejected_with_a_short_reason(
     payload: bytes, keyed: tuple[Any, Verifier]
 ) -> None:
     for check in (None, keyed[1]):
-        verdict = interpret(payload, ROBOT, check)
-        assert isinstance(verdict, Reject), verdict
-        assert len(verdict.reason) < 500
+        outcome = interpret(payload, ROBOT, check)
+        assert isinstance(outcome, Reject), outcome
+        assert len(outcome.reason) < 500
 
 
 @pytest.mark.parametrize("issued_at", [1e308, -1e308, 0.0, 2**62])
@@ -208,7 +216,7 @@ def test_replay_checks_survive_any_signed_time(
 ) -> None:
     private, check = keyed
     signed = sign(make_request(), private, issued_at=issued_at)
-    verdict = interpret(signed.payload(), ROBOT, check, Freshness(1e300, None))
-    assert isinstance(verdict, (Accept, Reject))
-    verdict = interpret(signed.payload(), ROBOT, check, Freshness(-1e300, None))
-    assert isinstance(verdict, (Accept, Reject))
+    outcome = interpret(signed.payload(), ROBOT, check, Freshness(1e300, None))
+    assert isinstance(outcome, (Accept, Reject))
+    outcome = interpret(signed.payload(), ROBOT, check, Freshness(-1e300, None))
+    assert isinstance(outcome, (Accept, Reject))

@@ -19,6 +19,7 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.reasoncodes import ReasonCode
 
+from agent.admission import MAX_REQUEST_BYTES
 from agent.events import (
     Connected,
     ConnectFailed,
@@ -27,12 +28,12 @@ from agent.events import (
     LaunchMessage,
     StatusMessage,
 )
-from agent.requests import MAX_REQUEST_BYTES
 from agent.workdir import SeqStore
+from configurator.backoff import Backoff
 from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
 from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("robotconf.agent.broker_link")
 
 QOS = 1
 MAX_STATUS_BYTES = 64 * 1024  # an agent status is a few hundred bytes
@@ -84,7 +85,7 @@ class BrokerLink:
         self._generation = 0
         self._poller: select.poll | None = None  # readiness of the current socket, no waiting
         self._retry_at = 0.0
-        self._delay = RECONNECT_MIN_DELAY
+        self._backoff = Backoff(RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY)
         self._next_misc = 0.0
         self.client = make_client(connection, client_id=f"robotconf-agent-{robot_id}")
         # A callback that raises must not end the loop: paho logs it and goes on.
@@ -117,7 +118,7 @@ class BrokerLink:
         if reason_code.is_failure:
             self._inbox.put_local(ConnectFailed(f"broker refused the connection: {reason_code}"))
             return
-        self._delay = RECONNECT_MIN_DELAY
+        self._backoff.reset()
         # Subscribing here, not once at start-up, restores the subscriptions after a reconnect.
         # The own status topic is watched for a late Last Will; QoS 0 is enough, since every
         # reconnection delivers the retained status anew, and spares a PUBACK per echo.
@@ -135,7 +136,7 @@ class BrokerLink:
         self._inbox.put_local(Disconnected(str(reason_code)))
 
     def _on_message(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
-        # Cut to one byte over each limit: the verdict (too large) is the same, the rest of a
+        # Cut to one byte over each limit: the outcome (too large) is the same, the rest of a
         # huge payload is not kept while it waits in the inbox.
         if message.topic == self.launch_topic:
             self._inbox.put_local(LaunchMessage(bytes(message.payload[: MAX_REQUEST_BYTES + 1])))
@@ -247,8 +248,7 @@ class BrokerLink:
         self._schedule_retry(now)
 
     def _schedule_retry(self, now: float) -> None:
-        self._retry_at = now + self._delay
-        self._delay = min(self._delay * 2, RECONNECT_MAX_DELAY)
+        self._retry_at = now + self._backoff.next()
 
     # ------------------------------------------------------------ publishing
 

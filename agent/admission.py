@@ -1,4 +1,5 @@
-"""What a payload on the launch topic means for this robot: clear, accept (with warnings), reject.
+"""Admission: whether a launch-topic payload is admitted for this robot (clear, accept with
+warnings, or reject).
 
 Pure: validated with the shared LaunchRequest type, checked against the robot's description.
 """
@@ -12,8 +13,15 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.launch import API_VERSION, LaunchRequest, StopRequest, canonical_json
+from configurator.launch import (
+    API_VERSION,
+    LaunchRequest,
+    StopRequest,
+    canonical_json,
+    template_mismatch,
+)
 from configurator.safejson import PayloadError, parse_object
+from configurator.typing_errors import error_line
 from configurator.wire import RobotDescription
 
 
@@ -35,7 +43,7 @@ class Reject:
     reason: str
 
 
-Verdict = Clear | Accept | Reject
+Admission = Clear | Accept | Reject
 # Checks the signature of the parsed JSON object; None when it is good.
 Verifier = Callable[[dict[str, Any]], "str | None"]
 
@@ -73,10 +81,7 @@ def _iso(stamp: float) -> str:
 
 
 def _validation_summary(exc: ValidationError, limit: int = 3) -> str:
-    parts = []
-    for error in exc.errors()[:limit]:
-        where = ".".join(str(p) for p in error["loc"]) or "(top level)"
-        parts.append(f"{where}: {error['msg']}")
+    parts = [error_line(error) for error in exc.errors(include_url=False)[:limit]]
     more = exc.error_count() - limit
     summary = "; ".join(parts) + (f"; and {more} more" if more > 0 else "")
     return summary if len(summary) <= 400 else summary[:397] + "..."  # keys come from the payload
@@ -87,8 +92,8 @@ def interpret(
     robot: RobotDescription,
     verify: Verifier | None = None,
     freshness: Freshness | None = None,
-) -> Verdict:
-    """The verdict on one launch-topic payload. Nothing is trusted before it is verified: the
+) -> Admission:
+    """The admission of one launch-topic payload. Nothing is trusted before it is verified: the
     payload is parsed under bounds, addressed and (when `verify` is set) its signature checked
     on the plain JSON object; only then is it validated as a request."""
     if not payload.strip():
@@ -137,18 +142,11 @@ def interpret(
             f"the request needs platform {capability.platform!r}, "
             f"this robot runs {robot.platform!r}"
         )
-    warnings = []
-    template = capability.robot_template
-    recommended = robot.recommended_template
-    if recommended is not None and template != recommended:
-        target = f"targets template {template!r}" if template else "names no robot template"
-        warnings.append(
-            f"capability {capability.name!r} {target}; this robot recommends {recommended!r}"
-        )
-    return Accept(request, warnings)
+    warning = template_mismatch(capability.robot_template, robot.recommended_template)
+    return Accept(request, [warning] if warning else [])
 
 
-def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Verdict:
+def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Admission:
     try:
         stop = StopRequest.model_validate(data)
     except ValidationError as exc:
