@@ -19,6 +19,7 @@ from typing import Protocol
 
 from pydantic import ValidationError
 
+from configurator.backoff import Backoff
 from configurator.launch import LaunchRequest, StopRequest
 from configurator.mqtt import Connection
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
@@ -126,7 +127,7 @@ class Controller:
         try:
             poll = None if self._watch_source() else LOCAL_POLL
             next_resync = 0.0
-            backoff = BACKOFF_INITIAL
+            backoff = Backoff(BACKOFF_INITIAL, BACKOFF_MAX)
             while not self._stop.is_set():
                 self._wake.clear()
                 now_ = time.monotonic()
@@ -135,17 +136,15 @@ class Controller:
                     next_resync = now_ + self.interval
                 outcome = self._step(resync)
                 if outcome is None:  # a bug: wait it out whatever wakes us, not to spin
-                    self._stop.wait(backoff)
-                    backoff = min(backoff * 2, BACKOFF_MAX)
+                    self._stop.wait(backoff.next())
                     continue
                 waits = [max(0.0, next_resync - time.monotonic())]
                 if poll is not None:
                     waits.append(poll)
                 if outcome is Outcome.RETRY:
-                    waits.append(backoff)
-                    backoff = min(backoff * 2, BACKOFF_MAX)
+                    waits.append(backoff.next())
                 elif outcome is Outcome.DONE:
-                    backoff = BACKOFF_INITIAL
+                    backoff.reset()
                 self._wake.wait(min(waits))
         finally:
             self.writer.go_offline()

@@ -140,3 +140,25 @@ def test_the_robot_side_imports_no_workstation_library(module: str) -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert not _top(set(done.stdout.splitlines())) & {"click", "rich", "git", "reconciler"}
+
+
+def test_the_readme_architecture_names_every_module_once() -> None:
+    """A newcomer finds any module in README's architecture table, and no row is stale."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## Architecture", 1)[1].split("\n## ", 1)[0]
+    rows = [
+        line.split("`")[1]
+        for line in section.splitlines()
+        if line.startswith("| `") and line.split("`")[1].endswith(".py")
+    ]
+    modules = sorted(
+        str(p.relative_to(ROOT))
+        for package in PACKAGES
+        for p in (ROOT / package).rglob("*.py")
+        if p.name != "__init__.py"
+    )
+    assert sorted(set(rows)) == sorted(rows), "a module is listed twice"
+    assert sorted(rows) == modules, (
+        f"missing from README: {sorted(set(modules) - set(rows))}; "
+        f"stale in README: {sorted(set(rows) - set(modules))}"
+    )

@@ -12,7 +12,7 @@ PACKAGES = ["configurator", "reconciler", "agent"]
 # Other libraries' loggers, configured by their own names (quietened, mostly).
 THIRD_PARTY = {"watchfiles", "amqtt", "transitions"}
 # `logging.getLogger()` without a name is the root logger: only for attaching a handler.
-ROOT_LOGGER_USERS = {"reconciler/up.py"}
+ROOT_LOGGER_USERS = {"reconciler/lifecycle.py"}
 
 
 def _is_get_logger(node: ast.AST) -> bool:
