@@ -1,4 +1,4 @@
-"""Fixtures shared by every test suite: a real Mosquitto broker per test."""
+"""Fixtures shared by every test suite: a copy of the example lab, a real Mosquitto per test."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.mosquitto import Mosquitto, find_mosquitto
+from tests.support.lab import Lab
+from tests.support.mosquitto import Mosquitto, find_mosquitto
 
 
 @pytest.fixture
@@ -22,3 +23,9 @@ def mosquitto(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mosquitto]:
         yield broker
     finally:
         broker.kill()
+
+
+@pytest.fixture
+def lab(tmp_path: Path) -> Lab:
+    """The example lab copied into a temporary folder (no git repository until committed)."""
+    return Lab(tmp_path / "lab")

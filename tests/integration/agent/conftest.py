@@ -1,0 +1,40 @@
+"""Fixtures of the agent tests: an observer of the fleet topics and agent processes."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.support.agents import AgentProc, Observer
+from tests.support.mosquitto import Mosquitto
+
+AgentFactory = Callable[..., AgentProc]
+
+
+@pytest.fixture
+def observer(mosquitto: Mosquitto) -> Iterator[Observer]:
+    watcher = Observer(mosquitto.url)
+    try:
+        yield watcher
+    finally:
+        watcher.close()
+
+
+@pytest.fixture
+def make_agent(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[AgentFactory]:
+    """Builds (not starts) agents against the test broker; all are cleaned up afterwards."""
+    made: list[AgentProc] = []
+
+    def factory(name: str = "agent", **settings: Any) -> AgentProc:
+        agent = AgentProc(tmp_path / name, mosquitto.url, **settings)
+        made.append(agent)
+        return agent
+
+    try:
+        yield factory
+    finally:
+        for agent in made:
+            agent.cleanup()

@@ -1,0 +1,184 @@
+"""The agent against a locked-down Mosquitto: TLS, a client certificate, a password, signatures."""
+
+from __future__ import annotations
+
+import datetime
+import subprocess
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import NameOID
+
+from configurator.mqtt import Connection
+from configurator.signing import generate_keys, load_private_key, sign
+from configurator.wire import AgentState, Topics
+from tests.support.agents import AgentProc, Observer, make_request, publish, wait_until
+from tests.support.mosquitto import Mosquitto
+from tests.support.tlsutil import make_pki
+
+ROBOT = "tb3-01"
+LAUNCH = Topics().launch(ROBOT)
+
+
+def _name(common: str) -> x509.Name:
+    return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common)])
+
+
+def make_client_cert(folder: Path, user: str) -> tuple[Path, Path, Path]:
+    """(client CA, client certificate, client key): the broker trusts that CA for clients."""
+    now = datetime.datetime.now(datetime.timezone.utc)
+    ca_key = ec.generate_private_key(ec.SECP256R1())
+    ca = (
+        x509.CertificateBuilder()
+        .subject_name(_name("robotconf test client CA"))
+        .issuer_name(_name("robotconf test client CA"))
+        .public_key(ca_key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - datetime.timedelta(minutes=5))
+        .not_valid_after(now + datetime.timedelta(days=1))
+        .add_extension(x509.BasicConstraints(ca=True, path_length=None), critical=True)
+        .sign(ca_key, hashes.SHA256())
+    )
+    key = ec.generate_private_key(ec.SECP256R1())
+    cert = (
+        x509.CertificateBuilder()
+        .subject_name(_name(user))
+        .issuer_name(ca.subject)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - datetime.timedelta(minutes=5))
+        .not_valid_after(now + datetime.timedelta(days=1))
+        .sign(ca_key, hashes.SHA256())
+    )
+    paths = (folder / "client-ca.crt", folder / "client.crt", folder / "client.key")
+    paths[0].write_bytes(ca.public_bytes(serialization.Encoding.PEM))
+    paths[1].write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    paths[2].write_bytes(
+        key.private_bytes(
+            serialization.Encoding.PEM,
+            serialization.PrivateFormat.PKCS8,
+            serialization.NoEncryption(),
+        )
+    )
+    paths[2].chmod(0o600)
+    return paths
+
+
+@dataclass
+class Secured:
+    broker: Mosquitto
+    server_ca: Path
+    client_cert: Path
+    client_key: Path
+    password_file: Path
+    keys: Path
+
+    def connection(self) -> Connection:
+        return Connection(
+            url=f"mqtts://127.0.0.1:{self.broker.port}",
+            username=ROBOT,
+            password_file=self.password_file,
+            ca_file=self.server_ca,
+            cert_file=self.client_cert,
+            key_file=self.client_key,
+        )
+
+    def agent_settings(self) -> dict[str, Any]:
+        return {
+            "broker": f"mqtts://127.0.0.1:{self.broker.port}",
+            "username": ROBOT,
+            "password_file": str(self.password_file),
+            "tls": {
+                "ca_file": str(self.server_ca),
+                "cert_file": str(self.client_cert),
+                "key_file": str(self.client_key),
+            },
+            "public_key": str(self.keys / "launch-signing.pub"),
+        }
+
+
+@pytest.fixture
+def secured(tmp_path: Path) -> Iterator[Secured]:
+    pki = make_pki(tmp_path / "pki")
+    client_ca, client_cert, client_key = make_client_cert(tmp_path / "pki", ROBOT)
+    passwd = tmp_path / "passwd"
+    subprocess.run(["mosquitto_passwd", "-c", "-b", str(passwd), ROBOT, "s3cret"], check=True)
+    password_file = tmp_path / "robot.password"
+    password_file.write_text("s3cret\n", encoding="utf-8")
+    password_file.chmod(0o600)
+    broker = Mosquitto(
+        tmp_path / "broker",
+        listener_options=[
+            f"certfile {pki.server_cert}",
+            f"keyfile {pki.server_key}",
+            f"cafile {client_ca}",
+            "require_certificate true",
+            f"password_file {passwd}",
+        ],
+        allow_anonymous=False,
+    )
+    keys = tmp_path / "keys"
+    generate_keys(keys)
+    broker.start()
+    try:
+        yield Secured(broker, pki.ca_cert, client_cert, client_key, password_file, keys)
+    finally:
+        broker.kill()
+
+
+def test_tls_client_certificate_password_and_signed_requests(
+    tmp_path: Path, secured: Secured
+) -> None:
+    observer = Observer(secured.connection())
+    agent = AgentProc(tmp_path / "agent", "unused", **secured.agent_settings())
+    try:
+        agent.start()
+        observer.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+        wait_until(lambda: ROBOT in observer.descriptions, "the description over TLS")
+
+        unsigned = make_request()
+        publish(secured.connection(), LAUNCH, unsigned.payload())
+        observer.wait_for(
+            ROBOT,
+            lambda s: s.state == AgentState.REJECTED and "not signed" in s.message,
+            "an unsigned request to be refused",
+            agent=agent,
+        )
+        foreign = generate_keys(tmp_path / "other-keys")
+        forged = sign(make_request(variant=1), load_private_key(foreign.private))
+        publish(secured.connection(), LAUNCH, forged.payload())
+        observer.wait_for(
+            ROBOT,
+            lambda s: s.state == AgentState.REJECTED and "does not verify" in s.message,
+            "a request signed by another key to be refused",
+            agent=agent,
+        )
+        our_key = load_private_key(secured.keys / "launch-signing.key")
+        signed = sign(make_request(variant=2), our_key)
+        publish(secured.connection(), LAUNCH, signed.payload())
+        running = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=signed.digest)
+        agent.note_brain(running.pid)
+    finally:
+        observer.close()
+        agent.cleanup()
+
+
+def test_wrong_password_is_reported_and_retried(tmp_path: Path, secured: Secured) -> None:
+    wrong = tmp_path / "wrong.password"
+    wrong.write_text("guess\n", encoding="utf-8")
+    settings = secured.agent_settings() | {"password_file": str(wrong)}
+    agent = AgentProc(tmp_path / "agent", "unused", **settings)
+    try:
+        agent.start()
+        wait_until(
+            lambda: "broker refused the connection" in agent.log_tail(), "the refusal in the log"
+        )
+        assert agent.proc is not None and agent.proc.poll() is None  # still trying
+    finally:
+        agent.cleanup()

@@ -1,0 +1,65 @@
+"""The stand-in brain: says what it would load, refuses a malformed request, runs until told."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+from pathlib import Path
+
+from tests.support.agents import STANDIN, TIMEOUT, make_request
+
+
+def test_prints_what_it_would_load_and_stops_on_sigterm(tmp_path: Path) -> None:
+    request_file = tmp_path / "launch-request.json"
+    request_file.write_bytes(make_request().payload())
+    proc = subprocess.Popen([*STANDIN, str(request_file)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        lines = [proc.stdout.readline().rstrip("\n") for _ in range(6)]
+        assert proc.poll() is None  # still running: it waits for a signal
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert lines[0].startswith("stand-in brain for tb3-01 (Delivery bot), scenario delivery-gazebo")
+    assert lines[1:] == [
+        "platform module: ROS2 (mapping scheme gazebo, robot template turtlebot3-camera)",
+        "logic modules:",
+        "  Follow: follow_with_poses",
+        "mappings:",
+        "  cmd_vel: topic /cmd_vel (geometry_msgs/msg/Twist)",
+    ]
+    assert "SIGTERM received, stopping" in rest
+    assert proc.returncode == 0
+
+
+def test_malformed_request_exits_non_zero(tmp_path: Path) -> None:
+    for content in (b"{not json", b'{"apiVersion": "robotconf/v1"}'):
+        request_file = tmp_path / "bad.json"
+        request_file.write_bytes(content)
+        result = subprocess.run(
+            [*STANDIN, str(request_file)], capture_output=True, text=True, timeout=TIMEOUT
+        )
+        assert result.returncode == 1
+        assert "malformed launch request" in result.stderr
+        assert "Traceback" not in result.stderr
+
+
+def test_missing_request_file_exits_non_zero(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [*STANDIN, str(tmp_path / "nope.json")], capture_output=True, text=True, timeout=TIMEOUT
+    )
+    assert result.returncode == 2 and "cannot read" in result.stderr
+
+
+def test_crash_on_demand_for_demos(tmp_path: Path) -> None:
+    request_file = tmp_path / "launch-request.json"
+    request_file.write_bytes(make_request().payload())
+    result = subprocess.run(
+        [*STANDIN, "--exit-after", "0", "--exit-code", "7", str(request_file)],
+        capture_output=True,
+        timeout=TIMEOUT,
+    )
+    assert result.returncode == 7

@@ -1,0 +1,179 @@
+"""The packages' shape: no import cycles, and start-up paths that import only what they need."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.support.lab import ROOT
+
+PACKAGES = ("configurator", "reconciler", "agent")
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imported_modules(path: Path, modules: set[str]) -> set[str]:
+    """Our modules that `path` imports anywhere (top level, functions, TYPE_CHECKING blocks):
+    `from a import b` counts as a.b when that is a module, else as a."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            targets = [f"{base}.{alias.name}" for alias in node.names] + [base]
+        else:
+            continue
+        for target in targets:
+            # The nearest module that exists: a.b.C (a class) counts as a.b.
+            while target and target not in modules:
+                target = target.rpartition(".")[0]
+            if target and target != name:
+                found.add(target)
+    return found
+
+
+def import_graph() -> dict[str, set[str]]:
+    paths = [p for package in PACKAGES for p in (ROOT / package).rglob("*.py")]
+    modules = {module_name(p) for p in paths}
+    return {module_name(p): imported_modules(p, modules) for p in paths}
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle as [a, b, ..., a], or None. A package's __init__ importing its own submodule
+    is not counted: importing the submodule imports the package first anyway."""
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        path.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if nxt.startswith(node + "."):
+                continue
+            if state.get(nxt) == 1:
+                return [*path[path.index(nxt) :], nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        path.pop()
+        state[node] = 2
+        return None
+
+    for start in sorted(graph):
+        if start not in state:
+            found = visit(start)
+            if found:
+                return found
+    return None
+
+
+def test_our_packages_have_no_import_cycles() -> None:
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def test_the_cycle_finder_finds_a_function_level_cycle(tmp_path: Path) -> None:
+    graph = {"a.x": {"a.y"}, "a.y": {"a.z"}, "a.z": {"a.x"}, "a": {"a.x"}}
+    assert find_cycle(graph) == ["a.x", "a.y", "a.z", "a.x"]
+    assert find_cycle({"a.x": {"a.y"}, "a.y": set()}) is None
+    # Imports inside functions count: they run sooner or later.
+    module = ROOT / "reconciler" / "up.py"
+    assert "reconciler.broker" in imported_modules(module, set(import_graph()))
+
+
+def loaded_modules(*argv: str) -> set[str]:
+    """The modules a `robotconf` run with these arguments has imported when it ends."""
+    code = (
+        "import sys, io, contextlib\n"
+        "from configurator.cli import main\n"
+        "out = io.StringIO()\n"
+        "with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):\n"
+        f"    code = main({list(argv)!r})\n"
+        "print(code)\n"
+        "print('\\n'.join(sorted(sys.modules)))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] in {"0", "1"}, done.stdout
+    return set(lines[1:])
+
+
+def _top(modules: set[str]) -> set[str]:
+    return {m.split(".")[0] for m in modules}
+
+
+def test_help_imports_no_command_module() -> None:
+    loaded = loaded_modules("--help")
+    commands = {m for m in loaded if m.startswith("configurator.cli.")}
+    assert commands <= {"configurator.cli.main", "configurator.cli.errors"}, commands
+    assert not _top(loaded) & {"rich", "pydantic", "paho", "git", "reconciler", "agent"}
+
+
+def test_validate_imports_neither_rich_nor_the_broker_side() -> None:
+    loaded = loaded_modules("validate", "--repo", str(ROOT))
+    assert "configurator.workspace" in loaded  # it did run
+    assert not _top(loaded) & {"rich", "paho", "git", "reconciler", "agent"}
+
+
+@pytest.mark.parametrize("module", ["agent.cli", "agent.runtime", "configurator.cli.errors"])
+def test_the_robot_side_imports_no_workstation_library(module: str) -> None:
+    code = f"import sys, {module}; print('\\n'.join(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert not _top(set(done.stdout.splitlines())) & {"click", "rich", "git", "reconciler"}
+
+
+def test_the_readme_architecture_names_every_module_once() -> None:
+    """A newcomer finds any module in README's architecture table, and no row is stale."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## Architecture", 1)[1].split("\n## ", 1)[0]
+    rows = [
+        line.split("`")[1]
+        for line in section.splitlines()
+        if line.startswith("| `") and line.split("`")[1].endswith(".py")
+    ]
+    modules = sorted(
+        str(p.relative_to(ROOT))
+        for package in PACKAGES
+        for p in (ROOT / package).rglob("*.py")
+        if p.name != "__init__.py"
+    )
+    assert sorted(set(rows)) == sorted(rows), "a module is listed twice"
+    assert sorted(rows) == modules, (
+        f"missing from README: {sorted(set(modules) - set(rows))}; "
+        f"stale in README: {sorted(set(rows) - set(modules))}"
+    )
+
+
+# What makes a test an integration test: a broker, git, or a process of its own.
+_INTEGRATION_MARKS = ("subprocess", "mosquitto", ".commit(", "lab.run(", "Popen", "GitLab", "git(")
+
+
+def test_unit_tests_are_pure() -> None:
+    """tests/unit runs no broker, no git and no process: those tests live in tests/integration."""
+    found = [
+        f"{path.relative_to(ROOT)}: {mark}"
+        for path in sorted((ROOT / "tests" / "unit").rglob("*.py"))
+        for mark in _INTEGRATION_MARKS
+        if mark in path.read_text(encoding="utf-8")
+    ]
+    assert found == [], "move these to tests/integration: " + "; ".join(found)

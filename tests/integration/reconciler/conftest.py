@@ -1,0 +1,66 @@
+"""Fixtures for the reconciler: a git lab, and a whole converged fleet on a real Mosquitto."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from configurator.launch import LaunchRequest
+from configurator.wire import AgentStatus
+from tests.support.fleet import GitLab, Proc, Watch, start_agent, start_reconciler
+from tests.support.mosquitto import Mosquitto
+
+# A sixth robot shares tb3-01's scenario, so that "its robots" is more than one.
+EXTRA_ROBOT = "  tb3-06: {scenario: delivery-gazebo, name: Second delivery bot}\n"
+
+
+@pytest.fixture
+def lab(tmp_path: Path) -> GitLab:
+    return GitLab(tmp_path / "lab")
+
+
+@dataclass
+class Fleet:
+    lab: GitLab
+    broker: Mosquitto
+    watch: Watch
+    folder: Path
+    agents: dict[str, Proc] = field(default_factory=dict)
+    reconciler: Proc | None = None
+    converged: dict[str, AgentStatus] = field(default_factory=dict)
+    logs: int = 0
+
+    def start_reconciler(self, *extra: str) -> Proc:
+        self.logs += 1
+        self.reconciler = start_reconciler(
+            self.lab, self.broker.url, self.folder / f"reconciler-{self.logs}.log", *extra
+        )
+        return self.reconciler
+
+    def requests(self, revision: str | None = None) -> dict[str, LaunchRequest]:
+        return self.lab.requests(revision)
+
+
+@pytest.fixture
+def fleet(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Fleet]:
+    """Six agents with the stand-in brain and a reconciler on `main`, all running (converged)."""
+    lab = GitLab(tmp_path / "lab")
+    lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
+    lab.commit("a sixth robot")
+    watch = Watch(mosquitto.url)
+    state = Fleet(lab, mosquitto, watch, tmp_path)
+    try:
+        for robot_id in lab.robots():
+            state.agents[robot_id] = start_agent(lab, robot_id, mosquitto.url, tmp_path / "agents")
+        state.start_reconciler("--interval", "5")
+        state.converged = watch.wait_running(state.requests())
+        yield state
+    finally:
+        watch.close()
+        if state.reconciler is not None:
+            state.reconciler.stop()
+        for proc in state.agents.values():
+            proc.stop()

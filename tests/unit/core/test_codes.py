@@ -1,0 +1,116 @@
+"""The registry of diagnostic codes: the code uses exactly what it declares, README shows it."""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+from configurator.codes import RULES, Severity, UnregisteredCode, readme_table, with_readme_table
+from configurator.diagnostics import Diagnostic
+from configurator.rules.report import Reporter
+from configurator.yamlio import YamlProblem, parse_document
+from tests.support.lab import ROOT
+
+CODE = re.compile(r"\bRC\d{3}\b")
+REGISTRY = ROOT / "configurator" / "codes.py"
+UPDATE = "python -m configurator.codes README.md"
+
+
+def _sources() -> list[Path]:
+    found = [
+        path
+        for package in ("configurator", "reconciler", "agent")
+        for path in sorted((ROOT / package).rglob("*.py"))
+        if path != REGISTRY
+    ]
+    assert len(found) > 30, "the packages were not found"
+    return found
+
+
+def test_every_code_named_in_the_packages_is_declared() -> None:
+    # Comments and messages too: a code named anywhere is one a reader will look up.
+    undeclared = [
+        f"{path.relative_to(ROOT)}:{number}: {code}"
+        for path in _sources()
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1)
+        for code in CODE.findall(line)
+        if code not in RULES
+    ]
+    assert not undeclared, "declare these in configurator/codes.py:\n" + "\n".join(undeclared)
+
+
+def test_every_declared_code_is_used_as_a_literal() -> None:
+    used = {
+        node.value
+        for path in _sources()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Constant)
+        and isinstance(node.value, str)
+        and CODE.fullmatch(node.value)
+    }
+    dead = sorted(set(RULES) - used)
+    assert not dead, f"declared in configurator/codes.py but never reported: {dead}"
+    assert used <= set(RULES)
+
+
+def test_readme_table_is_generated_from_the_registry() -> None:
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    if with_readme_table(readme) != readme:
+        table = readme[readme.index("| code | rule |") :].split("\n\n", 1)[0] + "\n"
+        stale = sorted(set(table.splitlines()) ^ set(readme_table().splitlines()))
+        pytest.fail(
+            "README.md's table of rule codes is not configurator/codes.py's; after editing the "
+            f"registry, run `{UPDATE}`. Rows that differ:\n" + "\n".join(stale)
+        )
+
+
+def test_the_readme_table_is_rewritten_row_for_row() -> None:
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    current = with_readme_table(readme)
+    row = f"| RC204 | {RULES['RC204'].summary} |\n"
+    assert row in current
+    edited = current.replace(row, "| RC204 | something else |\n| RC999 | invented |\n")
+    assert with_readme_table(edited) == current
+    assert with_readme_table(current.replace(row, "")) == current
+    assert "| RC608 | warning: " in current
+
+
+def test_registry_declares_each_code_once_with_a_summary() -> None:
+    for code, rule in RULES.items():
+        assert rule.code == code and CODE.fullmatch(code)
+        assert rule.summary and "|" not in rule.summary and "\n" not in rule.summary
+    assert [c for c, r in RULES.items() if r.severity is Severity.WARNING] == ["RC608"]
+
+
+def test_a_diagnostic_with_an_undeclared_code_is_refused() -> None:
+    with pytest.raises(UnregisteredCode, match="'RC999' is not declared"):
+        Diagnostic("configs/fleet.yaml", 1, 1, Severity.ERROR, "RC999", "invented")
+    with pytest.raises(UnregisteredCode, match="RC608 is declared as warning, not error"):
+        Diagnostic("configs/fleet.yaml", 1, 1, Severity.ERROR, "RC608", "wrong severity")
+    with pytest.raises(UnregisteredCode):
+        YamlProblem(1, 1, "RC010", "invented")
+    assert Diagnostic("a.yaml", 1, 1, Severity.WARNING, "RC608", "fine").code == "RC608"
+
+
+def test_the_reporter_takes_the_severity_from_the_registry() -> None:
+    from configurator.repository import Entry
+    from configurator.types import Task
+
+    doc = parse_document("models/tasks/Deliver.yaml", b"implementations: [[Go]]\n")
+    entry = Entry("Deliver", Task.model_validate(doc.data), doc)
+    report = Reporter()
+    report.add(entry, ["implementations", 0], "RC608", "a warning by declaration")
+    report.add(entry, ["implementations", 0, 0], "RC603", "an error by declaration")
+    assert [(d.severity, d.line, d.col) for d in report.found] == [
+        (Severity.WARNING, 1, 19),
+        (Severity.ERROR, 1, 20),
+    ]
+    with pytest.raises(UnregisteredCode):
+        report.add(entry, [], "RC699", "invented")
+    report.unknown(entry, [], "RC603", "unknown action 'Goo'", "Goo", ["Go"], unreadable=True)
+    assert len(report.found) == 2
+    report.unknown(entry, [], "RC603", "unknown action 'Goo'", "Goo", ["Go"])
+    assert report.found[-1].message == "unknown action 'Goo'; did you mean 'Go'?"

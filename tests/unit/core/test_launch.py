@@ -1,0 +1,105 @@
+"""The Launch Request's single definitions: what its digest covers, and the template warning
+that the agent's admission and the fleet status share."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+from pydantic import BaseModel, ValidationError
+
+from agent.admission import Accept, interpret
+from configurator.launch import (
+    DIGEST_EXCLUDED,
+    LaunchRequest,
+    content_digest,
+    digest_content,
+    template_mismatch,
+    with_digest,
+)
+from configurator.wire import AgentState, AgentStatus, RobotDescription
+from reconciler.observed import RobotSeen
+from reconciler.verdicts import DesiredRobot, template_warning
+from tests.support.agents import make_request
+
+
+class AnnotatedRequest(LaunchRequest):
+    """A request as a later version might extend it: one more field of content."""
+
+    note: str = ""
+
+
+def test_a_field_added_to_the_request_is_covered_by_render_and_check_alike() -> None:
+    plain = make_request()
+    annotated = with_digest(AnnotatedRequest(**dict(plain), note="lidar recalibrated"))
+    assert annotated.digest_matches()  # sealed on rendering's path, verified on the agent's
+    assert annotated.digest != plain.digest  # the new field is content
+    received = AnnotatedRequest.model_validate_json(annotated.payload())
+    assert received == annotated and received.digest_matches()
+    tampered = received.model_copy(update={"note": "not recalibrated"})
+    assert not tampered.digest_matches()
+
+
+def _other(name: str, value: Any) -> Any:
+    """A different value of the same type; a field of a new type must be taught here."""
+    if isinstance(value, str):
+        return value + "~"
+    if isinstance(value, float):
+        return value + 1.0
+    if isinstance(value, BaseModel) and isinstance(getattr(value, "name", None), str):
+        return value.model_copy(update={"name": value.name + "~"})  # type: ignore[attr-defined]
+    pytest.fail(f"field {name!r} holds a {type(value).__name__}: teach _other to change it")
+
+
+def test_every_field_but_the_documented_exclusions_changes_the_digest() -> None:
+    assert {"revision", "digest", "issued_at", "signature"} == DIGEST_EXCLUDED  # README, DESIGN
+    request = make_request().model_copy(update={"issued_at": 1.0e9, "signature": "c2ln"})
+    assert set(dict(request)) == set(LaunchRequest.model_fields)  # every field is visited
+    digest = content_digest(digest_content(request))
+    for name, value in request:
+        changed = request.model_copy(update={name: _other(name, value)})
+        moved = content_digest(digest_content(changed)) != digest
+        assert moved is (name not in DIGEST_EXCLUDED), name
+
+
+def test_template_mismatch_words() -> None:
+    assert template_mismatch("turtlebot3-burger", None) is None
+    assert template_mismatch("turtlebot3-burger", "turtlebot3-burger") is None
+    assert template_mismatch("turtlebot3-burger", "turtlebot3-camera") == (
+        "assigned robot template 'turtlebot3-burger' differs from the robot's recommended "
+        "'turtlebot3-camera'"
+    )
+    assert template_mismatch(None, "turtlebot3-camera") == (
+        "the assigned capability names no robot template; the robot recommends 'turtlebot3-camera'"
+    )
+
+
+@pytest.mark.parametrize("template", ["turtlebot3-burger", None])
+def test_agent_and_fleet_status_warn_in_the_same_words_once(template: str | None) -> None:
+    robot = RobotDescription(id="tb3-01", platform="ROS2", recommended_template="turtlebot3-camera")
+    request = make_request(template=template)
+    admitted = interpret(request.payload(), robot)
+    assert isinstance(admitted, Accept) and len(admitted.warnings) == 1
+    desired = DesiredRobot("tb3-01", "delivery-gazebo", request.digest, template=template)
+    before_report = RobotSeen(description=robot)
+    assert template_warning(desired, before_report) == admitted.warnings[0]
+    status = AgentStatus(
+        robot_id="tb3-01",
+        state=AgentState.RUNNING,
+        digest=request.digest,
+        warnings=admitted.warnings,
+    )
+    # Once the agent reports it, the status row carries the agent's line only.
+    assert template_warning(desired, RobotSeen(status=status, description=robot)) is None
+
+
+def test_strict_requests_still_take_json_as_the_agent_receives_it() -> None:
+    signed = make_request().model_copy(update={"issued_at": 1.7e9, "signature": "c2ln"})
+    data = json.loads(signed.payload())
+    assert LaunchRequest.model_validate(data) == signed
+    data["issued_at"] = 1700000000  # JSON has one number type: an integral time is an int
+    assert LaunchRequest.model_validate(data).issued_at == 1.7e9
+    data["issued_at"] = "1700000000"  # text is no number, on the wire as in YAML
+    with pytest.raises(ValidationError, match="issued_at"):
+        LaunchRequest.model_validate(data)

@@ -1,0 +1,83 @@
+"""Launch Requests: defaults, mappings, knowledge, goals, revision and a digest that ignores it."""
+
+from __future__ import annotations
+
+from configurator.launch import LaunchRequest
+from configurator.render import deep_merge, render_robot
+from tests.support.lab import Lab
+
+DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
+
+
+def _request(lab: Lab, robot_id: str = "tb3-01", rev: str | None = None) -> LaunchRequest:
+    checked = lab.check(rev)
+    assert checked.ok, checked.errors
+    return render_robot(checked.repo, robot_id)
+
+
+def test_request_shape_and_defaults(lab: Lab) -> None:
+    request = _request(lab)
+    assert request.apiVersion == "robotconf/v1" and request.kind == "LaunchRequest"
+    assert (request.robot_id, request.robot_name) == ("tb3-01", "Delivery bot")
+    scenario = request.scenario
+    assert scenario.name == "delivery-gazebo"
+    cap = scenario.capability
+    assert cap.platform == "ROS2" and cap.mapping_scheme == "gazebo"
+    assert cap.logics == {
+        "AskHelp": "ask_help_broadcast",
+        "SendGoalId": "send_goal_id",
+        "Follow": "follow_with_poses",
+    }
+    assert cap.tasks == ["Delivery"]
+    assert cap.actions == ["AskHelp", "Follow", "SendGoalId"]
+    # Chosen values override, defaults fill the rest.
+    assert scenario.robot_settings["max_linear_speed"] == 0.2
+    assert scenario.robot_settings["camera_resolution"] == "640x480"
+    assert scenario.logic_settings["follow_with_poses"] == {
+        "move_speed": 0.1,
+        "follow_distance": 0.6,
+    }
+    assert scenario.logic_settings["ask_help_broadcast"] == {"answer_timeout": 30}
+    assert scenario.environment_name == "GazeboDemo1" and scenario.environment_type == "Gazebo"
+
+
+def test_mappings_are_the_needed_ones_bound_by_the_scheme(lab: Lab) -> None:
+    cap = _request(lab).scenario.capability
+    assert set(cap.mappings) == {"odometry", "cmd_vel", "camera"}
+    assert cap.mappings["cmd_vel"].name == "/cmd_vel"
+    lab.replace(
+        "configs/capabilities/turtlebot3-camera.yaml",
+        "mapping_scheme: gazebo",
+        "mapping_scheme: real-world",
+    )
+    real = _request(lab).scenario.capability.mappings["camera"]
+    sim = cap.mappings["camera"]
+    assert (real.name, real.type) != (sim.name, sim.type)
+
+
+def test_knowledge_sets_merge_in_order_then_inline_knowledge(lab: Lab) -> None:
+    env = "models/environments/GazeboDemo1.yaml"
+    lab.replace(
+        env,
+        "knowledge_sets:",
+        "knowledge_sets:\n  A: {TARGET: {GOAL_ID: '1', KEEP: a}, ONLY_A: 1}\n"
+        "  B: {TARGET: {GOAL_ID: '3', FROM_B: b}}",
+    )
+    lab.replace(DELIVERY, "knowledge_sets: [Delivery]", "knowledge_sets: [A, B]")
+    knowledge = _request(lab).scenario.environment_knowledge
+    assert knowledge == {"ONLY_A": 1, "TARGET": {"GOAL_ID": "2", "KEEP": "a", "FROM_B": "b"}}
+
+
+def test_deep_merge_does_not_touch_its_inputs() -> None:
+    base = {"a": {"b": 1}}
+    merged = deep_merge(base, {"a": {"c": 2}, "d": [1]})
+    assert merged == {"a": {"b": 1, "c": 2}, "d": [1]} and base == {"a": {"b": 1}}
+
+
+def test_goal_locations_expand_to_their_objects(lab: Lab) -> None:
+    goals = _request(lab).scenario.goals
+    assert goals[0].task == "Delivery"
+    location = goals[0].location
+    assert location is not None
+    assert location["name"] == "BallContainer" and location["type"] == "Location"
+    assert "id" in location and len(location) > 3  # free extra fields (coordinates) come along
