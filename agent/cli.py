@@ -16,6 +16,7 @@ from pathlib import Path
 from agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
 from agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
 from agent.workdir import WorkdirLock
+from configurator.cli.errors import CliError, ExitCode
 from configurator.signing import SigningKeyError
 
 PROG = "robotconf agent"
@@ -45,10 +46,19 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
+    """Exit code as `robotconf` gives them: a CliError is one line on stderr."""
+    try:
+        return _run(argv)
+    except CliError as exc:
+        print(f"{PROG}: {exc.message}", file=sys.stderr)
+        return exc.code
+
+
+def _run(argv: list[str]) -> int:
     try:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # argparse has printed the usage problem already
-        return exc.code if isinstance(exc.code, int) else 2
+        return exc.code if isinstance(exc.code, int) else ExitCode.TOOL
     paths: list[Path] = args.config
     configs: list[AgentConfig] = []
     invalid = False
@@ -64,15 +74,14 @@ def main(argv: list[str]) -> int:
             continue
         configs.append(config)
     if invalid:
-        return 2
+        return ExitCode.TOOL  # each problem has been printed as its own file:line line
     clash = _clash(paths, configs)
     if clash:
-        print(f"{PROG}: {clash}", file=sys.stderr)
-        return 2
+        raise CliError(clash)
     if args.check:
         for path, config in zip(paths, configs, strict=True):
             print(f"{path}: ok (robot {config.robot_id})")
-        return 0
+        return ExitCode.OK
     _log_to_stderr(args.log_level, configs)
     locks: list[WorkdirLock] = []
     try:
@@ -80,18 +89,16 @@ def main(argv: list[str]) -> int:
             lock = WorkdirLock(config.workdir)
             problem = lock.acquire()
             if problem:
-                print(f"{PROG}: {problem}", file=sys.stderr)
-                return 2
+                raise CliError(problem)
             locks.append(lock)
         try:
             agents = [Agent(config) for config in configs]
         except (OSError, ssl.SSLError, ValueError, SigningKeyError) as exc:
             # e.g. a TLS certificate or key that exists but cannot be loaded.
-            print(f"{PROG}: cannot set up: {exc}", file=sys.stderr)
-            return 2
+            raise CliError(f"cannot set up: {exc}") from None
         install_signal_handlers(agents)
         run_agents(agents)
-        return 0
+        return ExitCode.OK
     finally:
         for lock in locks:
             lock.release()

@@ -31,8 +31,8 @@ import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
 from configurator.wire import AgentState, AgentStatus, Topics  # noqa: E402
-from tests.agent.harness import make_request  # noqa: E402
-from tests.mosquitto import Mosquitto  # noqa: E402
+from tests.support.agents import make_request  # noqa: E402
+from tests.support.mosquitto import Mosquitto  # noqa: E402
 
 RSS_TARGET_MB = 40.0
 CPU_TARGET_PERCENT = 1.0

@@ -60,8 +60,10 @@ import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
 from configurator.render import render_fleet  # noqa: E402
+from configurator.wire import AgentStatus  # noqa: E402
 from configurator.workspace import check  # noqa: E402
-from tests.mosquitto import find_mosquitto, free_port  # noqa: E402
+from tests.support.mosquitto import find_mosquitto, free_port  # noqa: E402
+from tests.support.watch import FleetWatch  # noqa: E402
 
 SCENARIOS = [
     "delivery-gazebo",
@@ -128,48 +130,29 @@ def connect(c: paho.Client, port: int) -> None:
         raise RuntimeError("cannot connect to the benchmark broker")
 
 
-class StatusWatch:
-    """Counts robots whose retained status is `running` with the digest they should have."""
+class Convergence:
+    """When every robot of a target runs the digest it should have: fed each agent status by
+    the tests' fleet watcher (tests/support/watch.py), with its arrival time."""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self) -> None:
         self.lock = threading.Lock()
         self.target: dict[str, str] = {}
         self.done: set[str] = set()
         self.latest: dict[str, tuple[str, str | None]] = {}
         self.reached = threading.Event()
         self.reached_at = 0.0
-        self.launches: list[float] = []  # arrival times of live launch messages
-        self.c = client("watch")
-        self.c.on_message = self._message
-        self.c.message_callback_add("robotconf/robots/+/launch", self._launch)
-        subscribed = threading.Event()
-        self.c.on_subscribe = lambda *a: subscribed.set()
-        connect(self.c, port)
-        self.c.subscribe([("robotconf/robots/+/status", 0), ("robotconf/robots/+/launch", 0)])
-        subscribed.wait(10)
-
-    def _launch(self, c: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
-        if not message.retain:
-            self.launches.append(time.perf_counter())
 
     def expect(self, target: dict[str, str]) -> None:
         with self.lock:
             self.target = dict(target)
             self.done = {r for r, d in self.target.items() if self.latest.get(r) == ("running", d)}
             self.reached.clear()
-            self.launches = []
             if len(self.done) == len(self.target):
                 self.reached_at = time.perf_counter()
                 self.reached.set()
 
-    def _message(self, c: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
-        now = time.perf_counter()
-        robot = message.topic.split("/")[-2]
-        try:
-            status = json.loads(message.payload)
-        except ValueError:
-            return
-        seen = (status.get("state"), status.get("digest"))
+    def __call__(self, robot: str, status: AgentStatus, arrived: float) -> None:
+        seen = (status.state.value, status.digest)
         with self.lock:
             self.latest[robot] = seen
             want = self.target.get(robot)
@@ -180,7 +163,7 @@ class StatusWatch:
             else:
                 self.done.discard(robot)
             if len(self.done) == len(self.target) and not self.reached.is_set():
-                self.reached_at = now
+                self.reached_at = arrived
                 self.reached.set()
 
     def missing(self) -> str:
@@ -188,10 +171,6 @@ class StatusWatch:
             late = sorted(set(self.target) - self.done)
             shown = ", ".join(f"{r} {self.latest.get(r)}" for r in late[:5])
         return f"{len(late)} of {len(self.target)} not running the new digest (e.g. {shown})"
-
-    def close(self) -> None:
-        self.c.disconnect()
-        self.c.loop_stop()
 
 
 # ------------------------------------------------------------------ the lab
@@ -483,7 +462,8 @@ def measure(size: int, options: Options) -> Result:
         broker = Broker(folder)
         fleet: subprocess.Popen[bytes] | None = None
         reconciler: subprocess.Popen[bytes] | None = None
-        watch = StatusWatch(broker.port)
+        converged = Convergence()
+        watch = FleetWatch(broker.url, listener=converged)
         times: list[float] = []
         delivered: list[float] = []
         cpu: list[dict[str, float]] = []
@@ -491,7 +471,7 @@ def measure(size: int, options: Options) -> Result:
             digests, payload = expected(lab)
             # On the idle machine, before the fleet exists (and again after it is gone).
             floors_before = [floor(broker.port, size, payload) for _ in range(5)]
-            watch.expect(digests)
+            converged.expect(digests)
             started = time.perf_counter()
             fleet = start_agents(folder, size, broker.url, options)
             with (folder / "reconciler.log").open("wb") as log:
@@ -504,22 +484,23 @@ def measure(size: int, options: Options) -> Result:
                 [broker.proc.pid, reconciler.pid, os.getpid()]
             ):
                 print("  (--server-priority needs root: running without it)", flush=True)
-            if not watch.reached.wait(TIMEOUT * 2):
-                raise RuntimeError(f"{size} robots never converged: {watch.missing()}")
-            initial = watch.reached_at - started
+            if not converged.reached.wait(TIMEOUT * 2):
+                raise RuntimeError(f"{size} robots never converged: {converged.missing()}")
+            initial = converged.reached_at - started
             for generation in range(1, options.rounds + 1):
                 time.sleep(1.0)  # let the previous round's last messages settle
                 write_fleet(lab, size, generation)
                 digests, _ = expected(lab)
-                watch.expect(digests)
+                converged.expect(digests)
+                watch.live_launches.clear()
                 git(lab, "add", "configs")
                 before = cpu_times(broker, reconciler, fleet)
                 t0 = time.perf_counter()
                 git(lab, "commit", "-q", "-m", f"fleet v{generation}")
-                if not watch.reached.wait(TIMEOUT):
-                    raise RuntimeError(f"round {generation}: not converged: {watch.missing()}")
-                times.append(watch.reached_at - t0)
-                delivered.append(max(watch.launches, default=t0) - t0)
+                if not converged.reached.wait(TIMEOUT):
+                    raise RuntimeError(f"round {generation}: not converged: {converged.missing()}")
+                times.append(converged.reached_at - t0)
+                delivered.append(max((t for _, _, t in watch.live_launches), default=t0) - t0)
                 time.sleep(0.5)  # the agents' last status messages, for the CPU figures
                 after = cpu_times(broker, reconciler, fleet)
                 cpu.append({k: after[k] - before[k] for k in before})

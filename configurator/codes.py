@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
+from configurator.cli.errors import ExitCode
+
 
 class Severity(str, Enum):
     ERROR = "error"
@@ -192,11 +194,11 @@ def with_readme_table(readme: str) -> str:
 def main(argv: list[str]) -> int:
     if len(argv) != 1:
         print("usage: python -m configurator.codes README.md", file=sys.stderr)
-        return 2
+        return ExitCode.TOOL
     path = Path(argv[0])
     text = path.read_text(encoding="utf-8")
     path.write_text(with_readme_table(text), encoding="utf-8")
-    return 0
+    return ExitCode.OK
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ import pytest
 
 from tests.support.lab import Lab
 from tests.support.mosquitto import Mosquitto, find_mosquitto
+from tests.support.watch import FleetWatch
 
 
 @pytest.fixture
@@ -29,3 +30,13 @@ def mosquitto(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mosquitto]:
 def lab(tmp_path: Path) -> Lab:
     """The example lab copied into a temporary folder (no git repository until committed)."""
     return Lab(tmp_path / "lab")
+
+
+@pytest.fixture
+def watch(mosquitto: Mosquitto) -> Iterator[FleetWatch]:
+    """The test broker's fleet topics, watched (tests/support/watch.py)."""
+    watcher = FleetWatch(mosquitto.url)
+    try:
+        yield watcher
+    finally:
+        watcher.close()

@@ -11,23 +11,20 @@ import os
 import signal
 import subprocess
 import sys
-import threading
-import time
 import uuid
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import paho.mqtt.client as paho
 import yaml
-from pydantic import ValidationError
 
 from agent.process import is_alive, read_pidfile
 from configurator.launch import LaunchCapability, LaunchRequest, LaunchScenario, make_launch_request
 from configurator.mqtt import Connection, make_client
-from configurator.safejson import PayloadError, parse_object
 from configurator.types import MappingBinding
-from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
+from configurator.wire import AgentState, AgentStatus, Topics
+from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
 
 TIMEOUT = 20.0
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
@@ -40,12 +37,6 @@ def agent_argv() -> list[str]:
     return [sys.executable, "-m", "agent.cli"]
 
 
-def wait_until(predicate: Callable[[], bool], what: str, timeout: float = TIMEOUT) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.05)
 
 
 def make_request(
@@ -126,116 +117,13 @@ def read_retained(broker: Broker, topic: str) -> bytes:
     client.connect(address.host, address.port)
     client.loop_start()
     try:
-        wait_until(lambda: bool(got), f"a retained message on {topic}")
+        wait_for(lambda: bool(got), f"a retained message on {topic}")
     finally:
         client.disconnect()
         client.loop_stop()
     return got[0]
 
 
-class Observer:
-    """Follows robots' status and description topics as `robotconf status` would."""
-
-    def __init__(self, broker: Broker, prefix: str = "robotconf") -> None:
-        self.topics = Topics(prefix)
-        self._cond = threading.Condition()
-        self.statuses: dict[str, list[AgentStatus]] = {}
-        self.descriptions: dict[str, RobotDescription] = {}
-        self.client = _client("test-observer", broker)
-        self.client.on_connect = self._on_connect
-        self.client.on_message = self._on_message
-        address = _connection(broker).address
-        self.client.connect_async(address.host, address.port, keepalive=10)
-        self.client.loop_start()
-
-    def _on_connect(self, c: paho.Client, u: Any, f: Any, rc: Any, p: Any) -> None:
-        c.subscribe([(self.topics.all_status, 1), (self.topics.all_description, 1)])
-
-    def _on_message(self, c: paho.Client, u: Any, msg: paho.MQTTMessage) -> None:
-        found = self.topics.robot_of(msg.topic)
-        if found is None or not msg.payload:
-            return
-        robot, leaf = found
-        try:  # tests publish garbage on these topics too: only agents' messages are recorded
-            with self._cond:
-                if leaf == "status":
-                    status = AgentStatus.model_validate(parse_object(msg.payload))
-                    self.statuses.setdefault(robot, []).append(status)
-                elif leaf == "description":
-                    description = RobotDescription.model_validate(parse_object(msg.payload))
-                    self.descriptions[robot] = description
-                self._cond.notify_all()
-        except (PayloadError, ValidationError):
-            return
-
-    def history(self, robot: str) -> list[AgentStatus]:
-        with self._cond:
-            return list(self.statuses.get(robot, []))
-
-    def latest(self, robot: str) -> AgentStatus | None:
-        seen = self.history(robot)
-        return seen[-1] if seen else None
-
-    def wait_for(
-        self,
-        robot: str,
-        predicate: Callable[[AgentStatus], bool],
-        what: str,
-        timeout: float = TIMEOUT,
-        agent: AgentProc | None = None,
-    ) -> AgentStatus:
-        """The latest status once it satisfies `predicate`."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                seen = self.statuses.get(robot, [])
-                if seen and predicate(seen[-1]):
-                    return seen[-1]
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                self._cond.wait(min(remaining, 0.5))
-        trail = "\n".join(
-            f"  {s.state.value} pid={s.pid} seq={s.seq} {s.message}" for s in seen[-10:]
-        )
-        log = f"\nagent log:\n{agent.log_tail()}" if agent is not None else ""
-        raise AssertionError(f"timed out waiting for {robot}: {what}; statuses:\n{trail}{log}")
-
-    def wait_seen(
-        self,
-        robot: str,
-        predicate: Callable[[AgentStatus], bool],
-        what: str,
-        since: int = 0,
-        timeout: float = TIMEOUT,
-    ) -> AgentStatus:
-        """A status from `since` (a history index) on that satisfies `predicate`, even if a
-        newer one has replaced it already."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for status in self.statuses.get(robot, [])[since:]:
-                    if predicate(status):
-                        return status
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise AssertionError(f"timed out waiting for {robot}: {what}")
-                self._cond.wait(min(remaining, 0.5))
-
-    def wait_state(
-        self, robot: str, state: AgentState, agent: AgentProc | None = None, **fields: Any
-    ) -> AgentStatus:
-        def matches(status: AgentStatus) -> bool:
-            return status.state == state and all(
-                getattr(status, key) == value for key, value in fields.items()
-            )
-
-        described = ", ".join(f"{k}={v}" for k, v in fields.items())
-        return self.wait_for(robot, matches, f"state {state.value} {described}", agent=agent)
-
-    def close(self) -> None:
-        self.client.disconnect()
-        self.client.loop_stop()
 
 
 class AgentProc:
@@ -345,3 +233,23 @@ def _is_standin(pid: int) -> bool:
         return b"agent.standin_brain" in Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return False
+
+
+ROBOT = "tb3-01"  # the robot of the agent tests
+
+
+def start_running(
+    agent: AgentProc, watch: FleetWatch, broker: Mosquitto, variant: int = 0
+) -> AgentStatus:
+    """Start the agent, give it a request, return its `running` status."""
+    agent.start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = make_request(variant=variant)
+    publish(broker.url, Topics().launch(ROBOT), request.payload())
+    status = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(status.pid)
+    assert status.pid is not None and is_alive(status.pid)
+    # `running` says the brain stayed up startsecs, not that it is done starting: wait until
+    # it has printed its modules (and so handles SIGTERM) before tests stop it.
+    wait_for(lambda: "platform module: ROS2" in agent.brain_log(), "the brain's output")
+    return status

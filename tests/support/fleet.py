@@ -1,36 +1,28 @@
-"""End-to-end harness: a real git lab, real `robotconf reconcile` and `robotconf agent` processes,
-and an observer of every retained topic. Tests wait for conditions; nothing asserts timing.
+"""End-to-end harness: a real git lab, and real `robotconf reconcile` and `robotconf agent`
+processes (their broker is watched with tests/support/watch.py). Nothing asserts timing.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import subprocess
 import sys
 import threading
-import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-import paho.mqtt.client as paho
 import yaml
-from pydantic import ValidationError
 
 from configurator.launch import LaunchRequest
 from configurator.mqtt import Connection
-from configurator.safejson import PayloadError
-from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, Topics
+from reconciler.controller import Controller
 from reconciler.desired import load_desired
-from reconciler.retained import RetainedView, read_object
+from reconciler.source import BranchSource
 from tests.support.lab import Lab
 
-TIMEOUT = 60.0  # generous: CI machines are slow and shared
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
-T = TypeVar("T")
 
 
 def robotconf_argv(*args: str) -> list[str]:
@@ -44,16 +36,6 @@ def robotconf_argv(*args: str) -> list[str]:
     ]
 
 
-def wait_for(probe: Callable[[], T | None], what: str, timeout: float = TIMEOUT) -> T:
-    """Polls until `probe` returns something truthy, and returns it."""
-    deadline = time.monotonic() + timeout
-    while True:
-        found = probe()
-        if found:
-            return found
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.05)
 
 
 class GitLab(Lab):
@@ -154,95 +136,6 @@ def start_reconciler(lab: GitLab, url: str, log: Path, *extra: str) -> Proc:
     )
 
 
-class Watch:
-    """Every retained robot and reconciler topic, plus a log of live (non-retained) launches."""
-
-    def __init__(self, url: str | Connection, prefix: str = "robotconf") -> None:
-        self.topics = Topics(prefix)
-        self.view = RetainedView(
-            url if isinstance(url, Connection) else Connection(url),
-            [
-                self.topics.all_launch,
-                self.topics.all_status,
-                self.topics.all_description,
-                self.topics.reconciler_status,
-            ],
-            f"{prefix}/sync",
-            role="test",
-        )
-        self.live_launches: list[tuple[str, bytes]] = []
-        self._lock = threading.Lock()
-        # Count what the reconciler publishes while we watch: a second paho handler on the
-        # same client sees each message once, with its retain flag.
-        client: paho.Client = self.view._client
-        client.message_callback_add(self.topics.all_launch, self._on_launch)
-        self.view.start()
-        assert self.view.wait_synced(TIMEOUT), "the test observer could not reach the broker"
-
-    def _on_launch(self, client: paho.Client, userdata: Any, message: paho.MQTTMessage) -> None:
-        if not message.retain:
-            with self._lock:
-                self.live_launches.append((message.topic, bytes(message.payload)))
-        self.view._handle_message(client, userdata, message)
-
-    def close(self) -> None:
-        self.view.stop()
-
-    def retained(self) -> dict[str, bytes]:
-        return self.view.snapshot()
-
-    def launch(self, robot_id: str) -> dict[str, Any] | None:
-        payload = self.retained().get(self.topics.launch(robot_id))
-        return json.loads(payload) if payload else None
-
-    def status(self, robot_id: str) -> AgentStatus | None:
-        payload = self.retained().get(self.topics.status(robot_id))
-        return AgentStatus.model_validate_json(payload) if payload else None
-
-    def reconciler(self) -> ReconcilerStatus | None:
-        """The retained reconciler status; None when there is none or it is unreadable."""
-        payload = self.retained().get(self.topics.reconciler_status)
-        if not payload:
-            return None
-        try:
-            return ReconcilerStatus.model_validate(read_object(payload))
-        except (PayloadError, ValidationError):
-            return None
-
-    def digest(self, robot_id: str) -> str | None:
-        """The digest retained on a robot's launch topic; "unreadable", or None for nothing."""
-        payload = self.retained().get(self.topics.launch(robot_id))
-        if not payload:
-            return None
-        try:
-            digest = read_object(payload).get("digest")
-        except PayloadError:
-            return "unreadable"
-        return digest if isinstance(digest, str) else "unreadable"
-
-    def running(self, requests: dict[str, LaunchRequest]) -> dict[str, AgentStatus] | None:
-        """Every robot's status when each one runs its request's digest, else None."""
-        found = {}
-        for robot_id, request in requests.items():
-            status = self.status(robot_id)
-            if status is None or status.state is not AgentState.RUNNING:
-                return None
-            if status.digest != request.digest or status.pid is None:
-                return None
-            found[robot_id] = status
-        return found
-
-    def wait_running(self, requests: dict[str, LaunchRequest]) -> dict[str, AgentStatus]:
-        return wait_for(lambda: self.running(requests), f"{sorted(requests)} running")
-
-    def wait_reconciler(
-        self, predicate: Callable[[ReconcilerStatus], bool], what: str
-    ) -> ReconcilerStatus:
-        def probe() -> ReconcilerStatus | None:
-            status = self.reconciler()
-            return status if status is not None and predicate(status) else None
-
-        return wait_for(probe, f"reconciler status: {what}")
 
 
 def pid_alive(pid: int) -> bool:
@@ -257,3 +150,22 @@ def pid_alive(pid: int) -> bool:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
         return state != "Z"
     return True
+
+
+ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
+
+
+class Running:
+    """A Controller on its own thread, as `robotconf reconcile` runs it."""
+
+    def __init__(
+        self, source: BranchSource, url: str, interval: float = 30.0, **options: Any
+    ) -> None:
+        self.controller = Controller(source, Connection(url), "robotconf", interval, **options)
+        self.thread = threading.Thread(target=self.controller.run, daemon=True)
+        self.thread.start()
+
+    def stop(self) -> None:
+        self.controller.stop()
+        self.thread.join(20)
+        assert not self.thread.is_alive()

@@ -1,4 +1,4 @@
-"""Fixtures of the agent tests: an observer of the fleet topics and agent processes."""
+"""Fixtures of the agent tests: an watch of the fleet topics and agent processes."""
 
 from __future__ import annotations
 
@@ -8,19 +8,10 @@ from typing import Any
 
 import pytest
 
-from tests.support.agents import AgentProc, Observer
+from tests.support.agents import AgentProc
 from tests.support.mosquitto import Mosquitto
 
 AgentFactory = Callable[..., AgentProc]
-
-
-@pytest.fixture
-def observer(mosquitto: Mosquitto) -> Iterator[Observer]:
-    watcher = Observer(mosquitto.url)
-    try:
-        yield watcher
-    finally:
-        watcher.close()
 
 
 @pytest.fixture

@@ -10,9 +10,9 @@ import pytest
 from agent.process import is_alive
 from configurator.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
-from tests.integration.agent.test_agent_mqtt import ROBOT, start_running
-from tests.support.agents import Observer, make_request, publish
+from tests.support.agents import ROBOT, make_request, publish, start_running
 from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch
 
 TOPICS = Topics()
 LAUNCH, STATUS = TOPICS.launch(ROBOT), TOPICS.status(ROBOT)
@@ -29,28 +29,28 @@ KILLERS = [
 
 @pytest.mark.parametrize("payload", KILLERS, ids=range(len(KILLERS)))
 def test_a_retained_hostile_request_is_rejected_at_every_start(
-    payload: bytes, mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+    payload: bytes, mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
     publish(mosquitto.url, LAUNCH, payload)
     agent = make_agent().start()
-    observer.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
+    watch.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
     # And again after a restart: the retained payload is delivered once more.
     agent.signal(__import__("signal").SIGTERM)
     assert agent.wait() == 0
     agent.start()
-    observer.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
+    watch.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
     # A good request still gets through.
     request = make_request()
     publish(mosquitto.url, LAUNCH, request.payload())
-    status = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    status = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
     agent.note_brain(status.pid)
 
 
 def test_hostile_payloads_on_its_own_status_topic_change_nothing(
-    mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
     agent = make_agent()
-    running = start_running(agent, observer, mosquitto)
+    running = start_running(agent, watch, mosquitto)
     for payload in (
         b"[" * 100_000,
         b'{"robot_id": "tb3-01", "state": "offline", "seq": ' + b"9" * 5000 + b"}",
@@ -60,22 +60,22 @@ def test_hostile_payloads_on_its_own_status_topic_change_nothing(
         publish(mosquitto.url, STATUS, payload, retain=False)
     request = make_request(variant=1)
     publish(mosquitto.url, LAUNCH, request.payload())
-    status = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    status = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
     agent.note_brain(status.pid)
     assert status.pid != running.pid and agent.proc is not None and agent.proc.poll() is None
 
 
 def test_a_request_that_cannot_be_written_leaves_the_brain_running(
-    mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
     agent = make_agent()
-    running = start_running(agent, observer, mosquitto)
+    running = start_running(agent, watch, mosquitto)
     # Where the next request is staged cannot take a file (a full or read-only disk fails
     # there the same way: before anything is stopped).
     staged = agent.workdir / "launch-request.json.next"
     staged.mkdir()
     publish(mosquitto.url, LAUNCH, make_request(variant=1).payload())
-    refused = observer.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
+    refused = watch.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
     assert refused.pid == running.pid and running.pid is not None and is_alive(running.pid)
     assert str(staged) in refused.message and "EISDIR" in refused.message
     assert "left as it is" in refused.message
@@ -83,7 +83,7 @@ def test_a_request_that_cannot_be_written_leaves_the_brain_running(
     os.rmdir(staged)
     request = make_request(variant=2)
     publish(mosquitto.url, LAUNCH, request.payload())
-    status = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    status = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
     agent.note_brain(status.pid)
     assert agent.request_on_disk()["digest"] == request.digest
     assert not staged.exists()

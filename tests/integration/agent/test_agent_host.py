@@ -12,32 +12,33 @@ from agent.cli import main
 from agent.process import is_alive
 from configurator.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
-from tests.support.agents import Observer, make_request, publish, read_retained, wait_until
+from tests.support.agents import make_request, publish, read_retained
 from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
 
 TOPICS = Topics()
 ROBOTS = ["tb3-01", "tb3-02"]
 
 
 def test_one_process_runs_two_robots_and_sigterm_stops_both_brains(
-    mosquitto: Mosquitto, observer: Observer, make_agent: AgentFactory
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
     first, second = (make_agent(robot, robot_id=robot) for robot in ROBOTS)
     host = first.start(second)
     for agent in (first, second):
-        observer.wait_state(agent.robot_id, AgentState.IDLE, agent=host)
+        watch.wait_state(agent.robot_id, AgentState.IDLE, agent=host)
     running: dict[str, AgentStatus] = {}
     for variant, agent in enumerate((first, second)):
         request = make_request(robot_id=agent.robot_id, variant=variant)
         publish(mosquitto.url, TOPICS.launch(agent.robot_id), request.payload())
-        status = observer.wait_state(
+        status = watch.wait_state(
             agent.robot_id, AgentState.RUNNING, agent=host, digest=request.digest
         )
         host.note_brain(status.pid)
         running[agent.robot_id] = status
         # Each robot has its own work directory, request and brain.
         assert agent.request_on_disk()["robot_id"] == agent.robot_id
-        wait_until(lambda a=agent: "platform module: ROS2" in a.brain_log(), "a brain's output")
+        wait_for(lambda a=agent: "platform module: ROS2" in a.brain_log(), "a brain's output")
     pids = {status.pid for status in running.values()}
     assert None not in pids and len(pids) == 2
     assert running["tb3-01"].digest != running["tb3-02"].digest

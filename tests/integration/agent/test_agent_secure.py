@@ -18,9 +18,10 @@ from cryptography.x509.oid import NameOID
 from configurator.mqtt import Connection
 from configurator.signing import generate_keys, load_private_key, sign
 from configurator.wire import AgentState, Topics
-from tests.support.agents import AgentProc, Observer, make_request, publish, wait_until
+from tests.support.agents import AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto
 from tests.support.tlsutil import make_pki
+from tests.support.watch import FleetWatch, wait_for
 
 ROBOT = "tb3-01"
 LAUNCH = Topics().launch(ROBOT)
@@ -135,16 +136,16 @@ def secured(tmp_path: Path) -> Iterator[Secured]:
 def test_tls_client_certificate_password_and_signed_requests(
     tmp_path: Path, secured: Secured
 ) -> None:
-    observer = Observer(secured.connection())
+    watch = FleetWatch(secured.connection())
     agent = AgentProc(tmp_path / "agent", "unused", **secured.agent_settings())
     try:
         agent.start()
-        observer.wait_state(ROBOT, AgentState.IDLE, agent=agent)
-        wait_until(lambda: ROBOT in observer.descriptions, "the description over TLS")
+        watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+        wait_for(lambda: watch.description(ROBOT), "the description over TLS")
 
         unsigned = make_request()
         publish(secured.connection(), LAUNCH, unsigned.payload())
-        observer.wait_for(
+        watch.wait_for(
             ROBOT,
             lambda s: s.state == AgentState.REJECTED and "not signed" in s.message,
             "an unsigned request to be refused",
@@ -153,7 +154,7 @@ def test_tls_client_certificate_password_and_signed_requests(
         foreign = generate_keys(tmp_path / "other-keys")
         forged = sign(make_request(variant=1), load_private_key(foreign.private))
         publish(secured.connection(), LAUNCH, forged.payload())
-        observer.wait_for(
+        watch.wait_for(
             ROBOT,
             lambda s: s.state == AgentState.REJECTED and "does not verify" in s.message,
             "a request signed by another key to be refused",
@@ -162,10 +163,10 @@ def test_tls_client_certificate_password_and_signed_requests(
         our_key = load_private_key(secured.keys / "launch-signing.key")
         signed = sign(make_request(variant=2), our_key)
         publish(secured.connection(), LAUNCH, signed.payload())
-        running = observer.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=signed.digest)
+        running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=signed.digest)
         agent.note_brain(running.pid)
     finally:
-        observer.close()
+        watch.close()
         agent.cleanup()
 
 
@@ -176,7 +177,7 @@ def test_wrong_password_is_reported_and_retried(tmp_path: Path, secured: Secured
     agent = AgentProc(tmp_path / "agent", "unused", **settings)
     try:
         agent.start()
-        wait_until(
+        wait_for(
             lambda: "broker refused the connection" in agent.log_tail(), "the refusal in the log"
         )
         assert agent.proc is not None and agent.proc.poll() is None  # still trying

@@ -26,7 +26,7 @@ from agent.process import (
     write_pidfile,
 )
 from agent.workdir import SeqStore, WorkdirLock, write_atomic
-from tests.support.agents import wait_until
+from tests.support.watch import wait_for
 
 IGNORES_SIGTERM = (
     "import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
@@ -153,7 +153,7 @@ def test_spawn_reports_the_exit_and_kills_what_the_brain_left_in_its_group(tmp_p
     lines = out.read_text(encoding="utf-8").splitlines()
     assert lines[1] == "to-stderr"
     straggler = int(lines[0])
-    wait_until(lambda: not is_alive(straggler), "the leftover sleep to be killed")
+    wait_for(lambda: not is_alive(straggler), "the leftover sleep to be killed")
     assert os.getpgid(os.getpid()) != brain.pid  # it had its own group; ours was never signalled
 
 

@@ -10,8 +10,9 @@ import pytest
 
 from configurator.launch import LaunchRequest
 from configurator.wire import AgentStatus
-from tests.support.fleet import GitLab, Proc, Watch, start_agent, start_reconciler
+from tests.support.fleet import GitLab, Proc, start_agent, start_reconciler
 from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch
 
 # A sixth robot shares tb3-01's scenario, so that "its robots" is more than one.
 EXTRA_ROBOT = "  tb3-06: {scenario: delivery-gazebo, name: Second delivery bot}\n"
@@ -26,7 +27,7 @@ def lab(tmp_path: Path) -> GitLab:
 class Fleet:
     lab: GitLab
     broker: Mosquitto
-    watch: Watch
+    watch: FleetWatch
     folder: Path
     agents: dict[str, Proc] = field(default_factory=dict)
     reconciler: Proc | None = None
@@ -50,7 +51,7 @@ def fleet(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Fleet]:
     lab = GitLab(tmp_path / "lab")
     lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
     lab.commit("a sixth robot")
-    watch = Watch(mosquitto.url)
+    watch = FleetWatch(mosquitto.url)
     state = Fleet(lab, mosquitto, watch, tmp_path)
     try:
         for robot_id in lab.robots():

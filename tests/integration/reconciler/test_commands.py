@@ -19,8 +19,9 @@ from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Controller
 from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch
-from tests.support.fleet import GitLab, Proc, Watch, robotconf_argv, wait_for
+from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.watch import FleetWatch, wait_for
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:
@@ -65,7 +66,7 @@ def test_reconcile_stops_on_sigterm(lab: GitLab, mosquitto: Mosquitto, tmp_path:
     assert proc.stop(signal.SIGTERM) == 0
     assert "Traceback" not in proc.output()
     # A clean stop sends no Last Will: the reconciler says it is offline itself.
-    watch = Watch(mosquitto.url)
+    watch = FleetWatch(mosquitto.url)
     try:
         status = watch.wait_reconciler(lambda s: s.state == "Offline", "offline")
         assert status.last_applied_revision == lab.head() and "stopped" in status.message
@@ -79,7 +80,7 @@ def test_status_watch_follows_the_fleet(lab: GitLab, mosquitto: Mosquitto, tmp_p
     )
     thread = threading.Thread(target=controller.run, daemon=True)
     thread.start()
-    watch = Watch(mosquitto.url)
+    watch = FleetWatch(mosquitto.url)
     try:
         watch.wait_reconciler(lambda s: s.ready, "ready")
         proc = Proc(

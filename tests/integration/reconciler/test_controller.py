@@ -2,47 +2,17 @@
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
-
-import pytest
 
 from configurator.mqtt import Connection
-from reconciler.controller import Controller
 from reconciler.retained import RetainedView
-from reconciler.source import BranchSource, LocalBranch, RemoteBranch
-from tests.support.fleet import GitLab, Watch, wait_for
+from reconciler.source import LocalBranch, RemoteBranch
+from tests.support.fleet import ROBOTS, GitLab, Running
 from tests.support.mosquitto import Mosquitto
-
-ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
-
-
-class Running:
-    """A Controller on its own thread, as `robotconf reconcile` runs it."""
-
-    def __init__(
-        self, source: BranchSource, url: str, interval: float = 30.0, **options: Any
-    ) -> None:
-        self.controller = Controller(source, Connection(url), "robotconf", interval, **options)
-        self.thread = threading.Thread(target=self.controller.run, daemon=True)
-        self.thread.start()
-
-    def stop(self) -> None:
-        self.controller.stop()
-        self.thread.join(20)
-        assert not self.thread.is_alive()
+from tests.support.watch import FleetWatch, wait_for
 
 
-@pytest.fixture
-def watch(mosquitto: Mosquitto) -> Iterator[Watch]:
-    observer = Watch(mosquitto.url)
-    yield observer
-    observer.close()
-
-
-def published(watch: Watch, lab: GitLab, revision: str) -> bool:
+def published(watch: FleetWatch, lab: GitLab, revision: str) -> bool:
     """The launch topics hold exactly the requests of `revision`."""
     requests = lab.requests(revision)
     digests = {r: (watch.launch(r) or {}).get("digest") for r in set(requests) | set(ROBOTS)}
@@ -50,7 +20,7 @@ def published(watch: Watch, lab: GitLab, revision: str) -> bool:
 
 
 def test_a_commit_that_empties_the_fleet_is_refused_unless_allowed(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url)
     try:
@@ -72,7 +42,7 @@ def test_a_commit_that_empties_the_fleet_is_refused_unless_allowed(
 
 
 def test_suspended_robots_keep_what_they_have(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url)
     try:
@@ -94,7 +64,7 @@ def test_suspended_robots_keep_what_they_have(
 
 
 def test_a_reconciler_started_on_a_bad_commit_serves_the_last_good_one(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url)
     good = lab.head()
@@ -123,7 +93,7 @@ def test_a_reconciler_started_on_a_bad_commit_serves_the_last_good_one(
         running.stop()
 
 
-def test_remote_repository_is_polled(lab: GitLab, mosquitto: Mosquitto, watch: Watch) -> None:
+def test_remote_repository_is_polled(lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch) -> None:
     cache = lab.root.parent / "cache"
     running = Running(RemoteBranch(f"file://{lab.root}", "main", cache), mosquitto.url, 0.5)
     try:
@@ -157,7 +127,7 @@ def test_broker_down_at_start_is_waited_for(lab: GitLab, tmp_path: Path) -> None
     running = Running(LocalBranch(lab.root, "main"), broker.url)
     try:
         broker.start()
-        watch = Watch(broker.url)
+        watch = FleetWatch(broker.url)
         try:
             watch.wait_reconciler(lambda s: s.ready, "ready once the broker is up")
             assert published(watch, lab, lab.head())

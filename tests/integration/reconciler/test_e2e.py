@@ -7,7 +7,8 @@ import subprocess
 
 from configurator.wire import AgentState
 from tests.integration.reconciler.conftest import Fleet
-from tests.support.fleet import pid_alive, robotconf_argv, wait_for
+from tests.support.fleet import pid_alive, robotconf_argv
+from tests.support.watch import wait_for
 
 
 def test_initial_convergence(fleet: Fleet) -> None:

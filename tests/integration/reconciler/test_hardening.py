@@ -7,7 +7,7 @@ import json
 import logging
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -21,10 +21,10 @@ from reconciler.desired import Desired, load_desired
 from reconciler.retained import Ignored, RetainedView
 from reconciler.signer import make_signer
 from reconciler.source import LocalBranch
-from tests.integration.reconciler.test_controller import ROBOTS, Running
-from tests.support.fleet import GitLab, Watch, robotconf_argv, start_reconciler, wait_for
+from tests.support.fleet import ROBOTS, GitLab, Running, robotconf_argv, start_reconciler
 from tests.support.lab import ROOT as LAB
 from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
 
 TOPICS = Topics()
 DEEP = b"[" * 100_000 + b"]" * 100_000
@@ -35,11 +35,6 @@ FAKE_PLACEHOLDER = b"\x00oversized x"  # what the reconciler keeps for a dropped
 HOSTILE = [DEEP, BIG, NOT_UTF8, DUPLICATE, FAKE_PLACEHOLDER]
 
 
-@pytest.fixture
-def watch(mosquitto: Mosquitto) -> Iterator[Watch]:
-    observer = Watch(mosquitto.url)
-    yield observer
-    observer.close()
 
 
 def publish(url: str, items: list[tuple[str, bytes]]) -> None:
@@ -53,7 +48,7 @@ def publish(url: str, items: list[tuple[str, bytes]]) -> None:
         publisher.stop()
 
 
-def serves(watch: Watch, lab: GitLab, revision: str) -> bool:
+def serves(watch: FleetWatch, lab: GitLab, revision: str) -> bool:
     """The launch topics hold exactly the requests of `revision` (garbage tolerated)."""
     requests = lab.requests(revision)
     robots = set(requests) | set(ROBOTS)
@@ -79,7 +74,7 @@ def status_cli(url: str, lab: GitLab, *extra: str) -> subprocess.CompletedProces
 
 
 def test_a_build_that_raises_is_stalled_and_the_next_good_commit_applied(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     bad: set[str] = set()
     calls: list[str] = []
@@ -114,7 +109,7 @@ def test_a_build_that_raises_is_stalled_and_the_next_good_commit_applied(
 
 
 def test_an_exception_while_applying_is_reported_and_retried(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch, tmp_path: Path
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch, tmp_path: Path
 ) -> None:
     keys = generate_keys(tmp_path / "keys")
     signer = make_signer(keys.private)
@@ -144,7 +139,7 @@ def test_an_exception_while_applying_is_reported_and_retried(
 
 
 def test_a_request_too_large_for_an_agent_is_a_build_error(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     def builder(root: Path, revision: str) -> Desired:
         desired = load_desired(root, revision)
@@ -168,7 +163,7 @@ def test_a_request_too_large_for_an_agent_is_a_build_error(
 
 
 def test_hostile_payloads_are_skipped_and_counted(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url, 1.0)
     try:
@@ -243,7 +238,7 @@ def test_a_failing_handler_does_not_end_the_connection(mosquitto: Mosquitto) -> 
 
 
 def test_a_reconciler_killed_by_nothing_but_sigkill_leaves_its_will(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch, tmp_path: Path
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch, tmp_path: Path
 ) -> None:
     proc = start_reconciler(lab, mosquitto.url, tmp_path / "reconciler.log", "--interval", "5")
     try:
@@ -282,7 +277,7 @@ def test_a_reconciler_killed_by_nothing_but_sigkill_leaves_its_will(
 
 
 def test_a_stale_or_missing_reconciler_fails_status(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     done = status_cli(mosquitto.url, lab)
     assert done.returncode == 1 and "reconciler: MISSING" in done.stdout
@@ -300,7 +295,7 @@ def test_a_stale_or_missing_reconciler_fails_status(
 
 
 def test_the_heartbeat_changes_nothing_else(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url, 0.3)
     try:
@@ -327,7 +322,7 @@ def test_the_heartbeat_changes_nothing_else(
 
 
 def test_a_will_fired_while_the_reconciler_lives_is_replaced_at_once(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
     """A will of one of its connections that dropped (or of a broker shutting down) must not
     leave a live reconciler shown offline until the next resync (here: minutes away)."""
@@ -342,7 +337,7 @@ def test_a_will_fired_while_the_reconciler_lives_is_replaced_at_once(
         running.stop()
 
 
-def test_a_stopped_reconciler_says_so(lab: GitLab, mosquitto: Mosquitto, watch: Watch) -> None:
+def test_a_stopped_reconciler_says_so(lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch) -> None:
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url)
     head = lab.head()
     watch.wait_reconciler(lambda s: s.ready, "ready")
@@ -355,7 +350,7 @@ def test_a_stopped_reconciler_says_so(lab: GitLab, mosquitto: Mosquitto, watch: 
 
 
 def test_a_signing_reconciler_stops_a_removed_robot_with_a_signed_stop(
-    lab: GitLab, mosquitto: Mosquitto, watch: Watch, tmp_path: Path
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch, tmp_path: Path
 ) -> None:
     keys = generate_keys(tmp_path / "keys")
     running = Running(

@@ -10,7 +10,8 @@ import pytest
 from configurator.source import SourceError
 from reconciler.desired import load_desired
 from reconciler.source import LocalBranch, RemoteBranch, redact
-from tests.support.fleet import GitLab, wait_for
+from tests.support.fleet import GitLab
+from tests.support.watch import wait_for
 
 
 def test_head_of_a_local_branch(lab: GitLab) -> None:

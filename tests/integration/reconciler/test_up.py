@@ -17,8 +17,9 @@ from agent.config import parse_config
 from configurator.mqtt import Connection
 from reconciler.desired import load_desired
 from reconciler.up import agent_yaml
-from tests.support.fleet import GitLab, Proc, Watch, robotconf_argv, wait_for
+from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
 
 
 @contextlib.contextmanager
@@ -96,7 +97,7 @@ def test_up_with_an_existing_broker(lab: GitLab, tmp_path: Path, mosquitto: Mosq
     up = start_up(lab, tmp_path, "--broker", mosquitto.url)
     try:
         wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
-        watch = Watch(mosquitto.url)
+        watch = FleetWatch(mosquitto.url)
         try:
             status = watch.reconciler()
             assert status is not None and status.last_applied_revision == lab.head()

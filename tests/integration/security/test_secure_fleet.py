@@ -17,9 +17,10 @@ from configurator.launch import LaunchRequest, canonical_json, content_digest
 from configurator.signing import generate_keys, load_private_key, sign
 from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.retained import RetainedView
-from tests.support.fleet import TIMEOUT, GitLab, Proc, Watch, pid_alive, wait_for
+from tests.support.fleet import GitLab, Proc, pid_alive
 from tests.support.lab import ROBOTCONF
 from tests.support.secure import Secured, start_secured
+from tests.support.watch import TIMEOUT, FleetWatch, wait_for
 
 TOPICS = Topics()
 
@@ -29,7 +30,7 @@ class SecureFleet:
     lab: GitLab
     broker: Secured
     keys: Path
-    view: Watch  # as the viewer user: reads everything, writes nothing
+    view: FleetWatch  # as the viewer user: reads everything, writes nothing
     writer: RetainedView  # the reconciler's user, to play an attacker who stole nothing else
     agents: dict[str, Proc] = field(default_factory=dict)
     reconciler: Proc | None = None
@@ -83,7 +84,7 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
     broker = start_secured(base, lab.root)
     keys = base / "keys"
     assert subprocess.run([ROBOTCONF, "keys", "generate", "--out", str(keys)]).returncode == 0
-    view = Watch(broker.connection("viewer"))
+    view = FleetWatch(broker.connection("viewer"))
     writer = RetainedView(
         broker.connection("reconciler"), [TOPICS.all_launch], "robotconf/sync", role="attacker"
     )
