@@ -26,7 +26,7 @@ from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.signing import Signed
 from configurator.source import SourceError
 from configurator.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
-from reconciler.decide import Condition, Decision, Observation, Reason, decide
+from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, load_desired
 from reconciler.diff import Actions
 from reconciler.observed import RECONCILER_STATUS, parse_retained
@@ -158,26 +158,22 @@ class Controller:
             return False
 
     def _step(self, resync: bool) -> Outcome | None:
-        """One reconcile step; None when it raised (a bug, logged and reported)."""
+        """One reconcile step, then its report: the step's one status write, whatever happened.
+        None when the step raised (a bug: logged with its traceback, reported, retried)."""
+        outcome: Outcome | None
         try:
-            return self.reconcile_once(fetch=resync)
+            outcome, condition, actions = self.reconcile_once(fetch=resync)
         except Exception as exc:
             log.exception("internal error while reconciling; retrying with backoff")
-            self._report_internal_error(exc)
-            return None
-
-    def _report_internal_error(self, exc: Exception) -> None:
+            outcome, condition, actions = None, internal_error(exc, self._head), None
+        if condition is None:  # waiting for the broker: nothing can be written
+            return outcome
         try:
-            message = f"internal error: {type(exc).__name__}: {exc}"[:500]
-            condition = Condition(
-                Reason.INTERNAL_ERROR,
-                f"{message} (see the reconciler's log); retrying",
-                self._head,
-                (StatusDiagnostic(code=Reason.INTERNAL_ERROR.value, message=message),),
-            )
-            self._report(condition, None)
+            self._report(condition, actions, heartbeat=resync)
         except Exception:
-            log.exception("cannot report the internal error either")
+            log.exception("cannot report the reconciler status")
+            return None
+        return outcome
 
     def _on_topic(self, topic: str) -> None:
         """Network thread: an Offline status while we run (the Last Will of one of our
@@ -199,21 +195,23 @@ class Controller:
 
     # ------------------------------------------------------------------ one step
 
-    def reconcile_once(self, *, fetch: bool = False) -> Outcome:
-        """Observe (source, broker) -> decide (pure) -> apply -> report, once."""
+    def reconcile_once(
+        self, *, fetch: bool = False
+    ) -> tuple[Outcome, Condition | None, Actions[LaunchRequest] | None]:
+        """Observe (source, broker) -> decide (pure) -> apply, once: what happened and the
+        condition to report (none while the broker's retained messages are not known)."""
         seen = self._observe(fetch)
         if seen is None:
-            return Outcome.WAIT
+            return Outcome.WAIT, None, None
         decision = decide(seen)
         condition = decision.condition
         if decision.changes:
             condition = self._apply(decision)
-        if decision.target is not None and condition.reason is not Reason.BROKER_UNAVAILABLE:
+        if condition.reason is Reason.BROKER_UNAVAILABLE:
+            return Outcome.RETRY, condition, decision.actions
+        if decision.target is not None:
             self.serving = decision.target
-        self._report(condition, decision.actions, heartbeat=fetch)
-        if condition.reason is Reason.BROKER_UNAVAILABLE or seen.head is None:
-            return Outcome.RETRY
-        return Outcome.DONE
+        return (Outcome.RETRY if seen.head is None else Outcome.DONE), condition, decision.actions
 
     def _observe(self, fetch: bool) -> Observation | None:
         """The head commit and its build, and what the broker holds; None until the broker's

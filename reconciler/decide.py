@@ -155,3 +155,14 @@ def _condition(
             (StatusDiagnostic(code=Reason.SOURCE_UNAVAILABLE.value, message=seen.fetch_error),),
         )
     return Condition(Reason.APPLIED, f"applied {short_rev(head)}")
+
+
+def internal_error(exc: Exception, head: str | None) -> Condition:
+    """A step raised: a bug, not the commit's fault. Reported; the step is retried."""
+    message = f"internal error: {type(exc).__name__}: {exc}"[:500]
+    return Condition(
+        Reason.INTERNAL_ERROR,
+        f"{message} (see the reconciler's log); retrying",
+        head,
+        (StatusDiagnostic(code=Reason.INTERNAL_ERROR.value, message=message),),
+    )
