@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 
 from configurator.diagnostics import Diagnostic
+from configurator.launch import LaunchRequest
+from configurator.render import render_robot
 from configurator.workspace import Checked, check
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,6 +43,12 @@ class Lab:
 
     def check(self, rev: str | None = None) -> Checked:
         return check(self.root, rev)
+
+    def render(self, robot_id: str = "tb3-01", rev: str | None = None) -> LaunchRequest:
+        """A robot's Launch Request from the work tree (or `rev`), which must be valid."""
+        checked = self.check(rev)
+        assert checked.ok, checked.errors
+        return render_robot(checked.repo, robot_id)
 
     def diagnostics(self, code: str) -> list[Diagnostic]:
         return [d for d in self.check().diagnostics if d.code == code]

@@ -6,16 +6,11 @@ from __future__ import annotations
 import json
 
 from configurator.launch import LaunchRequest
-from configurator.render import render_fleet, render_robot
+from configurator.render import render_fleet
 from tests.support.lab import Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
 
-
-def _request(lab: Lab, robot_id: str = "tb3-01", rev: str | None = None) -> LaunchRequest:
-    checked = lab.check(rev)
-    assert checked.ok, checked.errors
-    return render_robot(checked.repo, robot_id)
 
 
 def test_digest_covers_content_not_revision(lab: Lab) -> None:
@@ -43,7 +38,7 @@ def test_rev_reads_the_commit_not_the_work_tree(lab: Lab) -> None:
     sha = lab.commit("lab")
     lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: 0.2")
     lab.write("configs/capabilities/broken.yaml", "platform: [")
-    committed = _request(lab, rev=sha)
+    committed = lab.render(rev=sha)
     assert committed.revision == sha
     assert committed.scenario.logic_settings["follow_with_poses"]["move_speed"] == 0.1
     assert not lab.check().ok  # the work tree is broken, the commit is not
@@ -51,9 +46,9 @@ def test_rev_reads_the_commit_not_the_work_tree(lab: Lab) -> None:
 
 def test_work_tree_revision_is_marked_dirty(lab: Lab) -> None:
     sha = lab.commit("lab")
-    assert _request(lab).revision == sha
+    assert lab.render().revision == sha
     lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: 0.2")
-    assert _request(lab).revision == f"{sha}+dirty"
+    assert lab.render().revision == f"{sha}+dirty"
 
 
 def test_cli_render_prints_the_request(lab: Lab) -> None:

@@ -2,21 +2,15 @@
 
 from __future__ import annotations
 
-from configurator.launch import LaunchRequest
-from configurator.render import deep_merge, render_robot
+from configurator.render import deep_merge
 from tests.support.lab import Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
 
 
-def _request(lab: Lab, robot_id: str = "tb3-01", rev: str | None = None) -> LaunchRequest:
-    checked = lab.check(rev)
-    assert checked.ok, checked.errors
-    return render_robot(checked.repo, robot_id)
-
 
 def test_request_shape_and_defaults(lab: Lab) -> None:
-    request = _request(lab)
+    request = lab.render()
     assert request.apiVersion == "robotconf/v1" and request.kind == "LaunchRequest"
     assert (request.robot_id, request.robot_name) == ("tb3-01", "Delivery bot")
     scenario = request.scenario
@@ -42,7 +36,7 @@ def test_request_shape_and_defaults(lab: Lab) -> None:
 
 
 def test_mappings_are_the_needed_ones_bound_by_the_scheme(lab: Lab) -> None:
-    cap = _request(lab).scenario.capability
+    cap = lab.render().scenario.capability
     assert set(cap.mappings) == {"odometry", "cmd_vel", "camera"}
     assert cap.mappings["cmd_vel"].name == "/cmd_vel"
     lab.replace(
@@ -50,7 +44,7 @@ def test_mappings_are_the_needed_ones_bound_by_the_scheme(lab: Lab) -> None:
         "mapping_scheme: gazebo",
         "mapping_scheme: real-world",
     )
-    real = _request(lab).scenario.capability.mappings["camera"]
+    real = lab.render().scenario.capability.mappings["camera"]
     sim = cap.mappings["camera"]
     assert (real.name, real.type) != (sim.name, sim.type)
 
@@ -64,7 +58,7 @@ def test_knowledge_sets_merge_in_order_then_inline_knowledge(lab: Lab) -> None:
         "  B: {TARGET: {GOAL_ID: '3', FROM_B: b}}",
     )
     lab.replace(DELIVERY, "knowledge_sets: [Delivery]", "knowledge_sets: [A, B]")
-    knowledge = _request(lab).scenario.environment_knowledge
+    knowledge = lab.render().scenario.environment_knowledge
     assert knowledge == {"ONLY_A": 1, "TARGET": {"GOAL_ID": "2", "KEEP": "a", "FROM_B": "b"}}
 
 
@@ -75,7 +69,7 @@ def test_deep_merge_does_not_touch_its_inputs() -> None:
 
 
 def test_goal_locations_expand_to_their_objects(lab: Lab) -> None:
-    goals = _request(lab).scenario.goals
+    goals = lab.render().scenario.goals
     assert goals[0].task == "Delivery"
     location = goals[0].location
     assert location is not None
