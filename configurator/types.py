@@ -185,6 +185,38 @@ class RobotAssignment(StrictModel):
     scenario: str
     name: str | None = Field(None, description="display name; defaults to the robot id")
     suspended: bool = Field(False, description="leave the robot as it is")
+    labels: dict[str, str] = Field(
+        default_factory=dict,
+        description="groups the robot belongs to (ring: canary, site: hall-a); keys and values "
+        "as robot ids: letters, digits, '_', '.', '-'",
+    )
+
+
+class Wave(StrictModel):
+    """One step of a rollout. With `selector`, the robots whose labels match all of it; with
+    `percent`, up to that share (cumulative, in robot id order) of those robots, or of the
+    fleet; with neither, every robot left."""
+
+    name: str = Field(description="shown in status and plan")
+    selector: dict[str, str] = Field(default_factory=dict, description="labels a robot must have")
+    percent: int | None = Field(None, description="cumulative share, 1 to 100")
+
+
+class RolloutPolicy(StrictModel):
+    """How a commit reaches the fleet: wave by wave, each gated by the robots' health."""
+
+    waves: list[Wave] = Field(description="in order; the last should take every robot left")
+    healthy_after: float = Field(
+        30.0, description="seconds running the new request before a robot counts as healthy"
+    )
+    max_failures: int | str = Field(
+        0, description="failed robots a wave tolerates: a count, or a share like '10%'"
+    )
+    wave_timeout: float = Field(300.0, description="seconds a robot has to become healthy")
+    on_failure: Literal["rollback", "halt"] = Field(
+        "rollback", description="rollback: the moved robots get the last complete revision"
+    )
+    paused: bool = Field(False, description="no wave advances until a commit sets it false")
 
 
 class Fleet(StrictModel):
@@ -192,3 +224,6 @@ class Fleet(StrictModel):
 
     robots: dict[str, RobotAssignment] = Field(default_factory=dict)
     allow_empty: bool = Field(False, description="allow a commit that unassigns every robot")
+    rollout: RolloutPolicy | None = Field(
+        None, description="roll out in health-gated waves; absent: every robot at once"
+    )
