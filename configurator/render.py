@@ -20,7 +20,7 @@ from configurator.launch import (
 )
 from configurator.repository import Repository
 from configurator.resolve import resolve_capability
-from configurator.types import JsonObject, SettingDefinition
+from configurator.types import JsonObject, RolloutPolicy, SettingDefinition
 
 
 class RenderError(Exception):
@@ -35,7 +35,9 @@ class FleetRender:
     requests: dict[str, LaunchRequest] = field(default_factory=dict)
     suspended: set[str] = field(default_factory=set)
     scenario_of: dict[str, str] = field(default_factory=dict)
+    labels: dict[str, dict[str, str]] = field(default_factory=dict)
     allow_empty: bool = False
+    rollout: RolloutPolicy | None = None  # None: every robot at once
 
 
 def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
@@ -111,9 +113,12 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
 def render_fleet(repo: Repository) -> FleetRender:
     if repo.fleet is None:
         raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
-    result = FleetRender(revision=repo.revision, allow_empty=repo.fleet.model.allow_empty)
+    fleet = repo.fleet.model
+    result = FleetRender(
+        revision=repo.revision, allow_empty=fleet.allow_empty, rollout=fleet.rollout
+    )
     scenarios: dict[str, LaunchScenario] = {}
-    for robot_id, assignment in repo.fleet.model.robots.items():
+    for robot_id, assignment in fleet.robots.items():
         scenario = scenarios.get(assignment.scenario)
         if scenario is None:
             scenario = scenarios[assignment.scenario] = render_scenario(repo, assignment.scenario)
@@ -121,6 +126,7 @@ def render_fleet(repo: Repository) -> FleetRender:
             robot_id, assignment.name or robot_id, repo.revision, scenario
         )
         result.scenario_of[robot_id] = assignment.scenario
+        result.labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
             result.suspended.add(robot_id)
     return result
