@@ -245,6 +245,35 @@ class ReconcilerReason(str, Enum):
     BROKER_UNAVAILABLE = "BrokerUnavailable"  # the broker did not acknowledge every message
     INTERNAL_ERROR = "InternalError"  # a bug: logged with its traceback, retried
     OFFLINE = "Offline"  # the reconciler stopped, or its Last Will: it died
+    ROLLOUT_PAUSED = "RolloutPaused"  # fleet.yaml's rollout says paused: no wave advances
+    ROLLOUT_HALTED = "RolloutHalted"  # too many robots failed; on_failure: halt
+    ROLLED_BACK = "RolledBack"  # too many robots failed; the moved ones run the stable revision
+
+
+RolloutState = Literal["Progressing", "Paused", "Complete", "Halted", "RolledBack"]
+MAX_LISTED = 100  # robot ids a rollout status lists per kind; the counts say how many in all
+
+
+class RolloutStatus(_Message):
+    """A rollout of `revision`, wave by wave, as the reconciler status carries it: where it is
+    and why, and (stateless) what a restarted reconciler resumes from."""
+
+    revision: str = Field(description="the commit being rolled out")
+    stable_revision: str | None = Field(
+        None, description="the last revision that fully rolled out: what a rollback restores"
+    )
+    state: RolloutState
+    wave: int = Field(0, description="index of the current wave (0-based)")
+    waves: int = 0
+    wave_name: str = ""
+    wave_started_at: float | None = Field(None, description="unix time the wave was published")
+    healthy: list[str] = Field(default_factory=list, description="of the current wave")
+    failed: list[str] = Field(default_factory=list, description="of the current wave")
+    pending: list[str] = Field(default_factory=list, description="of the current wave")
+    counts: dict[str, int] = Field(
+        default_factory=dict, description="healthy, failed and pending robots of the wave"
+    )
+    message: str = ""
 
 
 # A heartbeat older than this many intervals (and at least STALE_MIN seconds, which absorbs a
@@ -279,6 +308,9 @@ class ReconcilerStatus(_Message):
     interval: float | None = Field(None, description="seconds between heartbeats")
     ignored_payloads: dict[str, int] = Field(
         default_factory=dict, description="unreadable MQTT payloads skipped, by topic kind"
+    )
+    rollout: RolloutStatus | None = Field(
+        None, description="the rollout in progress or last done, when fleet.yaml has a policy"
     )
 
     @field_validator("diagnostics", mode="before")

@@ -25,7 +25,14 @@ from configurator.mqtt import Connection
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.signing import Signed
 from configurator.source import SourceError
-from configurator.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
+from configurator.wire import (
+    AgentState,
+    AgentStatus,
+    ReconcilerStatus,
+    StatusDiagnostic,
+    Topics,
+    short_rev,
+)
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, load_desired
 from reconciler.diff import Actions
@@ -101,6 +108,11 @@ class Controller:
         presence = Presence(connection, self.topics.reconciler_status, "reconciler-will")
         self.writer = StatusWriter(self.view, self.topics, presence, self.ignored, on_reconciled)
         self.followed = Followed(source.branch, source.description, interval)
+        # The robots' statuses, followed live only while the head has a rollout policy: the
+        # waves are gated by them. Without one they are only sampled (`_sample_active`).
+        self.health: RetainedView | None = None
+        self._running_since: dict[str, tuple[str, float]] = {}  # robot -> (digest, first seen)
+        self._recheck_at: float | None = None  # unix time a rollout's health judgment changes
         self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
@@ -141,6 +153,8 @@ class Controller:
                 waits = [max(0.0, next_resync - time.monotonic())]
                 if poll is not None:
                     waits.append(poll)
+                if self._recheck_at is not None:
+                    waits.append(max(0.0, self._recheck_at - time.time()))
                 if outcome is Outcome.RETRY:
                     waits.append(backoff.next())
                 elif outcome is Outcome.DONE:
@@ -148,6 +162,7 @@ class Controller:
                 self._wake.wait(min(waits))
         finally:
             self.writer.go_offline()
+            self._follow_health(False)
             self.view.stop()
 
     def _watch_source(self) -> bool:
@@ -207,10 +222,11 @@ class Controller:
         condition = decision.condition
         if decision.changes:
             condition = self._apply(decision)
+        self._recheck_at = decision.recheck_at
         if condition.reason is Reason.BROKER_UNAVAILABLE:
             return Outcome.RETRY, condition, decision.actions
-        if decision.target is not None:
-            self.serving = decision.target
+        if decision.stable is not None:
+            self.serving = decision.stable
         return (Outcome.RETRY if seen.head is None else Outcome.DONE), condition, decision.actions
 
     def _observe(self, fetch: bool) -> Observation | None:
@@ -241,6 +257,9 @@ class Controller:
         retained = parse_retained(
             self.view.snapshot(), self.topics, requests=False, ignored=self.ignored
         )
+        now = time.time()
+        rollout = build.fleet is not None and build.fleet.rollout is not None
+        previous = self.writer.status
         return Observation(
             head=head,
             build=build,
@@ -249,7 +268,48 @@ class Controller:
             serving=self.serving,
             launches=retained.launch_digests(),
             active=self._sample_active(fetch),
+            previous_rollout=previous.rollout if previous is not None else None,
+            statuses=self._follow_health(rollout, now),
+            running_since={robot: seen for robot, (_, seen) in self._running_since.items()},
+            now=now,
         )
+
+    def _follow_health(self, wanted: bool, now: float = 0.0) -> dict[str, AgentStatus] | None:
+        """The robots' statuses while a rollout policy is in force (None until they are
+        known), and when each robot was first seen running its digest."""
+        if wanted and self.health is None:
+            self.health = RetainedView(
+                self.connection,
+                [self.topics.all_status],
+                f"{self.topics.prefix}/sync",
+                role="reconciler-health",
+                on_synced=self._wake.set,
+                on_change=self._on_health,
+            )
+            self.health.start()
+        elif not wanted and self.health is not None:
+            self.health.stop()
+            self.health = None
+            self._running_since.clear()
+        if self.health is None or not self.health.synced:
+            return None
+        seen = parse_retained(self.health.snapshot(), self.topics, ignored=self.ignored)
+        statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
+        for robot, status in statuses.items():
+            if status.state is AgentState.RUNNING and status.digest:
+                known = self._running_since.get(robot)
+                if known is None or known[0] != status.digest:
+                    self._running_since[robot] = (status.digest, now)
+            else:
+                self._running_since.pop(robot, None)
+        return statuses
+
+    def _on_health(self) -> None:
+        """Network thread: a robot's status changed; a rollout in progress looks at once."""
+        status = self.writer.status
+        rollout = status.rollout if status is not None else None
+        if rollout is not None and rollout.state == "Progressing" and not self._stop.is_set():
+            self._wake.set()
 
     def _apply(self, decision: Decision) -> Condition:
         """Publishes what differs and clears what is no longer assigned; the outcome."""

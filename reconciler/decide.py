@@ -8,12 +8,20 @@ without a broker.
 from __future__ import annotations
 
 from collections.abc import Mapping, Set
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from configurator.launch import LaunchRequest
-from configurator.wire import ReconcilerReason, ReconcilerState, StatusDiagnostic, short_rev
+from configurator.wire import (
+    AgentStatus,
+    ReconcilerReason,
+    ReconcilerState,
+    RolloutStatus,
+    StatusDiagnostic,
+    short_rev,
+)
 from reconciler.desired import Desired
 from reconciler.diff import Actions, diff
+from reconciler.rollout import RolloutInput, RolloutStep, roll_out
 
 Reason = ReconcilerReason
 
@@ -21,6 +29,7 @@ Reason = ReconcilerReason
 _STATE_OF: dict[ReconcilerReason, ReconcilerState] = {
     Reason.APPLIED: "Ready",
     Reason.PROGRESSING: "Progressing",
+    Reason.ROLLOUT_PAUSED: "Progressing",
     Reason.OFFLINE: "Offline",
 }
 
@@ -40,6 +49,12 @@ class Observation:
     serving: Desired | None = None  # the last good revision, applied or being applied
     launches: Mapping[str, str | None] = field(default_factory=dict)  # robot -> digest held
     active: Set[str] = frozenset()  # robots whose agent says a brain is up
+    # For rollouts: where the last one stood, the robots' statuses (None: not known yet),
+    # when each robot was first seen running its digest, and the time now.
+    previous_rollout: RolloutStatus | None = None
+    statuses: Mapping[str, AgentStatus] | None = None
+    running_since: Mapping[str, float] = field(default_factory=dict)
+    now: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -51,6 +66,7 @@ class Condition:
     failed_revision: str | None = None
     diagnostics: tuple[StatusDiagnostic, ...] = ()
     more_diagnostics: int = 0
+    rollout: RolloutStatus | None = None
 
     @property
     def state(self) -> ReconcilerState:
@@ -64,6 +80,8 @@ class Decision:
     target: Desired | None
     actions: Actions[LaunchRequest] | None
     condition: Condition
+    stable: Desired | None = None  # the last revision fully applied, once this step is
+    recheck_at: float | None = None  # unix time to look again though nothing arrives
 
     @property
     def changes(self) -> bool:
@@ -72,29 +90,29 @@ class Decision:
     def progressing(self) -> Condition:
         """Reported while the changes are published: the outcome is not known yet."""
         assert self.target is not None
-        return Condition(
-            Reason.PROGRESSING,
-            f"applying {short_rev(self.target.revision)}",
-            self.condition.failed_revision,
-            self.condition.diagnostics,
-            self.condition.more_diagnostics,
+        return replace(
+            self.condition,
+            reason=Reason.PROGRESSING,
+            message=f"applying {short_rev(self.target.revision)}",
         )
 
     def unacknowledged(self, error: str | None) -> Condition:
         """The outcome when the broker did not acknowledge every message in time."""
         assert self.target is not None
-        return Condition(
-            Reason.BROKER_UNAVAILABLE,
-            "the broker did not acknowledge every message; retrying: " + (error or "timeout"),
-            self.target.revision,
-            self.condition.diagnostics,
-            self.condition.more_diagnostics,
+        return replace(
+            self.condition,
+            reason=Reason.BROKER_UNAVAILABLE,
+            message="the broker did not acknowledge every message; retrying: "
+            + (error or "timeout"),
+            failed_revision=self.target.revision,
         )
 
 
 def decide(seen: Observation) -> Decision:
     """The head when it can be applied, else the last good revision kept (and refilled)."""
     build = seen.build
+    if build.fleet is not None and build.fleet.rollout is not None:
+        return _decide_rollout(seen, build)
     problems = list(build.problems)
     reason = _failure(seen)
     actions: Actions[LaunchRequest] | None = None
@@ -117,7 +135,81 @@ def decide(seen: Observation) -> Decision:
     if actions is None and target is not None and target.fleet is not None:
         fleet = target.fleet
         actions = diff(fleet.requests, seen.launches, fleet.suspended, True, seen.active)
-    return Decision(target, actions, _condition(seen, target, problems, reason, build.omitted))
+    condition = _condition(seen, target, problems, reason, build.omitted)
+    return Decision(target, actions, condition, stable=target)
+
+
+def _decide_rollout(seen: Observation, build: Desired) -> Decision:
+    """The head has a rollout policy: its robots move wave by wave (reconciler/rollout.py)."""
+    fleet = build.fleet
+    assert fleet is not None
+    stable = seen.serving if seen.serving is not None and seen.serving.fleet else None
+    step = roll_out(
+        RolloutInput(
+            head=fleet,
+            stable=stable.fleet if stable is not None else None,
+            previous=seen.previous_rollout,
+            launches=seen.launches,
+            statuses=seen.statuses,
+            running_since=seen.running_since,
+            now=seen.now,
+        )
+    )
+    if step.serve_stable and stable is not None and stable.fleet is not None:
+        back = stable.fleet
+        actions = diff(back.requests, seen.launches, back.suspended, True, seen.active)
+        return Decision(stable, actions, _rollout_condition(seen, step), stable=stable)
+    actions = diff(
+        step.requests, seen.launches, fleet.suspended | step.keep, fleet.allow_empty, seen.active
+    )
+    if actions.refused:  # the head would unassign every robot: the stable revision stays
+        refused = decide(replace(seen, build=Desired(build.revision, None)))
+        problem = StatusDiagnostic(
+            path="configs/fleet.yaml",
+            code=Reason.EMPTY_FLEET_REFUSED.value,
+            message=actions.refused,
+        )
+        condition = replace(
+            refused.condition,
+            reason=Reason.EMPTY_FLEET_REFUSED,
+            message=f"revision {short_rev(build.revision)} is not applied (EmptyFleetRefused)",
+            failed_revision=build.revision,
+            diagnostics=(problem,),
+        )
+        return replace(refused, condition=condition)
+    new_stable = build if step.complete else stable
+    return Decision(
+        build,
+        actions,
+        _rollout_condition(seen, step),
+        stable=new_stable,
+        recheck_at=step.recheck_at,
+    )
+
+
+def _rollout_condition(seen: Observation, step: RolloutStep) -> Condition:
+    rollout = step.status
+    assert rollout is not None
+    head = short_rev(rollout.revision)
+    if step.complete:
+        done = _condition(seen, None, [], Reason.APPLIED, 0)
+        return replace(done, rollout=rollout)
+    counts = rollout.counts
+    where = (
+        f"wave {rollout.wave + 1}/{rollout.waves} ({rollout.wave_name}): "
+        f"{counts.get('healthy', 0)} healthy, {counts.get('failed', 0)} failed, "
+        f"{counts.get('pending', 0)} pending"
+    )
+    if rollout.state == "RolledBack":
+        message = f"rollout of {head} rolled back: {rollout.message}"
+        return Condition(Reason.ROLLED_BACK, message, rollout.revision, rollout=rollout)
+    if rollout.state == "Halted":
+        message = f"rollout of {head} halted at {where}: {rollout.message}"
+        return Condition(Reason.ROLLOUT_HALTED, message, rollout.revision, rollout=rollout)
+    if rollout.state == "Paused":
+        message = f"rollout of {head} paused at {where}"
+        return Condition(Reason.ROLLOUT_PAUSED, message, rollout=rollout)
+    return Condition(Reason.PROGRESSING, f"rolling out {head}: {where}", rollout=rollout)
 
 
 def _failure(seen: Observation) -> Reason:

@@ -75,6 +75,7 @@ def status_of(
         published=published,
         cleared=cleared,
         interval=followed.interval,
+        rollout=condition.rollout,
     )
 
 
@@ -91,6 +92,7 @@ def offline_status(status: ReconcilerStatus, message: str) -> ReconcilerStatus:
         message=message,
         robots=status.robots,
         interval=status.interval,
+        rollout=status.rollout,
     )
 
 

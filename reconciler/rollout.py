@@ -1,0 +1,321 @@
+"""Rollout step, pure: a commit reaches the fleet wave by wave, each gated by the robots' health.
+
+Stateless: where a rollout stands is read back from what the broker holds — the retained
+launch topics, the robots' statuses and the rollout in the reconciler's retained status — so a
+restarted reconciler resumes the same wave without publishing anything anew.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+
+from configurator.launch import LaunchRequest
+from configurator.render import FleetRender
+from configurator.types import RolloutPolicy
+from configurator.waves import assign_waves, failure_budget
+from configurator.wire import (
+    MAX_LISTED,
+    AgentState,
+    AgentStatus,
+    RolloutState,
+    RolloutStatus,
+    short_rev,
+)
+
+# An agent reporting these about the new request has failed it.
+_FAILED_STATES = {AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED}
+
+
+class Health(str, Enum):
+    """A robot of the current wave, judged only on what it reports about the new request."""
+
+    HEALTHY = "healthy"  # ran the new request for healthy_after seconds
+    FAILED = "failed"  # failed, backed off, exited or refused it; went offline; timed out
+    PENDING = "pending"  # on its way
+    ABSENT = "absent"  # offline before delivery: pending, never failed; waited for until timeout
+
+
+@dataclass(frozen=True)
+class RolloutInput:
+    """What the rollout of `head` sees at one step."""
+
+    head: FleetRender  # the commit rolled out; has a policy
+    stable: FleetRender | None  # the last revision that fully rolled out
+    previous: RolloutStatus | None  # from the reconciler's retained status
+    launches: Mapping[str, str | None]  # robot -> digest held on its launch topic
+    statuses: Mapping[str, AgentStatus] | None  # None: not known yet (health not judged)
+    running_since: Mapping[str, float]  # robot -> unix time it was first seen running its digest
+    now: float
+
+
+@dataclass
+class RolloutStep:
+    """What the broker should hold now, and where the rollout stands."""
+
+    requests: dict[str, LaunchRequest] = field(default_factory=dict)  # to hold (publish if not)
+    keep: set[str] = field(default_factory=set)  # left exactly as they are
+    status: RolloutStatus | None = None
+    recheck_at: float | None = None  # unix time a health judgment changes with no new message
+    complete: bool = False  # every wave healthy: `head` is the new stable revision
+    serve_stable: bool = False  # rolled back: the fleet gets the stable revision
+
+    @property
+    def stopped(self) -> bool:
+        return self.status is not None and self.status.state in ("Halted", "RolledBack")
+
+
+def stable_revision_of(previous: RolloutStatus | None, applied: str | None) -> str | None:
+    """The last revision that fully rolled out: the previous rollout's when it completed."""
+    if previous is None:
+        return applied
+    if previous.state == "Complete":
+        return previous.revision
+    return previous.stable_revision
+
+
+def roll_out(seen: RolloutInput) -> RolloutStep:
+    """The next step of rolling `head` out; see the module docstring and the README."""
+    head, stable, previous = seen.head, seen.stable, seen.previous
+    policy = head.rollout
+    assert policy is not None
+    waves = assign_waves(head.labels, policy.waves)
+    stable_requests = stable.requests if stable is not None else {}
+    changed = {
+        robot
+        for robot, request in head.requests.items()
+        if robot not in head.suspended
+        and (robot not in stable_requests or stable_requests[robot].digest != request.digest)
+    }
+    same = previous is not None and previous.revision == head.revision
+    base = _Rollout(seen, policy, waves, changed, stable_requests)
+    if same and previous is not None and previous.state == "Complete":
+        return base.everyone()
+    if same and previous is not None and previous.state == "RolledBack":
+        return base.rolled_back(previous)
+    if same and previous is not None and previous.state in ("Halted", "Progressing", "Paused"):
+        started = previous.wave_started_at
+        wave = previous.wave if started is not None else -1
+        if previous.state == "Halted":
+            return base.halted(previous)
+        return base.advance(wave, started)
+    return base.advance(-1, None)
+
+
+class _Rollout:
+    def __init__(
+        self,
+        seen: RolloutInput,
+        policy: RolloutPolicy,
+        waves: dict[str, int],
+        changed: set[str],
+        stable_requests: Mapping[str, LaunchRequest],
+    ) -> None:
+        self.seen = seen
+        self.policy = policy
+        self.waves = waves
+        self.changed = changed
+        self.stable_requests = stable_requests
+        self.count = len(policy.waves)
+
+    # ------------------------------------------------------------------ what to hold
+
+    def hold(self, started: int) -> RolloutStep:
+        """Robots of started waves hold the head's request; the others are not touched (a
+        robot that holds nothing readable gets the stable request back)."""
+        head = self.seen.head
+        step = RolloutStep()
+        for robot, request in head.requests.items():
+            if robot in head.suspended:
+                step.requests[robot] = request  # the diff leaves suspended robots as they are
+                continue
+            if robot not in self.changed or self.waves.get(robot, self.count) <= started:
+                step.requests[robot] = request
+            elif self.seen.launches.get(robot) is not None:
+                step.keep.add(robot)
+                step.requests[robot] = request  # held as it is: the diff leaves it alone
+            elif robot in self.stable_requests:
+                step.requests[robot] = self.stable_requests[robot]
+        return step
+
+    def everyone(self) -> RolloutStep:
+        step = self.hold(self.count)
+        step.complete = True
+        step.status = self._status("Complete", self.count - 1, None, {}, "rolled out")
+        return step
+
+    # ------------------------------------------------------------------ the states
+
+    def advance(self, wave: int, started_at: float | None) -> RolloutStep:
+        """From `wave` (-1: none started yet), publish and judge waves as far as they are
+        healthy; stop on too many failures."""
+        now = self.seen.now
+        if wave < 0 and not self.policy.paused:
+            wave, started_at = 0, now
+        while True:
+            if wave < 0:
+                step = self.hold(-1)
+                step.status = self._status(
+                    "Paused", 0, None, {}, "paused before the first wave (rollout.paused)"
+                )
+                return step
+            judged, recheck = self._judge(wave, started_at or now)
+            failed = [r for r, h in judged.items() if h is Health.FAILED]
+            budget = failure_budget(self.policy.max_failures, len(judged)) or 0
+            if len(failed) > budget:
+                return self._failed(wave, started_at, judged)
+            done = all(h in (Health.HEALTHY, Health.FAILED) for h in judged.values()) or (
+                all(h is not Health.PENDING for h in judged.values())
+                and started_at is not None
+                and now - started_at >= self.policy.wave_timeout
+            )
+            if self.seen.statuses is None and judged:
+                done = False  # health not known yet: nothing advances
+            if done and wave == self.count - 1:
+                step = self.everyone()
+                return step
+            if done and not self.policy.paused:
+                wave, started_at = wave + 1, now
+                continue
+            step = self.hold(wave)
+            state: RolloutState = "Paused" if done and self.policy.paused else "Progressing"
+            why = "paused (rollout.paused)" if state == "Paused" else ""
+            step.status = self._status(state, wave, started_at, judged, why)
+            step.recheck_at = recheck
+            return step
+
+    def halted(self, previous: RolloutStatus) -> RolloutStep:
+        wave = previous.wave if previous.wave_started_at is not None else -1
+        step = self.hold(wave)
+        step.status = previous.model_copy()
+        return step
+
+    def rolled_back(self, previous: RolloutStatus) -> RolloutStep:
+        if self.seen.stable is None:  # the stable revision cannot be built now: hold on
+            return self.halted(previous)
+        step = RolloutStep(serve_stable=True)
+        step.status = previous.model_copy()
+        return step
+
+    def _failed(
+        self, wave: int, started_at: float | None, judged: dict[str, Health]
+    ) -> RolloutStep:
+        failed = sorted(r for r, h in judged.items() if h is Health.FAILED)
+        why = (
+            f"{len(failed)} robot(s) of wave '{self.policy.waves[wave].name}' failed "
+            f"({', '.join(failed[:5])}{', ...' if len(failed) > 5 else ''}), over max_failures "
+            f"{self.policy.max_failures}"
+        )
+        rollback = self.policy.on_failure == "rollback" and self.seen.stable is not None
+        if rollback:
+            step = RolloutStep(serve_stable=True)
+            what = f"; rolled back to {short_rev(self._stable_revision())}"
+            step.status = self._status("RolledBack", wave, started_at, judged, why + what)
+            return step
+        step = self.hold(wave)
+        if self.policy.on_failure == "rollback":
+            why += "; no revision ever fully rolled out to go back to: halted"
+        step.status = self._status("Halted", wave, started_at, judged, why)
+        return step
+
+    # ------------------------------------------------------------------ health
+
+    def _judge(self, wave: int, started_at: float) -> tuple[dict[str, Health], float | None]:
+        """The health of the wave's changed robots, and when a judgment changes with time."""
+        head = self.seen.head
+        statuses = self.seen.statuses or {}
+        policy, now = self.policy, self.seen.now
+        judged: dict[str, Health] = {}
+        recheck: float | None = None
+
+        def soon(at: float) -> None:
+            nonlocal recheck
+            recheck = at if recheck is None else min(recheck, at)
+
+        timeout_at = started_at + policy.wave_timeout
+        for robot in sorted(self.changed):
+            if self.waves.get(robot) != wave:
+                continue
+            digest = head.requests[robot].digest
+            health = _health(
+                statuses.get(robot),
+                digest,
+                self.seen.launches.get(robot) == digest,
+                started_at,
+                self.seen.running_since.get(robot),
+                now,
+                policy.healthy_after,
+            )
+            if health is Health.PENDING and robot in self.seen.running_since:
+                soon(self.seen.running_since[robot] + policy.healthy_after)
+            if health is Health.PENDING and now >= timeout_at:
+                health = Health.FAILED  # not healthy by wave_timeout
+            if health in (Health.PENDING, Health.ABSENT) and now < timeout_at:
+                soon(timeout_at)
+            judged[robot] = health
+        return judged, recheck
+
+    # ------------------------------------------------------------------ status
+
+    def _stable_revision(self) -> str | None:
+        stable = self.seen.stable
+        return stable.revision if stable is not None else None
+
+    def _status(
+        self,
+        state: RolloutState,
+        wave: int,
+        started_at: float | None,
+        judged: Mapping[str, Health],
+        message: str,
+    ) -> RolloutStatus:
+        def robots(*kinds: Health) -> list[str]:
+            return sorted(r for r, h in judged.items() if h in kinds)
+
+        healthy, failed = robots(Health.HEALTHY), robots(Health.FAILED)
+        pending = robots(Health.PENDING, Health.ABSENT)
+        index = max(0, min(wave, self.count - 1))
+        return RolloutStatus(
+            revision=self.seen.head.revision,
+            stable_revision=self._stable_revision(),
+            state=state,
+            wave=index,
+            waves=self.count,
+            wave_name=self.policy.waves[index].name,
+            wave_started_at=started_at,
+            healthy=healthy[:MAX_LISTED],
+            failed=failed[:MAX_LISTED],
+            pending=pending[:MAX_LISTED],
+            counts={"healthy": len(healthy), "failed": len(failed), "pending": len(pending)},
+            message=message,
+        )
+
+
+def _health(
+    status: AgentStatus | None,
+    digest: str,
+    delivered: bool,
+    started_at: float,
+    running_since: float | None,
+    now: float,
+    healthy_after: float,
+) -> Health:
+    """One robot of the current wave. A status about another digest never counts as health
+    (the trap of judging a wave by robots still reporting the previous request)."""
+    if status is None:
+        return Health.ABSENT
+    if status.state is AgentState.OFFLINE:
+        # Went offline after the wave was published: it may have died of the new request.
+        return Health.FAILED if delivered and status.since > started_at else Health.ABSENT
+    if not delivered:
+        return Health.PENDING
+    if status.state is AgentState.REJECTED and status.since >= started_at:
+        return Health.FAILED  # it refused the new request
+    if status.digest != digest:
+        return Health.PENDING
+    if status.state in _FAILED_STATES:
+        return Health.FAILED
+    if status.state is AgentState.RUNNING and running_since is not None:
+        return Health.HEALTHY if now - running_since >= healthy_after else Health.PENDING
+    return Health.PENDING
