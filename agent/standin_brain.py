@@ -39,6 +39,9 @@ def describe(request: LaunchRequest) -> list[str]:
     return lines
 
 
+CRASH_KEY = "STANDIN_CRASH"
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m agent.standin_brain",
@@ -84,6 +87,13 @@ def main(argv: list[str]) -> int:
     for line in describe(request):
         print(line)
     sys.stdout.flush()
+    # A request can ask for a crash, so that a bad commit can be rehearsed end to end (a
+    # rollout stopping at its canaries): knowledge {STANDIN_CRASH: CODE}.
+    crash = request.scenario.environment_knowledge.get(CRASH_KEY)
+    if crash not in (None, False, 0):
+        code = crash if isinstance(crash, int) and not isinstance(crash, bool) else 1
+        print(f"stand-in brain: crashing with code {code}, as {CRASH_KEY} asks", flush=True)
+        return code
 
     deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
     while not stop.is_set():

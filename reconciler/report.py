@@ -174,7 +174,15 @@ class StatusWriter:
     def _hold_will(self, status: ReconcilerStatus) -> None:
         """Keeps the Last Will naming the revision applied: a new will is a new connection, so
         only when what it says changes."""
-        key = (status.last_applied_revision, status.robots, status.branch, status.source)
+        rollout = status.rollout
+        # A restarted reconciler resumes a rollout from the status it finds, which after a
+        # crash is this will: it must name the current wave and when it started.
+        where = (
+            (rollout.revision, rollout.state, rollout.wave, rollout.wave_started_at)
+            if rollout
+            else None
+        )
+        key = (status.last_applied_revision, status.robots, status.branch, status.source, where)
         if key == self._will_key:
             return
         will = offline_status(

@@ -90,8 +90,8 @@ def roll_out(seen: RolloutInput) -> RolloutStep:
     }
     same = previous is not None and previous.revision == head.revision
     base = _Rollout(seen, policy, waves, changed, stable_requests)
-    if same and previous is not None and previous.state == "Complete":
-        return base.everyone()
+    if not changed or (same and previous is not None and previous.state == "Complete"):
+        return base.everyone()  # nothing to move (paused or not), or moved already
     if same and previous is not None and previous.state == "RolledBack":
         return base.rolled_back(previous)
     if same and previous is not None and previous.state in ("Halted", "Progressing", "Paused"):

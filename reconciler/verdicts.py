@@ -15,7 +15,7 @@ from typing import Any
 from configurator.launch import template_mismatch
 from configurator.render import FleetRender
 from configurator.textsafe import printable
-from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus
+from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutStatus
 from configurator.wire import short_digest as _short_digest
 from configurator.wire import short_rev as _short_rev
 from reconciler.observed import Retained, RobotSeen
@@ -247,6 +247,22 @@ def short_rev(revision: str | None) -> str:
     return clean(_short_rev(revision))
 
 
+def rollout_line(rollout: RolloutStatus) -> str:
+    """The rollout in one line: revision, state, where, who is healthy, failed, pending, why."""
+    counts = rollout.counts
+    line = (
+        f"rollout: {short_rev(rollout.revision)} {clean(rollout.state)}, "
+        f"wave {rollout.wave + 1}/{rollout.waves} ({clean(rollout.wave_name)}): "
+        f"{counts.get('healthy', 0)} healthy, {counts.get('failed', 0)} failed, "
+        f"{counts.get('pending', 0)} pending; stable {short_rev(rollout.stable_revision)}"
+    )
+    if rollout.failed:
+        line += f"; failed: {clean(', '.join(rollout.failed[:5]))}"
+    if rollout.message:
+        line += f" — {clean(rollout.message)}"
+    return line
+
+
 def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -> list[str]:
     if status is None:
         return [
@@ -272,6 +288,8 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
             f"  STALE: its last heartbeat is {at - status.heartbeat:.0f} s old and it beats "
             f"every {status.interval or 0:g} s: is the reconciler still running?"
         )
+    if status.rollout is not None:
+        lines.append(rollout_line(status.rollout))
     shown = status.diagnostics[:10]
     lines += [f"  {clean(str(d))}" for d in shown]
     more = len(status.diagnostics) - len(shown) + status.more_diagnostics

@@ -65,6 +65,7 @@ class FleetWatch:
         self._listener = listener
         self._cond = threading.Condition()
         self.statuses: dict[str, list[AgentStatus]] = {}
+        self.timeline: list[tuple[float, str, AgentStatus]] = []  # (arrival, robot, status)
         self.live_launches: list[tuple[str, bytes, float]] = []
         self.view = RetainedView(
             broker if isinstance(broker, Connection) else Connection(broker),
@@ -111,6 +112,7 @@ class FleetWatch:
             if status is not None:
                 with self._cond:
                     self.statuses.setdefault(found[0], []).append(status)
+                    self.timeline.append((arrived, found[0], status))
                 if self._listener is not None:
                     self._listener(found[0], status, arrived)
         self.view._handle_message(client, userdata, message)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -10,7 +11,7 @@ import pytest
 
 from configurator.launch import LaunchRequest
 from configurator.wire import AgentStatus
-from tests.support.fleet import GitLab, Proc, start_agent, start_reconciler
+from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start_reconciler
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch
 
@@ -43,6 +44,19 @@ class Fleet:
 
     def requests(self, revision: str | None = None) -> dict[str, LaunchRequest]:
         return self.lab.requests(revision)
+
+    def status_cli(self, *extra: str) -> subprocess.CompletedProcess[str]:
+        """`robotconf status` of this fleet, as a real process; never a traceback."""
+        done = subprocess.run(
+            robotconf_argv(
+                "status", "--repo", str(self.lab.root), "--broker", self.broker.url, *extra
+            ),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert "Traceback" not in done.stdout + done.stderr, done.stderr
+        return done
 
 
 @pytest.fixture

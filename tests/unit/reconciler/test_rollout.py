@@ -247,3 +247,10 @@ def test_the_first_rollout_without_a_stable_revision_halts_rather_than_clearing(
     failed = step(head, None, held(head, CANARY), broken, first.status, T0 + 1)
     assert failed.status is not None and failed.status.state == "Halted"
     assert "no revision ever fully rolled out" in failed.status.message
+
+
+def test_a_commit_that_changes_no_request_is_complete_even_when_paused(lab: Lab) -> None:
+    stable = fleet(lab, "a")
+    same = fleet(lab, "a", paused=True)
+    result = step(same, stable, held(stable))
+    assert result.complete and result.status is not None and result.status.state == "Complete"
