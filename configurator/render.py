@@ -36,6 +36,7 @@ class FleetRender:
     suspended: set[str] = field(default_factory=set)
     scenario_of: dict[str, str] = field(default_factory=dict)
     allow_empty: bool = False
+    labels: dict[str, dict[str, str]] = field(default_factory=dict)  # every robot's, maybe {}
 
 
 def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
@@ -121,6 +122,7 @@ def render_fleet(repo: Repository) -> FleetRender:
             robot_id, assignment.name or robot_id, repo.revision, scenario
         )
         result.scenario_of[robot_id] = assignment.scenario
+        result.labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
             result.suspended.add(robot_id)
     return result
