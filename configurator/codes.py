@@ -130,6 +130,12 @@ RULES: dict[str, Rule] = {
             "robot id not usable as an MQTT topic level (matched in full: a trailing newline is not"
             " an id), or reserved: a service user name (`reconciler`, `viewer`, in any case)",
         ),
+        Rule(
+            "RC502",
+            Severity.ERROR,
+            "fleet: a label key or value not written like a robot id (letters, digits, `_`, `.`, "
+            "`-`; 1-64, starting with a letter or digit)",
+        ),
         Rule("RC601", Severity.ERROR, "a setting's default does not fit its own definition"),
         Rule(
             "RC602",
@@ -146,6 +152,38 @@ RULES: dict[str, Rule] = {
             "RC608",
             Severity.WARNING,
             "a mapping scheme does not bind a mapping of a robot template of its platform",
+        ),
+        Rule(
+            "RC701",
+            Severity.ERROR,
+            "rollout: a wave name not written like a robot id, or used twice",
+        ),
+        Rule(
+            "RC702",
+            Severity.ERROR,
+            "rollout: a number out of range: `percent` 1-100, `healthy_after` >= 0, "
+            "`wave_timeout` > 0, `max_failures` a count >= 0 or a share `0%`-`100%`",
+        ),
+        Rule(
+            "RC703",
+            Severity.ERROR,
+            "rollout: a wave's selector names a label key no robot has (did you mean)",
+        ),
+        Rule(
+            "RC704",
+            Severity.ERROR,
+            "rollout: a wave's selector asks for a label value no robot has (did you mean)",
+        ),
+        Rule(
+            "RC705",
+            Severity.ERROR,
+            "rollout: a robot falls in no wave, so no commit would reach it (end with a wave "
+            "without selector, e.g. `{name: all}`)",
+        ),
+        Rule(
+            "RC706",
+            Severity.WARNING,
+            "rollout: a wave takes no robot (earlier waves take all it selects)",
         ),
     )
 }

@@ -7,6 +7,8 @@ from typing import Any, Literal
 
 from configurator.render import FleetRender
 from configurator.textsafe import markdown_code, markdown_text, printable_lines
+from configurator.types import RolloutPolicy
+from configurator.waves import assign_waves
 from configurator.wire import short_rev
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
@@ -19,14 +21,16 @@ class RobotChange:
     scenario_before: str | None
     scenario_after: str | None
     fields: list[str] = field(default_factory=list)
+    wave: str | None = None  # the head's rollout wave it falls in; None: no policy, or removed
 
 
 @dataclass
 class Plan:
     base: str
     head: str
-    changes: list[RobotChange]
+    changes: list[RobotChange]  # in robot id order; with waves, in wave order first
     unchanged: int
+    waves: list[str] | None = None  # the head's rollout waves in order; None: all at once
 
     @property
     def restarts(self) -> list[str]:
@@ -53,7 +57,9 @@ def changed_fields(before: Any, after: Any, path: str = "") -> list[str]:
     return [] if before == after else [path or "(whole request)"]
 
 
-def make_plan(base: FleetRender, head: FleetRender) -> Plan:
+def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | None = None) -> Plan:
+    """What changes per robot from `base` to `head`; with the head's `rollout` policy, which
+    wave each robot of the head falls in, the changes in wave order."""
     changes: list[RobotChange] = []
     unchanged = 0
     for robot_id in sorted(set(base.requests) | set(head.requests)):
@@ -71,7 +77,16 @@ def make_plan(base: FleetRender, head: FleetRender) -> Plan:
             changes.append(RobotChange(robot_id, kind, before, after, fields))
         else:
             unchanged += 1
-    return Plan(base.revision, head.revision, changes, unchanged)
+    if rollout is None:
+        return Plan(base.revision, head.revision, changes, unchanged)
+    names = [wave.name for wave in rollout.waves]
+    placed = assign_waves(head.labels, rollout.waves)
+    for change in changes:
+        index = placed.get(change.robot_id)
+        change.wave = None if index is None else names[index]
+    # Removed robots (and any no wave takes) last: they are in no wave of the head.
+    changes.sort(key=lambda c: (placed.get(c.robot_id, len(names)), c.robot_id))
+    return Plan(base.revision, head.revision, changes, unchanged, names)
 
 
 def _counts(plan: Plan) -> str:
@@ -91,24 +106,40 @@ def _short(rev: str) -> str:
 _SIGN = {"added": "+", "removed": "-", "changed": "~", "held": "="}
 
 
+def _change_line(c: RobotChange) -> str:
+    scenario = c.scenario_after or c.scenario_before or ""
+    if c.kind == "removed":
+        detail = f"(was {c.scenario_before}; its brain will be stopped)"
+    elif c.kind == "added":
+        detail = scenario
+    else:
+        moved = (
+            f"{c.scenario_before} -> {c.scenario_after}"
+            if c.scenario_before != c.scenario_after
+            else scenario
+        )
+        detail = f"{moved}: {', '.join(c.fields)}"
+        if c.kind == "held":
+            detail += " (suspended: left as it is)"
+    return f"  {_SIGN[c.kind]} {c.robot_id}  {detail}"
+
+
+def _wave_heading(waves: list[str], wave: str | None) -> str:
+    if wave is None:
+        return "in no wave (removed):"
+    return f"wave {wave} ({waves.index(wave) + 1} of {len(waves)}):"
+
+
 def format_plan_text(plan: Plan) -> str:
     lines = [f"plan {_short(plan.base)} -> {_short(plan.head)}: {_counts(plan)}"]
+    if plan.waves is not None:
+        lines.append(f"rollout in waves: {', '.join(plan.waves)}")
+    heading: str | None = None
     for c in plan.changes:
-        scenario = c.scenario_after or c.scenario_before or ""
-        if c.kind == "removed":
-            detail = f"(was {c.scenario_before}; its brain will be stopped)"
-        elif c.kind == "added":
-            detail = scenario
-        else:
-            moved = (
-                f"{c.scenario_before} -> {c.scenario_after}"
-                if c.scenario_before != c.scenario_after
-                else scenario
-            )
-            detail = f"{moved}: {', '.join(c.fields)}"
-            if c.kind == "held":
-                detail += " (suspended: left as it is)"
-        lines.append(f"  {_SIGN[c.kind]} {c.robot_id}  {detail}")
+        if plan.waves is not None and _wave_heading(plan.waves, c.wave) != heading:
+            heading = _wave_heading(plan.waves, c.wave)
+            lines.append(heading)
+        lines.append(_change_line(c))
     return printable_lines(lines)
 
 
@@ -119,10 +150,16 @@ def format_plan_markdown(plan: Plan) -> str:
         _counts(plan) + ".",
         "",
     ]
+    if plan.waves is not None:
+        lines += [f"Rollout in waves: {' → '.join(markdown_text(w) for w in plan.waves)}.", ""]
     if not plan.changes:
         lines.append("No robot's Launch Request changes: no robot restarts.")
         return "\n".join(lines) + "\n"
-    lines += ["| robot | change | scenario | changed fields |", "| --- | --- | --- | --- |"]
+    waves = plan.waves is not None
+    lines += [
+        ("| wave " if waves else "") + "| robot | change | scenario | changed fields |",
+        ("| --- " if waves else "") + "| --- | --- | --- | --- |",
+    ]
     for c in plan.changes:
         scenario = (
             f"{markdown_text(c.scenario_before)} → {markdown_text(c.scenario_after)}"
@@ -133,23 +170,28 @@ def format_plan_markdown(plan: Plan) -> str:
         if len(c.fields) > 20:
             fields += f"<br>… {len(c.fields) - 20} more"
         kind = "held (suspended)" if c.kind == "held" else c.kind
-        lines.append(f"| {markdown_code(c.robot_id)} | {kind} | {scenario} | {fields} |")
+        wave = (f"| {markdown_text(c.wave or '—')} ") if waves else ""
+        lines.append(f"{wave}| {markdown_code(c.robot_id)} | {kind} | {scenario} | {fields} |")
     return "\n".join(lines) + "\n"
 
 
-def plan_as_json(plan: Plan) -> dict[str, Any]:
-    return {
-        "base": plan.base,
-        "head": plan.head,
-        "unchanged": plan.unchanged,
-        "changes": [
-            {
-                "robot_id": c.robot_id,
-                "change": c.kind,
-                "scenario_before": c.scenario_before,
-                "scenario_after": c.scenario_after,
-                "fields": c.fields,
-            }
-            for c in plan.changes
-        ],
+def _change_json(c: RobotChange, waves: bool) -> dict[str, Any]:
+    found: dict[str, Any] = {
+        "robot_id": c.robot_id,
+        "change": c.kind,
+        "scenario_before": c.scenario_before,
+        "scenario_after": c.scenario_after,
+        "fields": c.fields,
     }
+    if waves:
+        found["wave"] = c.wave
+    return found
+
+
+def plan_as_json(plan: Plan) -> dict[str, Any]:
+    """For scripts; `waves` and each change's `wave` only when the head has a rollout policy."""
+    found: dict[str, Any] = {"base": plan.base, "head": plan.head, "unchanged": plan.unchanged}
+    if plan.waves is not None:
+        found["waves"] = plan.waves
+    found["changes"] = [_change_json(c, plan.waves is not None) for c in plan.changes]
+    return found

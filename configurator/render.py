@@ -35,7 +35,7 @@ class FleetRender:
     requests: dict[str, LaunchRequest] = field(default_factory=dict)
     suspended: set[str] = field(default_factory=set)
     scenario_of: dict[str, str] = field(default_factory=dict)
-    labels: dict[str, dict[str, str]] = field(default_factory=dict)
+    labels: dict[str, dict[str, str]] = field(default_factory=dict)  # every robot's, maybe {}
     allow_empty: bool = False
     rollout: RolloutPolicy | None = None  # None: every robot at once
 

@@ -17,6 +17,8 @@ from configurator.loader import KIND_BY_NAME
 from configurator.repository import Repository
 from configurator.types import ROBOT_ID_PATTERN
 
+# "0%" to "100%": the plain spellings of what configurator.waves.failure_budget reads
+SHARE_PATTERN = r"^(100|[1-9]?[0-9])%$"
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 # kind -> where its files live, relative to the repository root (for modelines)
@@ -187,6 +189,31 @@ def _fleet_schema(repo: Repository) -> dict[str, Any]:
         scenarios, "the scenario this robot runs"
     )
     schema["properties"]["robots"]["propertyNames"] = {"pattern": ROBOT_ID_PATTERN}
+    # What validate checks alone (RC502, RC701, RC702), told to editors as well; which label
+    # keys and values exist is not: the schema would go stale with every label edited.
+    labels = schema["$defs"]["RobotAssignment"]["properties"]["labels"]
+    labels["propertyNames"] = {"pattern": ROBOT_ID_PATTERN}
+    labels["additionalProperties"] = {"type": "string", "pattern": ROBOT_ID_PATTERN}
+    wave = schema["$defs"]["Wave"]["properties"]
+    wave["name"]["pattern"] = ROBOT_ID_PATTERN
+    wave["selector"]["propertyNames"] = {"pattern": ROBOT_ID_PATTERN}
+    wave["selector"]["additionalProperties"] = {"type": "string", "pattern": ROBOT_ID_PATTERN}
+    wave["percent"]["anyOf"][0].update(minimum=1, maximum=100)
+    policy = schema["$defs"]["RolloutPolicy"]["properties"]
+    policy["healthy_after"]["minimum"] = 0
+    policy["wave_timeout"]["exclusiveMinimum"] = 0
+    policy["max_failures"]["anyOf"] = [
+        {"type": "integer", "minimum": 0, "description": "a count of robots"},
+        {
+            "type": "string",
+            "pattern": SHARE_PATTERN,
+            "description": "a share of the wave's robots, 0% to 100%, rounded down",
+        },
+    ]
+    policy["on_failure"]["description"] = (
+        "when a wave fails: rollback: the robots it moved get the last complete revision back; "
+        "halt: the rollout stops where it is"
+    )
     return schema
 
 

@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 
 from configurator.types import Wave
 
-_SHARE = re.compile(r"^(\d{1,3})%$")
+_SHARE = re.compile(r"^([0-9]{1,3})%$")  # not \d, which takes any script's digits
 
 
 def matches(labels: Mapping[str, str], selector: Mapping[str, str]) -> bool:

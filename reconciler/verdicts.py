@@ -44,6 +44,7 @@ class DesiredRobot:
     digest: str
     suspended: bool = False
     template: str | None = None
+    labels: Mapping[str, str] = field(default_factory=dict)
 
 
 def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
@@ -54,6 +55,7 @@ def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
             request.digest,
             robot_id in fleet.suspended,
             request.scenario.capability.robot_template,
+            fleet.labels.get(robot_id, {}),
         )
         for robot_id, request in fleet.requests.items()
     }
@@ -86,6 +88,7 @@ class RobotRow:
     state: str
     restarts: int
     warnings: list[str] = field(default_factory=list)
+    labels: dict[str, str] = field(default_factory=dict)  # fleet.yaml's; none when not desired
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -94,6 +97,7 @@ class RobotRow:
             "reason": self.reason,
             "online": self.online,
             "scenario": self.scenario,
+            "labels": self.labels,
             "desired_digest": self.desired,
             "published_digest": self.published,
             "reported_digest": self.reported,
@@ -162,6 +166,7 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 state=status.state.value if status else AgentState.OFFLINE.value,
                 restarts=status.restarts if status else 0,
                 warnings=warnings,
+                labels=dict(want.labels) if want else {},
             )
         )
     rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), r.robot_id))

@@ -7,9 +7,11 @@ from rich.table import Table
 from rich.text import Text
 
 from configurator.cli.terminal import plain_text, safe
-from reconciler.verdicts import FleetStatus, Verdict, reconciler_lines, short_digest
+from reconciler.verdicts import FleetStatus, RobotRow, Verdict, reconciler_lines, short_digest
 
 COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
+# Shown after SCENARIO when some robot has labels: a fleet without labels keeps its table.
+LABELS = "LABELS"
 
 _STYLE = {
     Verdict.DEGRADED: "bold red",
@@ -21,19 +23,35 @@ _STYLE = {
 }
 
 
+def labels_text(labels: dict[str, str]) -> str:
+    """`key=value,key=value` in key order, or "-"."""
+    return ",".join(f"{key}={value}" for key, value in sorted(labels.items())) or "-"
+
+
+def columns(rows: list[RobotRow]) -> tuple[str, ...]:
+    if not any(r.labels for r in rows):
+        return COLUMNS
+    at = COLUMNS.index("SCENARIO") + 1
+    return (*COLUMNS[:at], LABELS, *COLUMNS[at:])
+
+
 def fleet_table(fleet: FleetStatus) -> Table:
     # No box and no edge padding: in plain text each row starts with its robot id.
     table = Table(box=None, pad_edge=False, show_edge=False, header_style="bold")
-    for name in COLUMNS:
-        table.add_column(name, no_wrap=name != "SCENARIO")
+    names = columns(fleet.rows)
+    for name in names:
+        table.add_column(name, no_wrap=name not in ("SCENARIO", LABELS))
     table.add_column("", overflow="fold")  # why a robot is not in sync: wraps on a terminal
     for r in fleet.rows:
         style = _STYLE[r.verdict]
+        # Labels are text from fleet.yaml: safe() escapes them and never reads them as markup.
+        labels = [safe(labels_text(r.labels))] if LABELS in names else []
         table.add_row(
             safe(r.robot_id),
             Text(r.verdict.value, style=style),
             Text("yes" if r.online else "no"),
             safe(r.scenario or "-"),
+            *labels,
             Text(short_digest(r.desired)),
             Text(short_digest(r.reported)),
             safe(r.state),

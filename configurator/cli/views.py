@@ -27,6 +27,7 @@ from configurator.tree import (
     logic_label,
     task_label,
 )
+from configurator.types import RolloutPolicy
 from configurator.workspace import check
 
 
@@ -130,15 +131,18 @@ def render(repo: Path, rev: str | None, robot_id: str) -> ExitCode:
     return ExitCode.OK
 
 
-def _fleet_at(repo: Path, rev: str | None, label: str) -> FleetRender:
+def _fleet_at(repo: Path, rev: str | None, label: str) -> tuple[FleetRender, RolloutPolicy | None]:
+    """The revision's rendered fleet and its rollout policy."""
     checked = check(repo, rev)
     if not checked.ok:
         sys.stderr.write(format_text(checked.errors))
         raise CliError(f"{label} revision {rev or '(work tree)'} is invalid")
     try:
-        return render_fleet(checked.repo)
+        rendered = render_fleet(checked.repo)
     except RenderError as exc:
         raise CliError(f"{label}: {exc}") from None
+    fleet = checked.repo.fleet
+    return rendered, fleet.model.rollout if fleet is not None else None
 
 
 @click.command("plan")
@@ -149,7 +153,7 @@ def _fleet_at(repo: Path, rev: str | None, label: str) -> FleetRender:
 def plan(repo: Path, base: str, head: str | None, fmt: str) -> ExitCode:
     """What would change per robot between two revisions (exit 1 when something would)."""
     # Both revisions are checked before either is reported: each names its own problems.
-    found: dict[str, FleetRender] = {}
+    found: dict[str, tuple[FleetRender, RolloutPolicy | None]] = {}
     problems: list[str] = []
     for label, rev in (("base", base), ("head", head)):
         try:
@@ -158,7 +162,9 @@ def plan(repo: Path, base: str, head: str | None, fmt: str) -> ExitCode:
             problems.append(exc.message)
     if problems:
         raise CliError("\nrobotconf: ".join(problems))
-    result = make_plan(found["base"], found["head"])
+    # The head's policy decides the waves: it is the one the reconciler will roll out by.
+    (base_fleet, _), (head_fleet, rollout) = found["base"], found["head"]
+    result = make_plan(base_fleet, head_fleet, rollout)
     if fmt == "markdown":
         sys.stdout.write(format_plan_markdown(result))
     elif fmt == "json":

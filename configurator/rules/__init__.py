@@ -8,6 +8,7 @@ from configurator.resolve import ResolvedCapability
 from configurator.rules.catalogue import check_catalogue
 from configurator.rules.configs import check_capability, check_fleet, check_scenario
 from configurator.rules.report import Reporter
+from configurator.rules.rollout import check_labels, check_rollout
 
 
 def check_repository(repo: Repository) -> list[Diagnostic]:
@@ -20,4 +21,7 @@ def check_repository(repo: Repository) -> list[Diagnostic]:
     for scenario in repo.scenarios.values():
         check_scenario(repo, scenario, capabilities, report)
     check_fleet(repo, report)
+    if repo.fleet is not None:
+        check_labels(repo.fleet, report)
+        check_rollout(repo.fleet, report)
     return report.found

@@ -56,6 +56,19 @@ def test_plan_between_two_commits_and_markdown(lab: Lab) -> None:
     assert "~ tb3-01" in text and "1 changed, 0 added, 0 removed" in text
 
 
+def test_plan_lists_the_wave_of_each_change_by_the_head_s_policy(lab: Lab) -> None:
+    lab.commit("base")
+    text = lab.read(FLEET)
+    lab.write(FLEET, text.replace("\n# rollout:\n", "\nrollout:\n").replace("\n#   ", "\n  "))
+    lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: 0.12")
+    done = lab.run("plan", "--base", "HEAD", "--format", "json")
+    assert done.returncode == 1, done.stderr
+    plan = json.loads(done.stdout)
+    assert plan["waves"] == ["canary", "half", "all"]
+    assert [(c["robot_id"], c["wave"]) for c in plan["changes"]] == [("tb3-01", "canary")]
+    assert "wave canary (1 of 3):\n  ~ tb3-01" in lab.run("plan", "--base", "HEAD").stdout
+
+
 def test_plan_suspended_robot_is_held(lab: Lab) -> None:
     lab.commit("base")
     lab.replace(FLEET, "name: Delivery bot}", "name: Delivery bot, suspended: true}")

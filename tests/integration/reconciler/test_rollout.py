@@ -7,6 +7,8 @@ from __future__ import annotations
 import itertools
 import json
 
+import yaml
+
 from configurator.launch import LaunchRequest
 from configurator.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
@@ -19,8 +21,10 @@ ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-06"]
 
 def with_policy(fleet: Fleet, policy: str) -> str:
     """Commits labels (tb3-01 is the canary) and a rollout policy; no request changes."""
-    fleet.lab.replace(FLEET, "name: Delivery bot}", "name: Delivery bot, labels: {ring: canary}}")
-    fleet.lab.write(FLEET, fleet.lab.read(FLEET) + policy)
+    robots = yaml.safe_load(fleet.lab.read(FLEET))["robots"]
+    for robot_id, assignment in robots.items():
+        assignment["labels"] = {"ring": "canary"} if robot_id == CANARY else {}
+    fleet.lab.write(FLEET, yaml.safe_dump({"robots": robots}, sort_keys=True) + policy)
     revision = fleet.lab.commit("roll out in waves")
     fleet.watch.wait_reconciler(lambda s: complete(s, revision), "the policy commit applied")
     return revision

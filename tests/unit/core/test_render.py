@@ -8,7 +8,6 @@ from tests.support.lab import Lab
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
 
 
-
 def test_request_shape_and_defaults(lab: Lab) -> None:
     request = lab.render()
     assert request.apiVersion == "robotconf/v1" and request.kind == "LaunchRequest"

@@ -1,0 +1,155 @@
+"""Fleet rules for labels and the rollout policy (RC502, RC7xx): every robot in a wave, every
+selector naming labels that exist."""
+
+from __future__ import annotations
+
+from configurator.repository import Entry
+from configurator.rules.report import Reporter
+from configurator.types import Fleet, RolloutPolicy, is_robot_id
+from configurator.waves import assign_waves, failure_budget
+
+# An error listing robots names this many, then how many more.
+_SHOWN = 5
+_ID_RULE = "use 1-64 letters, digits, '_', '.', '-', starting with a letter or digit"
+
+
+def check_labels(fleet: Entry[Fleet], report: Reporter) -> None:
+    """Label keys and values follow the robot-id rules: they name groups in selectors, status
+    and plan, and may become topic levels or file names later."""
+    for robot_id, assignment in fleet.model.robots.items():
+        for key, value in assignment.labels.items():
+            loc: list[str | int] = ["robots", robot_id, "labels", key]
+            if not is_robot_id(key):
+                report.add(
+                    fleet, loc, "RC502", f"label key {key!r} is not usable: {_ID_RULE}", key=True
+                )
+            if not is_robot_id(value):
+                report.add(
+                    fleet,
+                    loc,
+                    "RC502",
+                    f"label {key!r} has value {value!r}, not usable: {_ID_RULE}",
+                )
+
+
+def check_rollout(fleet: Entry[Fleet], report: Reporter) -> None:
+    policy = fleet.model.rollout
+    if policy is None:
+        return
+    percents_ok = _check_numbers(fleet, policy, report)
+    _check_wave_names(fleet, policy, report)
+    selectors_ok = _check_selectors(fleet, policy, report)
+    robots = {robot_id: a.labels for robot_id, a in fleet.model.robots.items()}
+    placed = assign_waves(robots, policy.waves)
+    left = sorted(set(robots) - set(placed))
+    if left:
+        shown = ", ".join(left[:_SHOWN]) + (
+            f", ... ({len(left)} in all)" if len(left) > _SHOWN else ""
+        )
+        report.add(
+            fleet,
+            ["rollout", "waves"],
+            "RC705",
+            f"no wave takes robot(s) {shown}, so no commit would ever reach them; add a last wave "
+            "without selector, e.g. {name: all}",
+            key=True,
+        )
+    if not (percents_ok and selectors_ok) or not robots:
+        return  # a wrong selector or percent already says why a wave takes what it takes
+    taken = set(placed.values())
+    for index, wave in enumerate(policy.waves):
+        if index not in taken:
+            report.add(
+                fleet,
+                ["rollout", "waves", index, "name"],
+                "RC706",
+                f"wave '{wave.name}' takes no robot: the waves before it take every robot it "
+                "selects, or none has its labels",
+            )
+
+
+def _check_numbers(fleet: Entry[Fleet], policy: RolloutPolicy, report: Reporter) -> bool:
+    """The policy's numbers in range; False when a wave's percent is not."""
+    if policy.healthy_after < 0:
+        report.add(
+            fleet,
+            ["rollout", "healthy_after"],
+            "RC702",
+            f"healthy_after is {policy.healthy_after:g}: seconds, 0 or more",
+        )
+    if policy.wave_timeout <= 0:
+        report.add(
+            fleet,
+            ["rollout", "wave_timeout"],
+            "RC702",
+            f"wave_timeout is {policy.wave_timeout:g}: seconds, more than 0",
+        )
+    if failure_budget(policy.max_failures, 0) is None:
+        report.add(
+            fleet,
+            ["rollout", "max_failures"],
+            "RC702",
+            f"max_failures is {policy.max_failures!r}: a count of robots (0 or more) or a share "
+            "of a wave's robots like '10%' (0% to 100%)",
+        )
+    percents_ok = True
+    for index, wave in enumerate(policy.waves):
+        if wave.percent is not None and not 1 <= wave.percent <= 100:
+            percents_ok = False
+            report.add(
+                fleet,
+                ["rollout", "waves", index, "percent"],
+                "RC702",
+                f"wave '{wave.name}' has percent {wave.percent}: 1 to 100",
+            )
+    return percents_ok
+
+
+def _check_wave_names(fleet: Entry[Fleet], policy: RolloutPolicy, report: Reporter) -> None:
+    first: dict[str, int] = {}
+    for index, wave in enumerate(policy.waves):
+        loc: list[str | int] = ["rollout", "waves", index, "name"]
+        if not is_robot_id(wave.name):
+            report.add(fleet, loc, "RC701", f"wave name {wave.name!r} is not usable: {_ID_RULE}")
+        elif wave.name in first:
+            line, _ = fleet.doc.locate(["rollout", "waves", first[wave.name], "name"])
+            report.add(
+                fleet, loc, "RC701", f"wave name '{wave.name}' is used twice (first at line {line})"
+            )
+        else:
+            first[wave.name] = index
+
+
+def _check_selectors(fleet: Entry[Fleet], policy: RolloutPolicy, report: Reporter) -> bool:
+    """Each selector names a label some robot carries, with a value some robot has: a typo
+    must not quietly empty a wave (or move its robots to a later one)."""
+    known: dict[str, set[str]] = {}
+    for assignment in fleet.model.robots.values():
+        for key, value in assignment.labels.items():
+            known.setdefault(key, set()).add(value)
+    ok = True
+    for index, wave in enumerate(policy.waves):
+        for key, value in wave.selector.items():
+            loc: list[str | int] = ["rollout", "waves", index, "selector", key]
+            if key not in known:
+                ok = False
+                report.unknown(
+                    fleet,
+                    loc,
+                    "RC703",
+                    f"wave '{wave.name}' selects label '{key}', which no robot has",
+                    key,
+                    known,
+                    key=True,
+                )
+            elif value not in known[key]:
+                ok = False
+                report.unknown(
+                    fleet,
+                    loc,
+                    "RC704",
+                    f"wave '{wave.name}' selects {key}: {value}, and no robot has that value",
+                    value,
+                    known[key],
+                )
+    return ok

@@ -1,0 +1,139 @@
+"""`plan` with a rollout policy: which wave each changed robot falls in, in every format."""
+
+from __future__ import annotations
+
+import pytest
+
+from configurator.plan import Plan, format_plan_markdown, format_plan_text, make_plan, plan_as_json
+from configurator.render import FleetRender, render_fleet
+from configurator.types import RolloutPolicy
+from tests.support.lab import Lab
+
+FLEET = "configs/fleet.yaml"
+DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
+GUIDE = "configs/scenarios/guide-gazebo.yaml"
+
+
+def fleet(lab: Lab) -> tuple[FleetRender, RolloutPolicy | None]:
+    checked = lab.check()
+    assert checked.ok, checked.errors
+    assert checked.repo.fleet is not None
+    return render_fleet(checked.repo), checked.repo.fleet.model.rollout
+
+
+def enable_example_rollout(lab: Lab) -> None:
+    text = lab.read(FLEET)
+    lab.write(FLEET, text.replace("\n# rollout:\n", "\nrollout:\n").replace("\n#   ", "\n  "))
+
+
+def edit(lab: Lab) -> None:
+    """Four robots change, one is added, one removed: every kind of change, every wave."""
+    lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: 0.12")  # tb3-01
+    lab.replace(GUIDE, "max_linear_speed: 0.18", "max_linear_speed: 0.19")  # tb3-02
+    lab.replace(FLEET, "name: Noetic patrol", "name: Old patrol")  # tb3-05
+    lab.replace(FLEET, "  tb3-05:", "  tb3-09: {scenario: guide-gazebo}\n  tb3-05:")
+    lab.replace(FLEET, "  tb3-03:", "  # tb3-03:")
+
+
+@pytest.fixture
+def plan(lab: Lab) -> Plan:
+    base, _ = fleet(lab)
+    enable_example_rollout(lab)
+    edit(lab)
+    head, rollout = fleet(lab)
+    return make_plan(base, head, rollout)
+
+
+def test_changes_come_in_wave_order_with_their_wave(plan: Plan) -> None:
+    # canary: tb3-01 (tb3-03, the other canary, is removed); half of the five robots is three,
+    # so half takes tb3-02 and tb3-04 (unchanged); all takes the rest; the removed are in none.
+    assert plan.waves == ["canary", "half", "all"]
+    assert [(c.robot_id, c.kind, c.wave) for c in plan.changes] == [
+        ("tb3-01", "changed", "canary"),
+        ("tb3-02", "changed", "half"),
+        ("tb3-05", "changed", "all"),
+        ("tb3-09", "added", "all"),
+        ("tb3-03", "removed", None),
+    ]
+
+
+def test_text_groups_the_changes_under_their_waves(plan: Plan) -> None:
+    lines = format_plan_text(plan).splitlines()
+    assert lines[0].endswith(": 3 changed, 1 added, 1 removed, 1 unchanged")
+    assert lines[1:] == [
+        "rollout in waves: canary, half, all",
+        "wave canary (1 of 3):",
+        "  ~ tb3-01  delivery-gazebo: scenario.logic_settings.follow_with_poses.move_speed",
+        "wave half (2 of 3):",
+        "  ~ tb3-02  guide-gazebo: scenario.robot_settings.max_linear_speed",
+        "wave all (3 of 3):",
+        "  ~ tb3-05  patrol-noetic-gazebo: robot_name",
+        "  + tb3-09  guide-gazebo",
+        "in no wave (removed):",
+        "  - tb3-03  (was delivery-bluetooth-gazebo; its brain will be stopped)",
+    ]
+
+
+def test_markdown_has_a_wave_column(plan: Plan) -> None:
+    text = format_plan_markdown(plan)
+    assert "Rollout in waves: canary → half → all." in text
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    assert rows[0] == "| wave | robot | change | scenario | changed fields |"
+    assert [row.split(" | ")[:2] for row in rows[2:]] == [
+        ["| canary", "`tb3-01`"],
+        ["| half", "`tb3-02`"],
+        ["| all", "`tb3-05`"],
+        ["| all", "`tb3-09`"],
+        ["| —", "`tb3-03`"],
+    ]
+
+
+def test_json_names_the_waves_and_each_change_s_wave(plan: Plan) -> None:
+    found = plan_as_json(plan)
+    assert found["waves"] == ["canary", "half", "all"]
+    assert [(c["robot_id"], c["wave"]) for c in found["changes"]] == [
+        ("tb3-01", "canary"),
+        ("tb3-02", "half"),
+        ("tb3-05", "all"),
+        ("tb3-09", "all"),
+        ("tb3-03", None),
+    ]
+
+
+def test_without_a_policy_the_plan_is_as_before(lab: Lab) -> None:
+    base, _ = fleet(lab)
+    edit(lab)
+    head, rollout = fleet(lab)
+    assert rollout is None
+    plan = make_plan(base, head, rollout)
+    assert plan.waves is None and all(c.wave is None for c in plan.changes)
+    assert [c.robot_id for c in plan.changes] == ["tb3-01", "tb3-02", "tb3-03", "tb3-05", "tb3-09"]
+    text = format_plan_text(plan)
+    assert "wave" not in text and "\n  ~ tb3-01  delivery-gazebo: " in text
+    markdown = format_plan_markdown(plan)
+    assert "wave" not in markdown.lower()
+    assert "| robot | change | scenario | changed fields |" in markdown
+    found = plan_as_json(plan)
+    assert list(found) == ["base", "head", "unchanged", "changes"]
+    assert list(found["changes"][0]) == [
+        "robot_id",
+        "change",
+        "scenario_before",
+        "scenario_after",
+        "fields",
+    ]
+
+
+def test_wave_names_from_the_file_are_printed_safely(lab: Lab) -> None:
+    base, _ = fleet(lab)
+    enable_example_rollout(lab)
+    edit(lab)
+    head, rollout = fleet(lab)
+    assert rollout is not None
+    # Validation refuses such a name (RC701); the formats must not trust that it did.
+    rollout.waves[0].name = "can*ary\u202e|x"
+    plan = make_plan(base, head, rollout)
+    text = format_plan_text(plan)
+    assert "wave can*ary\\u202e|x (1 of 3):" in text and "\u202e" not in text
+    markdown = format_plan_markdown(plan)
+    assert "| can\\*ary\\\\u202e\\|x | `tb3-01` |" in markdown and "\u202e" not in markdown
