@@ -85,6 +85,7 @@ class RobotRow:
     reported: str | None
     state: str
     restarts: int
+    reloads: int = 0  # of the running brain, in place: each one a request applied unrestarted
     warnings: list[str] = field(default_factory=list)
 
     def as_json(self) -> dict[str, Any]:
@@ -99,6 +100,7 @@ class RobotRow:
             "reported_digest": self.reported,
             "state": self.state,
             "restarts": self.restarts,
+            "reloads": self.reloads,
             "warnings": self.warnings,
         }
 
@@ -161,6 +163,7 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 reported=status.digest if status else None,
                 state=status.state.value if status else AgentState.OFFLINE.value,
                 restarts=status.restarts if status else 0,
+                reloads=status.reloads if status else 0,
                 warnings=warnings,
             )
         )
