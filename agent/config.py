@@ -73,6 +73,29 @@ class RestartConfig(StrictModel):
         return self
 
 
+# Signals whose default action a brain can replace with a handler, and that mean nothing else
+# to the agent (SIGTERM stops, SIGKILL and SIGSTOP cannot be caught).
+RELOAD_SIGNALS = ("SIGHUP", "SIGUSR1", "SIGUSR2")
+
+
+class ReloadConfig(StrictModel):
+    """How the brain is told to re-read its request when only reloadable parts changed."""
+
+    signal: Literal["SIGHUP", "SIGUSR1", "SIGUSR2"]
+
+    @field_validator("signal", mode="before")
+    @classmethod
+    def _catchable(cls, value: Any) -> Any:
+        if value not in RELOAD_SIGNALS:
+            near = did_you_mean(str(value).upper(), RELOAD_SIGNALS)
+            raise ValueError(
+                f"{value!r} is not a signal a brain catches to reload; use one of "
+                f"{', '.join(RELOAD_SIGNALS)}, e.g. reload: {{signal: SIGHUP}}"
+                + (near if "did you mean" in near else "")
+            )
+        return value
+
+
 class TlsConfig(StrictModel):
     ca_file: Path | None = Field(None, strict=False)
     cert_file: Path | None = Field(None, strict=False)
@@ -96,6 +119,8 @@ class AgentConfig(StrictModel):
     restart: RestartConfig = Field(default_factory=lambda: RestartConfig())
     keepalive: int = Field(default=30, ge=5, le=3600)
     log: LogConfig = Field(default_factory=lambda: LogConfig())
+    # Absent: every new request restarts the brain.
+    reload: ReloadConfig | None = None
     username: str | None = None
     password_file: Path | None = Field(None, strict=False)
     tls: TlsConfig | None = None
@@ -129,6 +154,16 @@ class AgentConfig(StrictModel):
         if not value or not value[0].strip():
             raise ValueError(
                 f"command is empty; give the brain service's argument list, e.g. {COMMAND_EXAMPLE}"
+            )
+        return value
+
+    @field_validator("reload", mode="before")
+    @classmethod
+    def _reload_is_a_mapping(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            name = value if value in RELOAD_SIGNALS else "SIGHUP"
+            raise ValueError(
+                f"reload is a mapping of its settings, e.g. reload: {{signal: {name}}}"
             )
         return value
 
@@ -213,6 +248,7 @@ _SECTIONS: dict[Loc, type[BaseModel]] = {
     ("restart",): RestartConfig,
     ("tls",): TlsConfig,
     ("log",): LogConfig,
+    ("reload",): ReloadConfig,
 }
 
 _HINTS: dict[str, str] = {
@@ -220,6 +256,7 @@ _HINTS: dict[str, str] = {
     "id": "the robot id, e.g. tb3-01",
     "command": f"e.g. command: {COMMAND_EXAMPLE}",
     "workdir": "e.g. workdir: /var/lib/robotconf/tb3-01",
+    "signal": "e.g. reload: {signal: SIGHUP}",
 }
 
 

@@ -34,7 +34,16 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
-from agent.supervisor import Effect, Kill, Policy, Spawn, Supervisor, Terminate, describe_exit
+from agent.supervisor import (
+    Effect,
+    Kill,
+    Policy,
+    Reload,
+    Spawn,
+    Supervisor,
+    Terminate,
+    describe_exit,
+)
 from agent.workdir import (
     ISSUED_FILE,
     LOG_FILE,
@@ -70,6 +79,7 @@ def policy_of(config: AgentConfig) -> Policy:
         reset_after=config.restart.reset_after,
         startsecs=config.startsecs,
         stop_timeout=config.stop_timeout,
+        reload_signal=None if config.reload is None else signal.Signals[config.reload.signal],
     )
 
 
@@ -342,21 +352,53 @@ class Agent:
             elif isinstance(effect, Kill):
                 log.warning("killing brain pid %d (SIGKILL to its process group)", effect.pid)
                 process.signal_group(effect.pid, signal.SIGKILL)
+            elif isinstance(effect, Reload):
+                self._reload(effect)
+
+    def _install(self, request: LaunchRequest) -> None:
+        """Puts `request` in place of the request file, atomically; raises OSError."""
+        path = self.workdir / REQUEST_FILE
+        digest, payload = self._accepted_payload
+        staged = self.workdir / STAGED_FILE
+        if digest == request.digest and staged.exists():
+            os.replace(staged, path)  # a rename needs no space: staged before the stop
+            return
+        if digest != request.digest:
+            payload = request.payload()
+        # Not durable: after a power cut the retained request arrives again.
+        write_atomic(path, payload, mode=0o600, durable=False)
+
+    def _reload(self, effect: Reload) -> None:
+        """The new request over the old one, then the signal: the brain re-reads a whole
+        file, never a half-written one, and finds the new one when it is told to look."""
+        request = effect.request
+        try:
+            self._install(request)
+        except OSError as exc:
+            problem = (
+                f"cannot write the new request to {exc.filename or REQUEST_FILE}: "
+                f"{_os_error(exc)}; the running brain is left as it is"
+            )
+            log.error("%s", problem)
+            self._apply(self.supervisor.reload_failed(request, problem, time.monotonic()))
+            return
+        name = effect.signal.name
+        log.info("reloading brain pid %d with %s (%s)", effect.pid, request.digest, name)
+        self.brain_log.note(
+            f"reloading pid {effect.pid} with {request.digest} ({request.revision}): {name}"
+        )
+        process.signal_group(effect.pid, effect.signal)
+        try:
+            process.write_pidfile(self.workdir / PID_FILE, effect.pid, request.digest)
+        except OSError as exc:
+            log.warning("cannot write the pidfile: %s", exc)
 
     def _spawn(self, request: LaunchRequest) -> None:
         now = time.monotonic()
         path = self.workdir / REQUEST_FILE
         argv = process.substitute(self.config.command, path)
         try:
-            digest, payload = self._accepted_payload
-            staged = self.workdir / STAGED_FILE
-            if digest == request.digest and staged.exists():
-                os.replace(staged, path)  # a rename needs no space: staged before the stop
-            else:
-                if digest != request.digest:
-                    payload = request.payload()
-                # Not durable: after a power cut the retained request arrives again.
-                write_atomic(path, payload, mode=0o600, durable=False)
+            self._install(request)
             log_fd = self.brain_log.open_for_child()
         except OSError as exc:
             problem = f"cannot write {exc.filename}: {exc.strerror}"

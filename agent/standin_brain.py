@@ -1,6 +1,6 @@
 """A stand-in brain service for demos and tests: `python -m agent.standin_brain REQUEST.json`.
 
-It loads nothing real: it prints what a brain would load, then runs until signalled.
+It loads nothing real: it prints what a brain would load, runs until signalled, reloads on SIGHUP.
 """
 
 from __future__ import annotations
@@ -55,26 +55,61 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _read(path: Path) -> LaunchRequest:
+    """The request in `path`; raises OSError or pydantic's ValidationError."""
+    from configurator.launch import LaunchRequest
+
+    return LaunchRequest.model_validate_json(path.read_bytes())
+
+
+def _reload(path: Path, running: LaunchRequest) -> LaunchRequest:
+    """What a brain that supports reloading does on SIGHUP: read the request again and apply
+    what changed in place. One that cannot read it keeps what it runs."""
+    from pydantic import ValidationError
+
+    try:
+        request = _read(path)
+    except (OSError, ValidationError) as exc:
+        print(
+            f"stand-in brain: cannot reload {path} ({type(exc).__name__}); keeping {running.digest}"
+        )
+        return running
+    print(f"stand-in brain: SIGHUP received, reloaded {request.digest} at {request.revision}")
+    if request.scenario.capability != running.scenario.capability:
+        # A real brain would have to restart for this; the agent restarts it then, not reloads.
+        print("stand-in brain: the capability changed too; only a restart applies it")
+    if request.scenario.goals:
+        print("goals: " + ", ".join(goal.task for goal in request.scenario.goals))
+    return request
+
+
 def main(argv: list[str]) -> int:
     stop = threading.Event()
+    wake = threading.Event()
     received: list[str] = []
+    reloads: list[int] = []
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         received.append(signal.Signals(signum).name)
         stop.set()
+        wake.set()
 
-    # Before the slow imports: a brain stopped while it starts should still stop cleanly.
+    def on_reload(signum: int, frame: FrameType | None) -> None:
+        reloads.append(signum)
+        wake.set()
+
+    # Before the slow imports: a brain stopped while it starts should still stop cleanly, and
+    # one told to reload while it starts should not die of SIGHUP's default action.
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGHUP, on_reload)
     args = _parser().parse_args(argv)
     if args.ignore_sigterm:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
     from pydantic import ValidationError
 
-    from configurator.launch import LaunchRequest
-
     try:
-        request = LaunchRequest.model_validate_json(args.request.read_bytes())
+        request = _read(args.request)
     except OSError as exc:
         print(f"stand-in brain: cannot read {args.request}: {exc.strerror}", file=sys.stderr)
         return 2
@@ -97,11 +132,18 @@ def main(argv: list[str]) -> int:
 
     deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
     while not stop.is_set():
+        if reloads:
+            reloads.clear()  # several signals before it looked: one reading is enough
+            with contextlib.suppress(OSError):  # the log may be gone
+                request = _reload(args.request, request)
+                sys.stdout.flush()
+            continue
         remaining = None if deadline is None else deadline - time.monotonic()
         if remaining is not None and remaining <= 0:
             print(f"stand-in brain: exiting with code {args.exit_code} as asked", flush=True)
             return int(args.exit_code)
-        stop.wait(remaining if remaining is not None else 3600)
+        wake.wait(remaining if remaining is not None else 3600)
+        wake.clear()
     # The log may be gone; stopping matters more than saying so.
     with contextlib.suppress(OSError):
         print(f"stand-in brain: {received[0]} received, stopping", flush=True)

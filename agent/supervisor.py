@@ -35,7 +35,17 @@ class Kill:
     pid: int
 
 
-Effect = Spawn | Terminate | Kill
+@dataclass(frozen=True)
+class Reload:
+    """Write the request over the running brain's and send `signal` to its process group;
+    answer `reload_failed` when the request cannot be written."""
+
+    pid: int
+    signal: signal.Signals
+    request: LaunchRequest
+
+
+Effect = Spawn | Terminate | Kill | Reload
 
 
 @dataclass(frozen=True)
@@ -47,6 +57,7 @@ class Policy:
     reset_after: float = 60.0
     startsecs: float = 1.0
     stop_timeout: float = 10.0
+    reload_signal: signal.Signals | None = None  # None: every new request restarts
 
     def backoff(self, streak: int) -> float:
         """Delay before restart number `streak + 1` of a run of failures."""
@@ -84,6 +95,8 @@ class Supervisor:
         self.pid: int | None = None
         self.exit_code: int | None = None
         self.restarts = 0  # restarts of the current request, shown in the status
+        self.reloads = 0  # reloads of the running brain since it started for a new capability
+        self._before_reload: _Assignment | None = None  # what a failed reload goes back to
         self.streak = 0  # failures in a row, drives the backoff and `failed`
         self.deadline: float | None = None  # monotonic time at which `tick` has work
         self.message = "waiting for a launch request"
@@ -122,6 +135,7 @@ class Supervisor:
             pid=self.pid,
             exit_code=self.exit_code,
             restarts=self.restarts,
+            reloads=self.reloads,
             since=self._since,
             message=message,
             warnings=list(brain.warnings) if brain else [],
@@ -136,14 +150,31 @@ class Supervisor:
             return []
         if self.desired is not None and self.desired.request.digest == request.digest:
             return []  # same content: a retained redelivery or a commit that changed nothing
+        if self._reloadable(request):
+            return self._reload(request, warnings)
         self.desired = _Assignment(request, list(warnings))
         self.restarts = 0
+        self.reloads = 0
         self.streak = 0
         if self.pid is not None:
             if self.phase == AgentState.STOPPING:
                 return []  # the exit will start the newest desired request
             return self._begin_stop(now, f"stopping for new request {request.digest}")
         return self._spawn(now)
+
+    def reload_failed(self, request: LaunchRequest, error: str, now: float) -> list[Effect]:
+        """The reloaded request could not be written: the brain was not signalled and runs
+        what it ran, and that is what is reported (with the reason), as when a request
+        cannot be staged for a restart. The same request arriving again is tried again."""
+        before = self._before_reload
+        brain = self.brain
+        if before is not None and brain is not None and brain.request is request:
+            self._before_reload = None
+            self.brain = self.desired = before
+            self.reloads -= 1
+            self.message = f"running (pid {self.pid})"
+        self._set_rejection(error)
+        return []
 
     def reject(self, reason: str, now: float) -> list[Effect]:
         """A request was refused; the brain, if any, is left as it is."""
@@ -162,6 +193,7 @@ class Supervisor:
         self.brain = None
         self.exit_code = None
         self.restarts = 0
+        self.reloads = 0
         self._enter(AgentState.IDLE, "no launch request for this robot")
         return []
 
@@ -200,6 +232,7 @@ class Supervisor:
                 return self._spawn(now)
             self.brain = None
             self.restarts = 0
+            self.reloads = 0
             self._enter(AgentState.IDLE, "no launch request for this robot")
             return []
         if now - self._started_at >= self.policy.reset_after:
@@ -253,6 +286,35 @@ class Supervisor:
         return []
 
     # ------------------------------------------------------------ internals
+
+    def _reloadable(self, request: LaunchRequest) -> bool:
+        """A reload instead of a restart: asked for in agent.yaml, only the reloadable part
+        changed (both requests carry a restart digest, and it is the same), and the brain is
+        RUNNING. Not while STARTING: it may not yet have set up its handler, and the default
+        action of SIGHUP and SIGUSR1/2 is to terminate; a restart is the safe answer there.
+        In BACKOFF, EXITED or FAILED no brain runs, and STOPPING ends in a start anyway."""
+        brain = self.brain
+        return (
+            self.policy.reload_signal is not None
+            and self.phase == AgentState.RUNNING
+            and self.pid is not None
+            and brain is not None
+            and brain is self.desired
+            and brain.request.restart_digest is not None
+            and brain.request.restart_digest == request.restart_digest
+        )
+
+    def _reload(self, request: LaunchRequest, warnings: list[str]) -> list[Effect]:
+        assert self.pid is not None and self.brain is not None
+        assert self.policy.reload_signal is not None
+        self._before_reload = self.brain
+        self.desired = self.brain = _Assignment(request, list(warnings))
+        self.reloads += 1
+        # The state stays `running` (and so does `since`): the same process runs on.
+        self.message = (
+            f"reloaded {request.digest} (pid {self.pid}, {self.policy.reload_signal.name})"
+        )
+        return [Reload(self.pid, self.policy.reload_signal, request)]
 
     def _spawn(self, now: float) -> list[Effect]:
         assert self.desired is not None

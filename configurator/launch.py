@@ -17,8 +17,11 @@ API_VERSION = "robotconf/v1"
 DIGEST_PATTERN = r"^sha256:[0-9a-f]{64}$"
 # What the digest leaves out: where the request was rendered from (a new commit with the same
 # content restarts no brain), the digest itself and the signing fields. Every other field of
-# a request, including one added later, is content.
-DIGEST_EXCLUDED = frozenset({"revision", "digest", "issued_at", "signature"})
+# a request, including one added later, is content. `restart_digest` is left out too: it is
+# derived from the capability, which the digest covers already, so it adds nothing; and left
+# out, a request keeps the digest it had before the field existed (an older reconciler's
+# request and a newer one's for the same content are the same: upgrading restarts no brain).
+DIGEST_EXCLUDED = frozenset({"revision", "digest", "restart_digest", "issued_at", "signature"})
 # A well-formed placeholder while a request is built; `with_digest` replaces it.
 _PENDING_DIGEST = "sha256:" + "0" * 64
 
@@ -59,8 +62,10 @@ class _Published(StrictModel):
     signature: str | None = Field(None, description="base64 Ed25519 over the signed fields")
 
     def wire(self, *, signature: bool = True) -> dict[str, Any]:
-        """The JSON object published (signing fields only when set)."""
-        unset = {k for k in ("issued_at", "signature") if getattr(self, k) is None}
+        """The JSON object published (signing fields and `restart_digest` only when set)."""
+        # A Stop has no `restart_digest`: only fields this model has and that are None.
+        optional = ("issued_at", "signature", "restart_digest")
+        unset = {k for k in optional if k in type(self).model_fields and getattr(self, k) is None}
         if not signature:
             unset.add("signature")
         return self.model_dump(mode="json", exclude=unset)
@@ -79,6 +84,13 @@ class LaunchRequest(_Published):
     robot_name: str
     revision: str = Field(description="the git commit it was rendered from")
     digest: str = Field(pattern=DIGEST_PATTERN, description="sha256 of the content")
+    # Optional: an older reconciler does not send it, and its requests always restart.
+    restart_digest: str | None = Field(
+        None,
+        pattern=DIGEST_PATTERN,
+        description="sha256 of what only a restart applies (scenario.capability); when only "
+        "the rest changes, an agent configured to may reload the running brain instead",
+    )
     scenario: LaunchScenario
 
     def content(self) -> dict[str, Any]:
@@ -86,7 +98,10 @@ class LaunchRequest(_Published):
         return digest_content(self)
 
     def digest_matches(self) -> bool:
-        """The agent's check: the digest is the one `with_digest` gives this content."""
+        """The agent's check: the digests are the ones `with_digest` gives this content (a
+        request without `restart_digest` passes on its digest alone)."""
+        if self.restart_digest is not None and self.restart_digest != restart_digest_of(self):
+            return False
         return self.digest == content_digest(digest_content(self))
 
 
@@ -118,18 +133,35 @@ def digest_content(request: LaunchRequest) -> dict[str, Any]:
     return request.model_dump(mode="json", exclude=set(DIGEST_EXCLUDED))
 
 
+def restart_content(request: LaunchRequest) -> dict[str, Any]:
+    """The one definition of what only a restart applies: the capability (platform, mapping
+    scheme, template, actions, logics, mappings). The rest (goals, knowledge, settings, the
+    robot's name) a brain that supports it may reload in place."""
+    return request.scenario.capability.model_dump(mode="json")
+
+
+def restart_digest_of(request: LaunchRequest) -> str:
+    return content_digest(restart_content(request))
+
+
 Request = TypeVar("Request", bound=LaunchRequest)
 
 
 def with_digest(request: Request) -> Request:
-    """The request with the digest of its content: how rendering seals every request."""
-    return request.model_copy(update={"digest": content_digest(digest_content(request))})
+    """The request with the digests of its content: how rendering seals every request."""
+    return request.model_copy(
+        update={
+            "digest": content_digest(digest_content(request)),
+            "restart_digest": restart_digest_of(request),
+        }
+    )
 
 
 def make_launch_request(
     robot_id: str, robot_name: str, revision: str, scenario: LaunchScenario
 ) -> LaunchRequest:
-    """Build a request whose digest covers everything but the revision."""
+    """Build a request whose digest covers everything but the revision, and whose
+    restart_digest covers its capability."""
     draft = LaunchRequest(
         robot_id=robot_id,
         robot_name=robot_name,

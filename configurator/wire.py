@@ -190,6 +190,8 @@ class AgentStatus(_Message):
     pid: int | None = None
     exit_code: int | None = None
     restarts: int = 0
+    # Times the running brain was signalled to reload a request instead of being restarted.
+    reloads: int = 0
     since: float = Field(default_factory=now, description="unix time of the last transition")
     message: str = ""
     warnings: list[str] = Field(default_factory=list)

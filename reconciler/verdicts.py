@@ -87,6 +87,7 @@ class RobotRow:
     reported: str | None
     state: str
     restarts: int
+    reloads: int = 0  # of the running brain, in place: each one a request applied unrestarted
     warnings: list[str] = field(default_factory=list)
     labels: dict[str, str] = field(default_factory=dict)  # fleet.yaml's; none when not desired
 
@@ -103,6 +104,7 @@ class RobotRow:
             "reported_digest": self.reported,
             "state": self.state,
             "restarts": self.restarts,
+            "reloads": self.reloads,
             "warnings": self.warnings,
         }
 
@@ -165,6 +167,7 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 reported=status.digest if status else None,
                 state=status.state.value if status else AgentState.OFFLINE.value,
                 restarts=status.restarts if status else 0,
+                reloads=status.reloads if status else 0,
                 warnings=warnings,
                 labels=dict(want.labels) if want else {},
             )

@@ -45,8 +45,14 @@ def make_request(
     revision: str = "rev-1",
     platform: str = "ROS2",
     template: str | None = "turtlebot3-camera",
+    logic: str = "follow_with_poses",
+    knowledge: dict[str, Any] | None = None,
 ) -> LaunchRequest:
-    """A valid request; a different `variant` gives a different digest, `revision` does not."""
+    """A valid request; a different `variant` gives a different digest, `revision` does not.
+
+    `variant` (a setting) and `knowledge` change the digest but not the restart digest (a
+    reload may apply them); another `logic` (or platform, template) changes the capability,
+    and so the restart digest."""
     capability = LaunchCapability(
         name="follow-camera",
         platform=platform,
@@ -54,7 +60,7 @@ def make_request(
         mapping_scheme="gazebo",
         tasks=["Delivery"],
         actions=["Follow"],
-        logics={"Follow": "follow_with_poses"},
+        logics={"Follow": logic},
         mappings={
             "cmd_vel": MappingBinding(kind="topic", name="/cmd_vel", type="geometry_msgs/msg/Twist")
         },
@@ -66,7 +72,7 @@ def make_request(
         environment_type="Gazebo",
         robot_settings={"max_linear_speed": 0.1 + variant / 100},
         logic_settings={},
-        environment_knowledge={},
+        environment_knowledge=knowledge or {},
         goals=[],
     )
     return make_launch_request(robot_id, "Delivery bot", revision, scenario)

@@ -63,3 +63,31 @@ def test_crash_on_demand_for_demos(tmp_path: Path) -> None:
         timeout=TIMEOUT,
     )
     assert result.returncode == 7
+
+
+def test_sighup_rereads_the_request_and_a_broken_one_keeps_the_old(tmp_path: Path) -> None:
+    request_file = tmp_path / "launch-request.json"
+    first, second = make_request(), make_request(variant=1, revision="rev-2")
+    request_file.write_bytes(first.payload())
+    proc = subprocess.Popen([*STANDIN, str(request_file)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        for _ in range(6):  # what it loaded: its handlers are in place by now
+            proc.stdout.readline()
+        request_file.write_bytes(second.payload())
+        proc.send_signal(signal.SIGHUP)
+        reloaded = proc.stdout.readline().rstrip("\n")
+        request_file.write_bytes(b"{not json")
+        proc.send_signal(signal.SIGHUP)
+        kept = proc.stdout.readline().rstrip("\n")
+        assert proc.poll() is None  # neither reload ended it
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert reloaded == f"stand-in brain: SIGHUP received, reloaded {second.digest} at rev-2"
+    assert kept.startswith(f"stand-in brain: cannot reload {request_file}")
+    assert kept.endswith(f"keeping {second.digest}")
+    assert "SIGTERM received, stopping" in rest and proc.returncode == 0

@@ -53,6 +53,44 @@ def test_defaults(tmp_path: Path) -> None:
     assert config.stop_timeout == 10 and config.startsecs == 1
     assert config.restart.backoff_max == 60 and config.log.backups == 3
     assert config.username is None and config.tls is None
+    assert config.reload is None  # no reloads: every new request restarts the brain
+
+
+@pytest.mark.parametrize("name", ["SIGHUP", "SIGUSR1", "SIGUSR2"])
+def test_reload_names_a_signal_the_brain_catches(tmp_path: Path, name: str) -> None:
+    config = load_config(write(tmp_path, GOOD + f"reload: {{signal: {name}}}\n"))
+    assert config.reload is not None and config.reload.signal == name
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        (
+            "{signal: SIGTERM}",
+            "8: reload.signal: 'SIGTERM' is not a signal a brain catches to reload; use one of "
+            "SIGHUP, SIGUSR1, SIGUSR2, e.g. reload: {signal: SIGHUP}",
+        ),
+        ("{signal: SIGKILL}", "8: reload.signal: 'SIGKILL' is not a signal a brain catches"),
+        ("{signal: hup}", "8: reload.signal: 'hup' is not a signal"),
+        ("{signal: 1}", "8: reload.signal: 1 is not a signal a brain catches to reload"),
+        ("{}", "8: 'reload.signal' is required; e.g. reload: {signal: SIGHUP}"),
+        ("{signal: SIGHUP, after: 3}", "8: unknown key 'reload.after'; allowed here: signal"),
+        ("SIGHUP", "8: reload is a mapping of its settings, e.g. reload: {signal: SIGHUP}"),
+    ],
+)
+def test_a_bad_reload_is_one_located_line_saying_what_would_be_right(
+    tmp_path: Path, value: str, expected: str
+) -> None:
+    found = problems(tmp_path, GOOD + f"reload: {value}\n")
+    assert len(found) == 1 and found[0].startswith(expected), found
+
+
+def test_a_near_miss_of_a_reload_signal_is_named(tmp_path: Path) -> None:
+    found = problems(tmp_path, GOOD + "reload:\n  signal: sighup\n")
+    assert found == [
+        "9: reload.signal: 'sighup' is not a signal a brain catches to reload; use one of "
+        "SIGHUP, SIGUSR1, SIGUSR2, e.g. reload: {signal: SIGHUP}; did you mean 'SIGHUP'?"
+    ]
 
 
 def test_unknown_keys_are_errors_with_their_line_and_a_suggestion(tmp_path: Path) -> None:

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import signal
 from typing import Any
 
-from agent.supervisor import Kill, Policy, Spawn, Supervisor, Terminate
+from agent.supervisor import Kill, Policy, Reload, Spawn, Supervisor, Terminate
 from configurator.wire import AgentState
 from tests.support.agents import make_request
 
 A = make_request(variant=0)
-B = make_request(variant=1)
+B = make_request(variant=1)  # another setting: the same restart digest as A
+LOGIC = make_request(logic="follow_by_spinning")  # another capability: a new restart digest
+HUP = signal.SIGHUP
 
 
 class Clock:
@@ -262,3 +265,140 @@ def test_since_moves_only_when_the_state_changes() -> None:
     clock.wall = 1_020.0
     sup.tick(1.0)
     assert sup.status().since == 1_020.0
+
+
+# ---------------------------------------------------------------- reload without restart
+
+
+def reloading(**policy: Any) -> Supervisor:
+    """Running A as pid 100, with reloads by SIGHUP configured."""
+    return running(supervisor(reload_signal=HUP, **policy))
+
+
+def test_a_reloadable_change_signals_the_running_brain() -> None:
+    assert A.restart_digest == B.restart_digest and A.digest != B.digest
+    sup = reloading()
+    since = sup.status().since
+    assert sup.accept(B, ["w"], 5.0) == [Reload(100, HUP, B)]
+    status = sup.status()
+    assert (status.state, status.pid, status.digest, status.revision) == (
+        AgentState.RUNNING,
+        100,
+        B.digest,
+        B.revision,
+    )
+    assert status.reloads == 1 and status.restarts == 0 and status.warnings == ["w"]
+    assert status.since == since  # the state did not change: the same brain runs on
+    assert "reloaded" in status.message and "SIGHUP" in status.message
+    assert sup.deadline is None  # nothing to wait for: no stop, no start
+    C = make_request(variant=2)
+    assert sup.accept(C, [], 6.0) == [Reload(100, HUP, C)]
+    assert sup.status().reloads == 2
+    assert sup.accept(C, [], 7.0) == []  # the same digest again is still nothing
+
+
+def test_the_configured_signal_is_the_one_sent() -> None:
+    sup = running(supervisor(reload_signal=signal.SIGUSR2))
+    assert sup.accept(B, [], 5.0) == [Reload(100, signal.SIGUSR2, B)]
+
+
+def test_without_reload_configured_a_reloadable_change_restarts() -> None:
+    sup = running(supervisor())
+    assert sup.accept(B, [], 5.0) == [Terminate(100)]
+    assert sup.status().reloads == 0
+
+
+def test_a_capability_change_restarts_and_resets_the_reloads() -> None:
+    sup = reloading()
+    sup.accept(B, [], 5.0)
+    assert sup.accept(LOGIC, [], 6.0) == [Terminate(100)]
+    assert sup.state == AgentState.STOPPING and sup.status().digest == B.digest
+    assert sup.exited(100, -15, 7.0) == [Spawn(LOGIC)]
+    sup.spawned(101, 7.0)
+    status = sup.status()
+    assert status.digest == LOGIC.digest and status.reloads == 0 and status.restarts == 0
+
+
+def test_a_request_without_restart_digest_always_restarts() -> None:
+    older = B.model_copy(update={"restart_digest": None})  # from an older reconciler
+    sup = reloading()
+    assert sup.accept(older, [], 5.0) == [Terminate(100)]
+    # Nor can a brain that runs such a request be reloaded: nothing says what it runs.
+    sup = running(supervisor(reload_signal=HUP))
+    assert sup.accept(make_request(variant=3).model_copy(update={"restart_digest": None}), [], 5.0)
+    sup.exited(100, -15, 6.0)
+    sup.spawned(101, 6.0)
+    sup.tick(7.0)
+    assert sup.state == AgentState.RUNNING
+    assert sup.accept(B, [], 8.0) == [Terminate(101)]
+
+
+def test_a_starting_brain_is_restarted_not_signalled() -> None:
+    # It may not handle the signal yet, and SIGHUP's default action ends a process.
+    sup = supervisor(reload_signal=HUP)
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    assert sup.state == AgentState.STARTING
+    assert sup.accept(B, [], 0.5) == [Terminate(100)]
+    assert sup.exited(100, -15, 0.6) == [Spawn(B)]
+    assert sup.status().reloads == 0
+
+
+def test_in_backoff_the_new_request_starts_at_once() -> None:
+    sup = reloading()
+    sup.exited(100, 1, 5.0)
+    assert sup.state == AgentState.BACKOFF
+    assert sup.accept(B, [], 5.1) == [Spawn(B)]  # no brain runs to reload
+    assert sup.status().reloads == 0
+
+
+def test_while_stopping_the_newest_request_starts() -> None:
+    sup = reloading()
+    assert sup.accept(LOGIC, [], 1.0) == [Terminate(100)]
+    # Back to A's capability while A's brain stops: it is stopping, so it is started anew.
+    assert sup.accept(B, [], 1.5) == []
+    assert sup.exited(100, -15, 2.0) == [Spawn(B)]
+
+
+def test_a_reload_while_rejected_clears_the_rejection() -> None:
+    sup = reloading()
+    sup.reject("malformed launch request", 5.0)
+    assert sup.state == AgentState.REJECTED
+    assert sup.accept(B, [], 6.0) == [Reload(100, HUP, B)]
+    assert sup.state == AgentState.RUNNING and sup.status().digest == B.digest
+
+
+def test_a_reload_that_cannot_be_written_leaves_the_brain_on_its_request() -> None:
+    sup = reloading()
+    sup.accept(B, [], 5.0)
+    sup.reload_failed(B, "cannot write the new request: ENOSPC", 5.0)
+    status = sup.status()
+    assert (status.state, status.pid, status.digest, status.reloads) == (
+        AgentState.REJECTED,
+        100,
+        A.digest,
+        0,
+    )
+    assert "ENOSPC" in status.message and f"still running {A.digest}" in status.message
+    # The same request again is tried again (it was never applied).
+    assert sup.accept(B, [], 6.0) == [Reload(100, HUP, B)]
+    assert sup.state == AgentState.RUNNING and sup.status().reloads == 1
+
+
+def test_a_crash_after_a_reload_restarts_the_reloaded_request() -> None:
+    sup = reloading()
+    sup.accept(B, [], 5.0)
+    assert sup.exited(100, 1, 6.0) == []
+    assert sup.tick(6.0 + sup.policy.backoff_initial) == [Spawn(B)]
+    sup.spawned(101, 8.0)
+    # Like restarts, reloads count for the request's lineage until a new capability restarts.
+    assert sup.status().digest == B.digest and sup.status().restarts == 1
+
+
+def test_clear_after_reloads_resets_them() -> None:
+    sup = reloading()
+    sup.accept(B, [], 5.0)
+    sup.clear(6.0)
+    sup.exited(100, -15, 6.5)
+    status = sup.status()
+    assert status.state == AgentState.IDLE and status.reloads == 0

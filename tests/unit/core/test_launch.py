@@ -15,6 +15,7 @@ from configurator.launch import (
     LaunchRequest,
     content_digest,
     digest_content,
+    restart_digest_of,
     template_mismatch,
     with_digest,
 )
@@ -53,7 +54,7 @@ def _other(name: str, value: Any) -> Any:
 
 
 def test_every_field_but_the_documented_exclusions_changes_the_digest() -> None:
-    assert {"revision", "digest", "issued_at", "signature"} == DIGEST_EXCLUDED  # README, DESIGN
+    assert {"revision", "digest", "restart_digest", "issued_at", "signature"} == DIGEST_EXCLUDED
     request = make_request().model_copy(update={"issued_at": 1.0e9, "signature": "c2ln"})
     assert set(dict(request)) == set(LaunchRequest.model_fields)  # every field is visited
     digest = content_digest(digest_content(request))
@@ -61,6 +62,46 @@ def test_every_field_but_the_documented_exclusions_changes_the_digest() -> None:
         changed = request.model_copy(update={name: _other(name, value)})
         moved = content_digest(digest_content(changed)) != digest
         assert moved is (name not in DIGEST_EXCLUDED), name
+
+
+def test_restart_digest_covers_the_capability_only() -> None:
+    request = make_request()
+    assert request.restart_digest == restart_digest_of(request) and request.digest_matches()
+    # Settings, knowledge, goals, the robot's name: a new digest, the same restart digest.
+    scenario = request.scenario.model_copy(
+        update={"environment_knowledge": {"shelf": 3}, "goals": [], "name": "night-shift"}
+    )
+    reloadable = with_digest(request.model_copy(update={"scenario": scenario, "robot_name": "x"}))
+    assert reloadable.digest != request.digest
+    assert reloadable.restart_digest == request.restart_digest
+    # A logic, the mappings, the platform or scheme: a new restart digest.
+    for change in (
+        {"logics": {"Follow": "follow_by_spinning"}},
+        {"mappings": {}},
+        {"platform": "ROS1"},
+        {"mapping_scheme": "real-world"},
+    ):
+        capability = request.scenario.capability.model_copy(update=change)
+        moved = with_digest(
+            request.model_copy(
+                update={"scenario": request.scenario.model_copy(update={"capability": capability})}
+            )
+        )
+        assert moved.restart_digest != request.restart_digest, change
+        assert moved.digest != request.digest, change
+
+
+def test_a_wrong_restart_digest_fails_the_check_and_a_missing_one_passes() -> None:
+    request = make_request()
+    other = make_request(template=None).restart_digest
+    assert other != request.restart_digest
+    assert not request.model_copy(update={"restart_digest": other}).digest_matches()
+    # An older reconciler's request: no restart_digest on the wire at all, same digest.
+    older = request.model_copy(update={"restart_digest": None})
+    assert "restart_digest" not in json.loads(older.payload())
+    received = LaunchRequest.model_validate_json(older.payload())
+    assert received.restart_digest is None and received.digest_matches()
+    assert received.digest == request.digest
 
 
 def test_template_mismatch_words() -> None:
