@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import json
 import os
 import resource
@@ -48,7 +49,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +80,7 @@ ROBOTCONF = [
     "import sys; from configurator.cli import main; sys.exit(main())",
 ]
 TARGETS = {100: (1.0, None), 1000: (3.0, 10.0)}  # size: (p50 seconds, ratio to the floor)
+WAVE_GAP_TARGET = 0.1  # seconds from a wave's last healthy robot to the next wave's publish
 
 
 # ------------------------------------------------------------------ infrastructure
@@ -185,12 +187,34 @@ def robot_ids(size: int) -> list[str]:
     return [f"r{i:04d}" for i in range(1, size + 1)]
 
 
-def write_fleet(root: Path, size: int, generation: int) -> None:
+# Three waves: one robot in a hundred as canaries, then half the fleet, then all of it.
+WAVES_POLICY = """\
+rollout:
+  waves: [{name: canary, selector: {ring: canary}}, {name: half, percent: 50}, {name: all}]
+  healthy_after: 0
+  max_failures: "5%"
+  wave_timeout: 600
+"""
+
+
+def write_fleet(root: Path, size: int, generation: int, mode: str = "restart") -> None:
+    """fleet.yaml of `size` robots. A round of `restart` and `waves` renames every robot (every
+    digest changes); `knowledge` and `reload` keep the names and change every scenario's
+    knowledge instead (the capability, hence restart_digest, stays)."""
+    named = generation if mode in ("restart", "waves") else 0
     lines = ["robots:"]
     for index, robot in enumerate(robot_ids(size)):
         scenario = SCENARIOS[index % len(SCENARIOS)]
-        lines.append(f"  {robot}: {{scenario: {scenario}, name: {robot} v{generation}}}")
-    (root / "configs" / "fleet.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+        labels = ", labels: {ring: canary}" if mode == "waves" and index % 100 == 0 else ""
+        lines.append(f"  {robot}: {{scenario: {scenario}, name: {robot} v{named}{labels}}}")
+    policy = WAVES_POLICY if mode == "waves" else ""
+    (root / "configs" / "fleet.yaml").write_text("\n".join(lines) + "\n" + policy, "utf-8")
+    if mode in ("knowledge", "reload"):
+        for name in SCENARIOS:
+            path = root / "configs" / "scenarios" / f"{name}.yaml"
+            scenario = yaml.safe_load(path.read_text(encoding="utf-8"))
+            scenario.setdefault("knowledge", {})["ROUND"] = generation
+            path.write_text(yaml.safe_dump(scenario, sort_keys=False), encoding="utf-8")
 
 
 def expected(root: Path) -> tuple[dict[str, str], bytes]:
@@ -202,12 +226,12 @@ def expected(root: Path) -> tuple[dict[str, str], bytes]:
     return {r: q.digest for r, q in fleet.requests.items()}, first.payload()
 
 
-def make_lab(folder: Path, size: int) -> Path:
+def make_lab(folder: Path, size: int, mode: str = "restart") -> Path:
     root = folder / "lab"
     root.mkdir()
     for part in ("models", "configs"):
         shutil.copytree(ROOT / part, root / part)
-    write_fleet(root, size, 0)
+    write_fleet(root, size, 0, mode)
     git(root, "init", "-q", "-b", "main")
     git(root, "config", "user.email", "bench@example.org")
     git(root, "config", "user.name", "bench")
@@ -244,7 +268,9 @@ def brain_command(choice: str, folder: Path) -> list[str]:
     return ["sleep", "86400"]
 
 
-def agent_config(folder: Path, robot: str, url: str, startsecs: float, brain: list[str]) -> Path:
+def agent_config(
+    folder: Path, robot: str, url: str, startsecs: float, brain: list[str], reload: bool = False
+) -> Path:
     work = folder / "agents" / robot
     work.mkdir(parents=True)
     config = {
@@ -255,6 +281,8 @@ def agent_config(folder: Path, robot: str, url: str, startsecs: float, brain: li
         "startsecs": startsecs,
         "stop_timeout": 5,
     }
+    if reload:
+        config["reload"] = {"signal": "SIGHUP"}
     path = work / "agent.yaml"
     path.write_text(yaml.safe_dump(config), encoding="utf-8")
     return path
@@ -269,7 +297,10 @@ def host_command(paths: Sequence[Path]) -> list[str]:
 def start_agents(folder: Path, size: int, url: str, options: Options) -> subprocess.Popen[bytes]:
     """The simulated fleet: one launcher process, in a session of its own, and its children."""
     brain = brain_command(options.brain, folder)
-    paths = [agent_config(folder, r, url, options.startsecs, brain) for r in robot_ids(size)]
+    reload = options.mode == "reload"
+    paths = [
+        agent_config(folder, r, url, options.startsecs, brain, reload) for r in robot_ids(size)
+    ]
     if size <= options.process_max:
         commands = [[sys.executable, "-m", "agent.cli", "--config", str(p)] for p in paths]
     else:
@@ -415,6 +446,7 @@ class Options:
     server_priority: bool
     verbose: bool
     keep: bool = False
+    mode: str = "restart"
 
 
 @dataclass
@@ -430,6 +462,9 @@ class Result:
     delivered_ratio: float
     initial: float  # agents and reconciler started until the first convergence
     cpu: dict[str, float]  # CPU seconds per round (median) of bench, broker, reconciler, agents
+    mode: str = "restart"
+    gaps: list[float] = field(default_factory=list)  # waves: last healthy -> next wave published
+    gap_p50: float | None = None
 
 
 def prioritise(pids: Sequence[int]) -> bool:
@@ -458,7 +493,7 @@ def measure(size: int, options: Options) -> Result:
     base = Path("/dev/shm") if Path("/dev/shm").is_dir() else None
     with work_folder(f"rollout-{size}-", base, options.keep) as tmp:
         folder = Path(tmp)
-        lab = make_lab(folder, size)
+        lab = make_lab(folder, size, options.mode)
         broker = Broker(folder)
         fleet: subprocess.Popen[bytes] | None = None
         reconciler: subprocess.Popen[bytes] | None = None
@@ -466,6 +501,7 @@ def measure(size: int, options: Options) -> Result:
         watch = FleetWatch(broker.url, listener=converged)
         times: list[float] = []
         delivered: list[float] = []
+        gaps: list[float] = []
         cpu: list[dict[str, float]] = []
         try:
             digests, payload = expected(lab)
@@ -489,10 +525,11 @@ def measure(size: int, options: Options) -> Result:
             initial = converged.reached_at - started
             for generation in range(1, options.rounds + 1):
                 time.sleep(1.0)  # let the previous round's last messages settle
-                write_fleet(lab, size, generation)
+                write_fleet(lab, size, generation, options.mode)
                 digests, _ = expected(lab)
                 converged.expect(digests)
                 watch.live_launches.clear()
+                watch.timeline.clear()
                 git(lab, "add", "configs")
                 before = cpu_times(broker, reconciler, fleet)
                 t0 = time.perf_counter()
@@ -501,6 +538,8 @@ def measure(size: int, options: Options) -> Result:
                     raise RuntimeError(f"round {generation}: not converged: {converged.missing()}")
                 times.append(converged.reached_at - t0)
                 delivered.append(max((t for _, _, t in watch.live_launches), default=t0) - t0)
+                if options.mode == "waves":
+                    gaps += wave_gaps(watch, digests, size)
                 time.sleep(0.5)  # the agents' last status messages, for the CPU figures
                 after = cpu_times(broker, reconciler, fleet)
                 cpu.append({k: after[k] - before[k] for k in before})
@@ -532,12 +571,46 @@ def measure(size: int, options: Options) -> Result:
     cpu_p50 = {k: round(statistics.median(c[k] for c in cpu), 3) for k in cpu[0]}
     return Result(
         size, agents, times, p50, max(times), delivered_p50, floor_p50,
-        p50 / floor_p50, delivered_p50 / floor_p50, initial, cpu_p50,
+        p50 / floor_p50, delivered_p50 / floor_p50, initial, cpu_p50, options.mode,
+        gaps, statistics.median(gaps) if gaps else None,
     )  # fmt: skip
+
+
+def wave_gaps(watch: FleetWatch, digests: dict[str, str], size: int) -> list[float]:
+    """Per wave boundary of the round just done: from the moment the last robot of a wave
+    reported running its new request (healthy_after is 0) until the first request of the next
+    wave was published, both as seen by the watcher."""
+    ids = robot_ids(size)
+    canary = {r for i, r in enumerate(ids) if i % 100 == 0}
+    half = set((sorted(canary) + [r for r in ids if r not in canary])[: -(-size // 2)])
+    waves = [canary, half - canary, set(ids) - half]
+    running: dict[str, float] = {}
+    for at, robot, status in watch.timeline:
+        if status.state.value == "running" and status.digest == digests.get(robot):
+            running.setdefault(robot, at)
+    published: dict[str, float] = {}
+    for topic, payload, at in watch.live_launches:
+        if payload:
+            published.setdefault(topic.split("/")[-2], at)
+    found = []
+    for earlier, later in itertools.pairwise(waves):
+        healthy = max(running.get(r, float("inf")) for r in earlier)
+        first = min(published.get(r, float("inf")) for r in later)
+        if healthy != float("inf") and first != float("inf"):
+            found.append(first - healthy)
+    return found
 
 
 def verdicts(results: list[Result]) -> Iterator[tuple[str, bool]]:
     for r in results:
+        if r.gap_p50 is not None:
+            yield (
+                f"{r.robots} robots wave gap p50 {r.gap_p50 * 1000:.0f} ms <= "
+                f"{WAVE_GAP_TARGET * 1000:.0f} ms",
+                r.gap_p50 <= WAVE_GAP_TARGET,
+            )
+        if r.mode != "restart":
+            continue  # the latency targets are the all-at-once restart's
         target = TARGETS.get(r.robots)
         if target is None:
             continue
@@ -578,6 +651,14 @@ def main(argv: list[str]) -> int:
         "--keep", action="store_true", help="keep each size's work folder (logs) afterwards"
     )
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    parser.add_argument(
+        "--mode",
+        choices=["restart", "waves", "knowledge", "reload"],
+        default="restart",
+        help="restart: rename every robot, all at once; waves: the same in three health-gated "
+        "waves (canary 1%%, half, all; healthy_after 0); knowledge: a knowledge-only change, "
+        "agents restart; reload: the same change, agents reload (default: %(default)s)",
+    )
     args = parser.parse_args(argv)
     options = Options(
         args.rounds,
@@ -588,13 +669,17 @@ def main(argv: list[str]) -> int:
         args.server_priority,
         args.verbose,
         args.keep,
+        args.mode,
     )
     results = []
     for size in (int(s) for s in args.sizes.split(",")):
-        print(f"{size} robots ...", flush=True)
+        print(f"{size} robots, {args.mode} ...", flush=True)
         results.append(measure(size, options))
         r = results[-1]
         print(f"  rounds: {', '.join(f'{t:.3f}' for t in r.rounds)} s", flush=True)
+        if r.gap_p50 is not None:
+            shown = ", ".join(f"{g * 1000:.0f}" for g in r.gaps)
+            print(f"  wave gaps (last healthy -> next wave published): {shown} ms", flush=True)
     print()
     print(
         f"{'robots':>7} {'agents':<20} {'p50 s':>7} {'max s':>7} {'delivered s':>11} "

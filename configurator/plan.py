@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from configurator.launch import LaunchRequest
 from configurator.render import FleetRender
 from configurator.textsafe import markdown_code, markdown_text, printable_lines
 from configurator.types import RolloutPolicy
@@ -12,6 +13,15 @@ from configurator.waves import assign_waves
 from configurator.wire import short_rev
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
+
+
+Action = Literal["start", "stop", "restart", "reload", "none"]
+
+
+def action_of(old: LaunchRequest, new: LaunchRequest) -> Action:
+    """Restart, unless only what a running brain can reload changed (same restart_digest)."""
+    same = old.restart_digest is not None and old.restart_digest == new.restart_digest
+    return "reload" if same else "restart"
 
 
 @dataclass
@@ -22,6 +32,9 @@ class RobotChange:
     scenario_after: str | None
     fields: list[str] = field(default_factory=list)
     wave: str | None = None  # the head's rollout wave it falls in; None: no policy, or removed
+    # What its agent will do: start, stop, restart the brain, or reload it (the capability is
+    # unchanged: an agent with `reload:` signals the running brain, any other restarts it).
+    action: Action = "none"
 
 
 @dataclass
@@ -68,13 +81,15 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
         before, after = base.scenario_of.get(robot_id), head.scenario_of.get(robot_id)
         if old is None:
             kind: ChangeKind = "held" if robot_id in head.suspended else "added"
-            changes.append(RobotChange(robot_id, kind, None, after))
+            action: Action = "none" if kind == "held" else "start"
+            changes.append(RobotChange(robot_id, kind, None, after, action=action))
         elif new is None:
-            changes.append(RobotChange(robot_id, "removed", before, None))
+            changes.append(RobotChange(robot_id, "removed", before, None, action="stop"))
         elif old.digest != new.digest:
             kind = "held" if robot_id in head.suspended else "changed"
             fields = changed_fields(old.content(), new.content())
-            changes.append(RobotChange(robot_id, kind, before, after, fields))
+            action = "none" if kind == "held" else action_of(old, new)
+            changes.append(RobotChange(robot_id, kind, before, after, fields, action=action))
         else:
             unchanged += 1
     if rollout is None:
@@ -121,6 +136,8 @@ def _change_line(c: RobotChange) -> str:
         detail = f"{moved}: {', '.join(c.fields)}"
         if c.kind == "held":
             detail += " (suspended: left as it is)"
+        else:
+            detail += f" [{c.action}]"
     return f"  {_SIGN[c.kind]} {c.robot_id}  {detail}"
 
 
@@ -169,7 +186,9 @@ def format_plan_markdown(plan: Plan) -> str:
         fields = "<br>".join(markdown_code(f) for f in c.fields[:20])
         if len(c.fields) > 20:
             fields += f"<br>… {len(c.fields) - 20} more"
-        kind = "held (suspended)" if c.kind == "held" else c.kind
+        kind: str = "held (suspended)" if c.kind == "held" else c.kind
+        if c.kind == "changed":
+            kind += f", {c.action}"
         wave = (f"| {markdown_text(c.wave or '—')} ") if waves else ""
         lines.append(f"{wave}| {markdown_code(c.robot_id)} | {kind} | {scenario} | {fields} |")
     return "\n".join(lines) + "\n"
@@ -182,6 +201,7 @@ def _change_json(c: RobotChange, waves: bool) -> dict[str, Any]:
         "scenario_before": c.scenario_before,
         "scenario_after": c.scenario_after,
         "fields": c.fields,
+        "action": c.action,
     }
     if waves:
         found["wave"] = c.wave

@@ -15,6 +15,7 @@ from typing import Any
 from configurator.launch import template_mismatch
 from configurator.render import FleetRender
 from configurator.textsafe import printable
+from configurator.waves import assign_waves
 from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutStatus
 from configurator.wire import short_digest as _short_digest
 from configurator.wire import short_rev as _short_rev
@@ -45,9 +46,15 @@ class DesiredRobot:
     suspended: bool = False
     template: str | None = None
     labels: Mapping[str, str] = field(default_factory=dict)
+    wave: str | None = None  # the rollout wave it falls in; None: no policy
 
 
 def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
+    waves: dict[str, str] = {}
+    if fleet.rollout is not None:
+        names = [wave.name for wave in fleet.rollout.waves]
+        placed = assign_waves(fleet.labels, fleet.rollout.waves)
+        waves = {robot: names[index] for robot, index in placed.items()}
     return {
         robot_id: DesiredRobot(
             robot_id,
@@ -56,6 +63,7 @@ def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
             robot_id in fleet.suspended,
             request.scenario.capability.robot_template,
             fleet.labels.get(robot_id, {}),
+            waves.get(robot_id),
         )
         for robot_id, request in fleet.requests.items()
     }
@@ -90,6 +98,7 @@ class RobotRow:
     reloads: int = 0  # of the running brain, in place: each one a request applied unrestarted
     warnings: list[str] = field(default_factory=list)
     labels: dict[str, str] = field(default_factory=dict)  # fleet.yaml's; none when not desired
+    wave: str | None = None  # its rollout wave, when fleet.yaml has a rollout policy
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -99,6 +108,7 @@ class RobotRow:
             "online": self.online,
             "scenario": self.scenario,
             "labels": self.labels,
+            "wave": self.wave,
             "desired_digest": self.desired,
             "published_digest": self.published,
             "reported_digest": self.reported,
@@ -170,6 +180,7 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 reloads=status.reloads if status else 0,
                 warnings=warnings,
                 labels=dict(want.labels) if want else {},
+                wave=want.wave if want else None,
             )
         )
     rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), r.robot_id))

@@ -10,8 +10,10 @@ from configurator.cli.terminal import plain_text, safe
 from reconciler.verdicts import FleetStatus, RobotRow, Verdict, reconciler_lines, short_digest
 
 COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
-# Shown after SCENARIO when some robot has labels: a fleet without labels keeps its table.
+# Shown after SCENARIO when some robot has labels, or a rollout wave: a fleet without either
+# keeps its table.
 LABELS = "LABELS"
+WAVE = "WAVE"
 
 _STYLE = {
     Verdict.DEGRADED: "bold red",
@@ -29,10 +31,16 @@ def labels_text(labels: dict[str, str]) -> str:
 
 
 def columns(rows: list[RobotRow]) -> tuple[str, ...]:
-    if not any(r.labels for r in rows):
-        return COLUMNS
+    extra = [
+        name
+        for name, shown in (
+            (LABELS, any(r.labels for r in rows)),
+            (WAVE, any(r.wave for r in rows)),
+        )
+        if shown
+    ]
     at = COLUMNS.index("SCENARIO") + 1
-    return (*COLUMNS[:at], LABELS, *COLUMNS[at:])
+    return (*COLUMNS[:at], *extra, *COLUMNS[at:])
 
 
 def fleet_table(fleet: FleetStatus) -> Table:
@@ -46,6 +54,8 @@ def fleet_table(fleet: FleetStatus) -> Table:
         style = _STYLE[r.verdict]
         # Labels are text from fleet.yaml: safe() escapes them and never reads them as markup.
         labels = [safe(labels_text(r.labels))] if LABELS in names else []
+        if WAVE in names:
+            labels.append(safe(r.wave or "-"))
         table.add_row(
             safe(r.robot_id),
             Text(r.verdict.value, style=style),

@@ -37,8 +37,9 @@ def test_plan_names_changed_added_and_removed_robots(lab: Lab) -> None:
     by_robot = {c["robot_id"]: c for c in plan["changes"]}
     assert by_robot["tb3-01"]["change"] == "changed"
     assert by_robot["tb3-01"]["fields"] == ["scenario.logic_settings.follow_with_poses.move_speed"]
-    assert by_robot["tb3-09"]["change"] == "added"
-    assert by_robot["tb3-04"]["change"] == "removed"
+    assert by_robot["tb3-01"]["action"] == "reload"  # a setting: the capability is the same
+    assert by_robot["tb3-09"]["change"] == "added" and by_robot["tb3-09"]["action"] == "start"
+    assert by_robot["tb3-04"]["change"] == "removed" and by_robot["tb3-04"]["action"] == "stop"
     assert set(by_robot) == {"tb3-01", "tb3-09", "tb3-04"}
 
 
@@ -49,11 +50,25 @@ def test_plan_between_two_commits_and_markdown(lab: Lab) -> None:
     done = lab.run("plan", "--base", base, "--head", head, "--format", "markdown")
     assert done.returncode == 1
     assert (
-        "| `tb3-01` | changed | delivery-gazebo | `scenario.robot_settings.max_linear_speed` |"
-        in (done.stdout)
+        "| `tb3-01` | changed, reload | delivery-gazebo "
+        "| `scenario.robot_settings.max_linear_speed` |" in (done.stdout)
     )
     text = lab.run("plan", "--base", base, "--head", head).stdout
     assert "~ tb3-01" in text and "1 changed, 0 added, 0 removed" in text
+    assert "max_linear_speed [reload]" in text
+
+
+def test_plan_says_restart_when_the_capability_changes(lab: Lab) -> None:
+    base = lab.commit("base")
+    # The same robot on the real-world mapping scheme: other topics, so another brain.
+    lab.replace(
+        "configs/capabilities/turtlebot3-camera.yaml",
+        "mapping_scheme: gazebo",
+        "mapping_scheme: real-world",
+    )
+    done = lab.run("plan", "--base", base, "--format", "json")
+    by_robot = {c["robot_id"]: c for c in json.loads(done.stdout)["changes"]}
+    assert by_robot["tb3-01"]["action"] == "restart", done.stdout
 
 
 def test_plan_lists_the_wave_of_each_change_by_the_head_s_policy(lab: Lab) -> None:

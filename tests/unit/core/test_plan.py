@@ -63,11 +63,12 @@ def test_text_groups_the_changes_under_their_waves(plan: Plan) -> None:
     assert lines[1:] == [
         "rollout in waves: canary, half, all",
         "wave canary (1 of 3):",
-        "  ~ tb3-01  delivery-gazebo: scenario.logic_settings.follow_with_poses.move_speed",
+        "  ~ tb3-01  delivery-gazebo: scenario.logic_settings.follow_with_poses.move_speed"
+        " [reload]",
         "wave half (2 of 3):",
-        "  ~ tb3-02  guide-gazebo: scenario.robot_settings.max_linear_speed",
+        "  ~ tb3-02  guide-gazebo: scenario.robot_settings.max_linear_speed [reload]",
         "wave all (3 of 3):",
-        "  ~ tb3-05  patrol-noetic-gazebo: robot_name",
+        "  ~ tb3-05  patrol-noetic-gazebo: robot_name [reload]",
         "  + tb3-09  guide-gazebo",
         "in no wave (removed):",
         "  - tb3-03  (was delivery-bluetooth-gazebo; its brain will be stopped)",
@@ -121,6 +122,7 @@ def test_without_a_policy_the_plan_is_as_before(lab: Lab) -> None:
         "scenario_before",
         "scenario_after",
         "fields",
+        "action",  # restart or reload: with or without a policy
     ]
 
 
