@@ -205,7 +205,9 @@ class Wave(StrictModel):
 class RolloutPolicy(StrictModel):
     """How a commit reaches the fleet: wave by wave, each gated by the robots' health."""
 
-    waves: list[Wave] = Field(description="in order; the last should take every robot left")
+    waves: list[Wave] = Field(
+        min_length=1, description="in order; the last should take every robot left"
+    )
     healthy_after: float = Field(
         30.0, description="seconds running the new request before a robot counts as healthy"
     )

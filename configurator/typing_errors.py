@@ -157,6 +157,10 @@ def typing_diagnostics(
         expected: list[str] = []
         for err in errs:
             text = _EXPECTED.get(err["type"])
+            context = err.get("ctx") or {}
+            if err["type"] == "too_short" and "min_length" in context:
+                least = context["min_length"]
+                text = f"a list of at least {least} item{'s' if least != 1 else ''}"
             if text is None:
                 text = error_text(err)
                 text = (text[:1].lower() + text[1:]).removeprefix("input should be ")

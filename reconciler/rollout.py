@@ -96,7 +96,9 @@ def roll_out(seen: RolloutInput) -> RolloutStep:
         return base.rolled_back(previous)
     if same and previous is not None and previous.state in ("Halted", "Progressing", "Paused"):
         started = previous.wave_started_at
-        wave = previous.wave if started is not None else -1
+        # Read back from the broker: a wave out of range (another reconciler's, a hand-made
+        # status) is brought into range rather than trusted.
+        wave = min(max(previous.wave, 0), base.count - 1) if started is not None else -1
         if previous.state == "Halted":
             return base.halted(previous)
         return base.advance(wave, started)
@@ -186,7 +188,9 @@ class _Rollout:
             return step
 
     def halted(self, previous: RolloutStatus) -> RolloutStep:
-        wave = previous.wave if previous.wave_started_at is not None else -1
+        wave = min(max(previous.wave, 0), self.count - 1)
+        if previous.wave_started_at is None:
+            wave = -1
         step = self.hold(wave)
         step.status = previous.model_copy()
         return step

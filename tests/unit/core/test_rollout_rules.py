@@ -208,3 +208,10 @@ def test_a_fleet_of_labels_and_waves_that_fit_is_clean(lab: Lab) -> None:
         max_failures="'10%'",
     )
     assert lab.check().diagnostics == []
+
+
+def test_a_policy_without_waves_says_one_is_needed(lab: Lab) -> None:
+    enable_rollout(lab, "[]")
+    found = lab.only("RC103")
+    assert found.line == line_starting(lab, "  waves:")
+    assert "rollout.waves must be a list of at least 1 item" in found.message

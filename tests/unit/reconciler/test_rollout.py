@@ -254,3 +254,17 @@ def test_a_commit_that_changes_no_request_is_complete_even_when_paused(lab: Lab)
     same = fleet(lab, "a", paused=True)
     result = step(same, stable, held(stable))
     assert result.complete and result.status is not None and result.status.state == "Complete"
+
+
+def test_a_wave_read_back_out_of_range_is_brought_into_range(
+    two: tuple[FleetRender, FleetRender],
+) -> None:
+    stable, head = two
+    first = step(head, stable, held(stable))
+    assert first.status is not None
+    forged = first.status.model_copy(update={"wave": 99})
+    result = step(head, stable, held(head), running(head, ROBOTS), forged, T0 + 50)
+    assert result.complete  # the last wave, healthy: done, and no endless walk past it
+    below = first.status.model_copy(update={"wave": -5})
+    again = step(head, stable, held(stable), {}, below, T0 + 1)
+    assert again.status is not None and again.status.wave == 0
