@@ -176,11 +176,6 @@ def test_a_long_list_of_robots_left_out_is_cut_short(lab: Lab) -> None:
     assert "tb3-02, tb3-04, tb3-05, tb3-10, tb3-11, ... (9 in all)" in lab.only("RC705").message
 
 
-def test_no_waves_at_all_leave_every_robot_out(lab: Lab) -> None:
-    enable_rollout(lab, "[]")
-    assert "robot(s) tb3-01, tb3-02, tb3-03, tb3-04, tb3-05, so" in lab.only("RC705").message
-
-
 def test_a_wave_that_takes_no_robot_is_a_warning(lab: Lab) -> None:
     enable_rollout(lab, "[{name: all}, {name: canary, selector: {ring: canary}}]")
     d = lab.only("RC706")
