@@ -9,13 +9,13 @@ from __future__ import annotations
 import enum
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from configurator.launch import template_mismatch
 from configurator.render import FleetRender
 from configurator.textsafe import printable
-from configurator.waves import assign_waves
+from configurator.waves import assign_waves, matches
 from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutStatus
 from configurator.wire import short_digest as _short_digest
 from configurator.wire import short_rev as _short_rev
@@ -218,6 +218,16 @@ class FleetStatus:
     @property
     def health(self) -> Health:
         return reconciler_health(self.reconciler, self.checked_at)
+
+    def select(self, selector: Mapping[str, str]) -> FleetStatus:
+        """Only the robots whose fleet.yaml labels match `selector` (all of it), as rollout
+        waves select them; the reconciler's lines stay."""
+        if not selector:
+            return self
+        rows = [r for r in self.rows if matches(r.labels, selector)]
+        wanted = ",".join(f"{k}={v}" for k, v in sorted(selector.items()))
+        note = f"only robots labelled {wanted}: {len(rows)} of {len(self.rows)}"
+        return replace(self, rows=rows, notes=[*self.notes, note])
 
     @property
     def in_sync(self) -> bool:

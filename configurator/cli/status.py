@@ -16,6 +16,7 @@ from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.fleet_view import fleet_status_view
 from configurator.cli.options import repo_option, rev_option
 from configurator.cli.terminal import is_terminal, plain_text, show, terminal_console
+from configurator.types import is_robot_id
 from configurator.wire import Topics
 from reconciler.fleet_status import DesiredCache, fleet_status, open_view, watch
 from reconciler.lifecycle import on_stop_signals
@@ -39,10 +40,25 @@ def _verdict(fleet: FleetStatus) -> ExitCode:
     default=5.0,
     help="give up when the broker's retained messages have not arrived after S seconds",
 )
+@click.option(
+    "--selector",
+    "-l",
+    "selectors",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="only robots with this fleet.yaml label (repeat: all of them); the exit code too",
+)
 def status(
-    repo: Path, rev: str | None, mqtt: BrokerOptions, follow: bool, as_json: bool, wait: float
+    repo: Path,
+    rev: str | None,
+    mqtt: BrokerOptions,
+    follow: bool,
+    as_json: bool,
+    wait: float,
+    selectors: tuple[str, ...],
 ) -> ExitCode:
     """Show the fleet: desired vs reported, worst first (exit 0 when every robot is in sync)."""
+    selector = parse_selector(selectors)
     connection = mqtt.connection()
     topics = Topics(mqtt.prefix)
     desired = DesiredCache(repo, rev)
@@ -57,15 +73,29 @@ def status(
                 f"({reason}); is the broker running? (--broker URL, --wait S)"
             )
         if not follow:
-            fleet = fleet_status(view.snapshot(), topics, desired)
+            fleet = fleet_status(view.snapshot(), topics, desired).select(selector)
             if as_json:
                 print(json.dumps(fleet.as_json(), indent=2))
             else:
                 show(fleet_status_view(fleet))
             return _verdict(fleet)
-        return _follow(view, topics, desired, changed, as_json)
+        return _follow(view, topics, desired, changed, as_json, selector)
     finally:
         view.stop()
+
+
+def parse_selector(selectors: tuple[str, ...]) -> dict[str, str]:
+    """`KEY=VALUE` options as a label selector; a malformed one is a CliError."""
+    found: dict[str, str] = {}
+    for text in selectors:
+        key, equals, value = text.partition("=")
+        if not equals or not is_robot_id(key) or not is_robot_id(value):
+            raise CliError(
+                f"--selector {text!r} is not KEY=VALUE with a label key and value written like "
+                "robot ids (e.g. --selector ring=canary)"
+            )
+        found[key] = value
+    return found
 
 
 def _follow(
@@ -74,6 +104,7 @@ def _follow(
     desired: DesiredCache,
     changed: threading.Event,
     as_json: bool,
+    selector: dict[str, str],
 ) -> ExitCode:
     """Per change: one JSON line, or one plain report ended by `---`; on a terminal, a screen."""
     stop = threading.Event()
@@ -81,7 +112,8 @@ def _follow(
     code = ExitCode.FINDINGS
     offline = f"(waiting for the broker at {view.connection.address.url}: {{}})"
     if as_json or not is_terminal():
-        for fleet in watch(view, topics, desired, changed, stop):
+        for found in watch(view, topics, desired, changed, stop):
+            fleet = found.select(selector) if found is not None else None
             if fleet is None:
                 if not as_json:
                     print(offline.format(view.last_error), flush=True)
@@ -95,7 +127,8 @@ def _follow(
         return code
 
     with Live(console=terminal_console(), auto_refresh=False, transient=False) as live:
-        for fleet in watch(view, topics, desired, changed, stop):
+        for found in watch(view, topics, desired, changed, stop):
+            fleet = found.select(selector) if found is not None else None
             if fleet is None:
                 live.update(Text(offline.format(view.last_error)), refresh=True)
                 continue

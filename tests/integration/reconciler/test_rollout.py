@@ -133,6 +133,9 @@ def test_healthy_waves_advance_in_order(fleet: Fleet) -> None:
             ]
             assert ran and min(ran) < started, f"{robot} was not running before {later}"
         assert max(first[r] for r in earlier) < started
+    # Labels select robots in status too, and each row names its wave.
+    report = json.loads(fleet.status_cli("--json", "--selector", "ring=canary").stdout)
+    assert [(r["robot_id"], r["wave"]) for r in report["robots"]] == [(CANARY, "canary")]
 
 
 def test_a_reconciler_killed_mid_rollout_resumes_without_republishing(fleet: Fleet) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from configurator.cli.fleet_view import fleet_status_text
 from configurator.launch import StopRequest
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
@@ -237,3 +239,26 @@ def test_text_from_the_broker_is_never_rich_markup_and_never_wrapped() -> None:
     assert "[link=http://x]s[/link]" in row and f"[red]{long_reason}[/red]" in row
     assert "desired: [i]repo[/i]" in text
     assert all(line == line.rstrip() for line in text.splitlines())
+
+
+def test_a_label_selector_keeps_only_the_robots_it_matches() -> None:
+    desired = {
+        "a": DesiredRobot("a", "s", D1, labels={"ring": "canary", "site": "x"}),
+        "b": DesiredRobot("b", "s", D1, labels={"site": "x"}),
+    }
+    fleet = FleetStatus(build_rows(desired, Retained()), None, "t")
+    only = fleet.select({"ring": "canary"})
+    assert [r.robot_id for r in only.rows] == ["a"]
+    assert "only robots labelled ring=canary: 1 of 2" in only.notes
+    assert [r.robot_id for r in fleet.select({"site": "x"}).rows] == ["a", "b"]
+    assert fleet.select({}) is fleet
+
+
+def test_a_selector_option_is_key_equals_value() -> None:
+    from configurator.cli.errors import CliError
+    from configurator.cli.status import parse_selector
+
+    assert parse_selector(("ring=canary", "site=hall-a")) == {"ring": "canary", "site": "hall-a"}
+    for bad in ("ring", "ring=", "=x", "a b=c", "ring=can ary"):
+        with pytest.raises(CliError):
+            parse_selector((bad,))
