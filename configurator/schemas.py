@@ -15,7 +15,8 @@ from pydantic import BaseModel
 from configurator.launch import LaunchRequest
 from configurator.loader import KIND_BY_NAME
 from configurator.repository import Repository
-from configurator.types import ROBOT_ID_PATTERN
+from configurator.resolve import resolve_capability
+from configurator.types import ROBOT_ID_PATTERN, SettingDefinition
 
 # "0%" to "100%": the plain spellings of what configurator.waves.failure_budget reads
 SHARE_PATTERN = r"^(100|[1-9]?[0-9])%$"
@@ -158,6 +159,7 @@ def _scenario_schema(repo: Repository) -> dict[str, Any]:
     )
     if logics_with_settings:
         props["logic_settings"]["propertyNames"] = {"enum": logics_with_settings}
+    _settings_per_capability(repo, schema)
     goal = schema["$defs"]["Goal"]["properties"]
     tasks = {name: e.model.description for name, e in repo.tasks.items()}
     goal["task"] = _enum_or_nothing(tasks, "the task to achieve")
@@ -180,6 +182,85 @@ def _scenario_schema(repo: Repository) -> dict[str, Any]:
             "default": None,
         }
     return schema
+
+
+_JSON_TYPE = {"number": "number", "integer": "integer", "boolean": "boolean", "string": "string"}
+
+
+def setting_schema(definition: SettingDefinition) -> dict[str, Any]:
+    """One setting as JSON Schema: type, range or choices, default, and the unit in the words an
+    editor shows on hover."""
+    found: dict[str, Any] = {"default": definition.default}
+    if definition.type == "enum":
+        found["enum"] = list(definition.choices or [])
+    else:
+        found["type"] = _JSON_TYPE[definition.type]
+    if definition.minimum is not None:
+        found["minimum"] = definition.minimum
+    if definition.maximum is not None:
+        found["maximum"] = definition.maximum
+    words = [definition.description or ""]
+    if definition.unit:
+        words.append(f"in {definition.unit}")
+    if definition.minimum is not None or definition.maximum is not None:
+        low = "" if definition.minimum is None else f"{definition.minimum:g}"
+        high = "" if definition.maximum is None else f"{definition.maximum:g}"
+        words.append(f"from {low or '-inf'} to {high or 'inf'}")
+    if definition.type == "enum":
+        words.append("one of " + ", ".join(json.dumps(c) for c in definition.choices or []))
+    words.append(f"default {json.dumps(definition.default)}")
+    found["description"] = "; ".join(w for w in words if w)
+    return found
+
+
+def _settings_object(definitions: dict[str, SettingDefinition]) -> dict[str, Any]:
+    return {
+        "type": "object",
+        "properties": {name: setting_schema(d) for name, d in sorted(definitions.items())},
+        "additionalProperties": False,
+    }
+
+
+def _ref(key: str) -> str:
+    """A $ref to $defs/key, escaped as a JSON pointer (names come from file names)."""
+    return "#/$defs/" + key.replace("~", "~0").replace("/", "~1")
+
+
+def _settings_per_capability(repo: Repository, schema: dict[str, Any]) -> None:
+    """Which settings a scenario may set, with their types and bounds, follow from the
+    capability it names: `if capability is C then ...` per capability. The settings of each
+    robot template and each logic are written once, in $defs, and referred to."""
+    defs = schema.setdefault("$defs", {})
+    rules: list[dict[str, Any]] = []
+    for name, entry in sorted(repo.capabilities.items()):
+        resolved = resolve_capability(repo, entry.model)
+        robot: dict[str, Any] = {"type": "object", "maxProperties": 0}
+        if resolved.template is not None and entry.model.robot_template is not None:
+            key = f"robot-settings.{entry.model.platform}.{entry.model.robot_template}"
+            defs.setdefault(key, _settings_object(resolved.template.settings))
+            robot = {"$ref": _ref(key)}
+        logics: dict[str, Any] = {}
+        for action, selection in sorted(resolved.selections.items()):
+            key = f"logic-settings.{action}.{selection.logic_name}"
+            defs.setdefault(key, _settings_object(selection.logic.settings))
+            logics[selection.logic_name] = {"$ref": _ref(key)}
+        rules.append(
+            {
+                "if": {"properties": {"capability": {"const": name}}, "required": ["capability"]},
+                "then": {
+                    "properties": {
+                        "robot_settings": robot,
+                        "logic_settings": {
+                            "type": "object",
+                            "properties": logics,
+                            "additionalProperties": False,
+                        },
+                    }
+                },
+            }
+        )
+    if rules:
+        schema["allOf"] = rules
 
 
 def _fleet_schema(repo: Repository) -> dict[str, Any]:

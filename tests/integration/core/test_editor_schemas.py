@@ -1,0 +1,154 @@
+"""The editor schemas as an editor uses them: the real yaml-language-server (installed by
+./dev setup) flags a setting out of range, a wrong choice and an unknown logic setting for the
+capability a scenario names, and finds nothing in a good scenario."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from configurator.schemas import dump, generate
+from tests.support.lab import ROOT, Lab
+
+SERVER = ROOT / os.environ.get("ROBOTCONF_VENV", ".venv") / "yaml-language-server"
+BINARY = SERVER / "node_modules" / ".bin" / "yaml-language-server"
+TIMEOUT = 60.0
+SCENARIO = "configs/scenarios/delivery-gazebo.yaml"
+
+
+class LanguageServer:
+    """A language server over stdio: requests with ids, notifications kept per method."""
+
+    def __init__(self, root: Path) -> None:
+        self.proc = subprocess.Popen(
+            [str(BINARY), "--stdio"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+        )
+        self.lock = threading.Condition()
+        self.responses: dict[int, Any] = {}
+        self.diagnostics: dict[str, list[dict[str, Any]]] = {}
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+        self.request(
+            1,
+            "initialize",
+            {"processId": os.getpid(), "rootUri": root.as_uri(), "capabilities": {}},
+        )
+        self.wait(lambda: 1 in self.responses, "the initialize answer")
+        self.notify("initialized", {})
+        self.notify(
+            "workspace/didChangeConfiguration",
+            {"settings": {"yaml": {"validate": True, "hover": True, "schemas": {}}}},
+        )
+
+    def _send(self, message: dict[str, Any]) -> None:
+        body = json.dumps(message).encode()
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(b"Content-Length: %d\r\n\r\n" % len(body) + body)
+        self.proc.stdin.flush()
+
+    def request(self, ident: int, method: str, params: dict[str, Any]) -> None:
+        self._send({"jsonrpc": "2.0", "id": ident, "method": method, "params": params})
+
+    def notify(self, method: str, params: dict[str, Any]) -> None:
+        self._send({"jsonrpc": "2.0", "method": method, "params": params})
+
+    def _read(self) -> None:
+        stream = self.proc.stdout
+        assert stream is not None
+        while True:
+            length = 0
+            while (line := stream.readline()) not in (b"\r\n", b""):
+                if line.lower().startswith(b"content-length:"):
+                    length = int(line.split(b":")[1])
+            if not line:
+                return
+            message = json.loads(stream.read(length))
+            if "method" in message and "id" in message:  # the server asks us something
+                settings = {"validate": True, "hover": True, "schemas": {}}
+                items = message.get("params", {}).get("items", [])
+                answer: Any = [settings for _ in items] if items else None
+                self._send({"jsonrpc": "2.0", "id": message["id"], "result": answer})
+                continue
+            with self.lock:
+                if "id" in message:
+                    self.responses[message["id"]] = message.get("result")
+                elif message.get("method") == "textDocument/publishDiagnostics":
+                    params = message["params"]
+                    self.diagnostics[params["uri"]] = params["diagnostics"]
+                self.lock.notify_all()
+
+    def wait(self, done: Any, what: str) -> None:
+        deadline = time.monotonic() + TIMEOUT
+        with self.lock:
+            while not done():
+                left = deadline - time.monotonic()
+                if left <= 0 or self.proc.poll() is not None:
+                    raise AssertionError(f"yaml-language-server: no {what}")
+                self.lock.wait(min(left, 0.5))
+
+    def check(self, path: Path, text: str, version: int) -> list[dict[str, Any]]:
+        """Diagnostics for `text` as the contents of `path`, opened (or changed) in the editor."""
+        uri = path.as_uri()
+        with self.lock:
+            self.diagnostics.pop(uri, None)
+        if version == 1:
+            document = {"uri": uri, "languageId": "yaml", "version": 1, "text": text}
+            self.notify("textDocument/didOpen", {"textDocument": document})
+        else:
+            self.notify(
+                "textDocument/didChange",
+                {
+                    "textDocument": {"uri": uri, "version": version},
+                    "contentChanges": [{"text": text}],
+                },
+            )
+        self.wait(lambda: uri in self.diagnostics, f"diagnostics for {path.name}")
+        return self.diagnostics[uri]
+
+    def close(self) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+
+@pytest.fixture
+def server(lab: Lab) -> Iterator[LanguageServer]:
+    if not BINARY.exists():
+        pytest.skip(f"yaml-language-server is not installed in {SERVER}: ./dev setup installs it")
+    checked = lab.check()
+    assert checked.ok, checked.errors
+    (lab.root / "schemas").mkdir()
+    for name, schema in generate(checked.repo).items():
+        (lab.root / "schemas" / name).write_text(dump(schema), encoding="utf-8")
+    started = LanguageServer(lab.root)
+    try:
+        yield started
+    finally:
+        started.close()
+
+
+def test_the_editor_flags_bad_setting_values_for_the_scenario_s_capability(
+    lab: Lab, server: LanguageServer
+) -> None:
+    path = lab.path(SCENARIO)
+    good = lab.read(SCENARIO)
+    assert good.startswith("# yaml-language-server: $schema=../../schemas/scenario.schema.json")
+    assert server.check(path, good, 1) == []
+    too_fast = good.replace("max_linear_speed: 0.2", "max_linear_speed: 99")
+    found = server.check(path, too_fast, 2)
+    assert any("maximum" in d["message"] and "0.26" in d["message"] for d in found), found
+    speed_line = next(n for n, line in enumerate(too_fast.splitlines()) if "99" in line)
+    assert {d["range"]["start"]["line"] for d in found} == {speed_line}
+    unknown = good.replace("move_speed: 0.1", "move_sped: 0.1")
+    found = server.check(path, unknown, 3)
+    assert any("move_sped" in d["message"] for d in found), found
