@@ -2,7 +2,8 @@
 
 Each event is told once per transition, never per resync: a refused commit once per revision,
 a halted or rolled back rollout once per revision, a robot once as it degrades or goes offline
-and once as it is back in sync.
+and once as it is back in sync (running the desired request for SETTLE seconds: a brain in a
+crash loop runs a moment before each crash, and that is no recovery).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any
 
 from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
 
+SETTLE = 5.0  # seconds a robot told degraded or offline runs the desired request before in sync
 REMEMBERED = 64  # revisions remembered as told: a commit refused long ago is not told again
 _REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REFUSED.value}
 _DEGRADED = {AgentState.FAILED, AgentState.BACKOFF, AgentState.REJECTED}
@@ -67,6 +69,8 @@ class Seen:
     status: ReconcilerStatus | None = None
     robots: Mapping[str, AgentStatus] | None = None
     desired: Mapping[str, str] = field(default_factory=dict)  # robot -> digest, unsuspended
+    # robot -> when it was first seen running the digest it reports (the observer's clock)
+    running_since: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -93,7 +97,9 @@ def robot_kind(status: AgentStatus, digest: str) -> Kind | None:
     return None
 
 
-def transitions(told: Told, seen: Seen, at: float) -> tuple[Told, list[Event]]:
+def transitions(
+    told: Told, seen: Seen, at: float, settle: float = SETTLE
+) -> tuple[Told, list[Event]]:
     """The events `seen` makes, given what was `told`; and the memory after telling them."""
     events: list[Event] = []
     status = seen.status
@@ -131,24 +137,22 @@ def transitions(told: Told, seen: Seen, at: float) -> tuple[Told, list[Event]]:
                 )
             )
     if seen.robots is not None:
-        told, robot_events = _robot_transitions(told, seen.robots, seen.desired, branch, at)
+        settled = {r for r, since in seen.running_since.items() if at - since >= settle}
+        told, robot_events = _robot_transitions(told, seen, settled, branch, at)
         events += robot_events
     return told, events
 
 
 def _robot_transitions(
-    told: Told,
-    robots: Mapping[str, AgentStatus],
-    desired: Mapping[str, str],
-    branch: str | None,
-    at: float,
+    told: Told, seen: Seen, settled: set[str], branch: str | None, at: float
 ) -> tuple[Told, list[Event]]:
     """Only robots the fleet assigns (and does not suspend) are judged; one that is no longer
     assigned, or whose status is gone, is forgotten without a word."""
+    assert seen.robots is not None
     events: list[Event] = []
     alerting: dict[str, Kind] = {}
-    for robot_id, digest in sorted(desired.items()):
-        status = robots.get(robot_id)
+    for robot_id, digest in sorted(seen.desired.items()):
+        status = seen.robots.get(robot_id)
         was = told.alerting.get(robot_id)
         if status is None:
             continue
@@ -169,7 +173,7 @@ def _robot_transitions(
                         state,
                     )
                 )
-        elif now is Kind.ROBOT_IN_SYNC and was is not None:
+        elif now is Kind.ROBOT_IN_SYNC and was is not None and robot_id in settled:
             events.append(
                 Event(
                     now,
@@ -181,6 +185,6 @@ def _robot_transitions(
                     status.state.value,
                 )
             )
-        elif was is not None:  # on its way back (starting, ...): still told as it was
+        elif was is not None:  # on its way back (starting, settling): still told as it was
             alerting[robot_id] = was
     return replace(told, alerting=alerting), events

@@ -181,8 +181,10 @@ class Sender:
 class Notifier:
     """Tells every receiver every event; each on its own thread."""
 
-    def __init__(self, receivers: Sequence[Receiver], count: Counter | None = None) -> None:
-        self.senders = [Sender(receiver, count) for receiver in receivers]
+    def __init__(
+        self, receivers: Sequence[Receiver], count: Counter | None = None, timeout: float = TIMEOUT
+    ) -> None:
+        self.senders = [Sender(receiver, count, timeout=timeout) for receiver in receivers]
 
     def start(self) -> None:
         for sender in self.senders:

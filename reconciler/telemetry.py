@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from configurator.mqtt import Connection
-from configurator.wire import AgentStatus, Topics
+from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
 from reconciler.events import Seen, Told, transitions
@@ -49,6 +49,8 @@ class Telemetry:
         self._lock = threading.Lock()
         self._step: Step | None = None
         self._told = Told()
+        # robot -> ((digest, the agent's since), first seen running it by our clock)
+        self._running_since: dict[str, tuple[tuple[str, float], float]] = {}
         self._desired: tuple[str | None, dict[str, DesiredRobot]] = (None, {})
         self.view = RetainedView(
             connection,
@@ -93,7 +95,8 @@ class Telemetry:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            self._wake.wait()
+            # A robot told degraded or offline may settle back in sync with nothing arriving.
+            self._wake.wait(1.0 if self._told.alerting else None)
             self._wake.clear()
             if self._stop.is_set():
                 return
@@ -107,22 +110,36 @@ class Telemetry:
             step = self._step
         if step is None:  # robots are judged against what the reconciler serves
             return
-        robots = self._robots()
+        now = time.time()  # events carry it, so unix time; runs settle by it too
+        robots = self._robots(now)
         desired = self._desired_of(step)
         if self.notifier is not None:
             digests = {r: d.digest for r, d in desired.items() if not d.suspended}
+            since = {r: seen for r, (_, seen) in self._running_since.items()}
             self._told, events = transitions(
-                self._told, Seen(step.status, robots, digests), time.time()
+                self._told, Seen(step.status, robots, digests, since), now
             )
             self.notifier.tell(events)
         if self.metrics is not None and robots is not None:
             self.metrics.verdicts(verdict_counts(desired, robots))
 
-    def _robots(self) -> dict[str, AgentStatus] | None:
+    def _robots(self, now: float) -> dict[str, AgentStatus] | None:
+        """The robots' statuses (None until known), and when each was first seen running."""
         if not self.view.synced:
             return None
         seen = parse_retained(self.view.snapshot(), self.topics)
-        return {r: robot.status for r, robot in seen.robots.items() if robot.status}
+        statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
+        # A run is known by its digest and the agent's time of entering it: a brain that
+        # crashed and runs again between two looks is a new run, not a settled one.
+        previous, self._running_since = self._running_since, {}
+        for robot_id, status in statuses.items():
+            if status.state is AgentState.RUNNING and status.digest:
+                run = (status.digest, status.since)
+                known = previous.get(robot_id)
+                self._running_since[robot_id] = (
+                    known if known is not None and known[0] == run else (run, now)
+                )
+        return statuses
 
     def _desired_of(self, step: Step) -> dict[str, DesiredRobot]:
         serving = step.serving

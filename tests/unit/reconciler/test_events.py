@@ -114,8 +114,9 @@ def test_a_halted_or_rolled_back_rollout_is_told_once_per_revision() -> None:
     assert steps[1][0].revision == BAD and "halted" in steps[1][0].message
 
 
-def robots(status: AgentStatus | None, digest: str = D1) -> Seen:
-    return Seen(ready(), {"r1": status} if status else {}, {"r1": digest})
+def robots(status: AgentStatus | None, digest: str = D1, since: float = -100.0) -> Seen:
+    """r1 as `status` says, running (if it runs) since `since`: settled at time 1.0."""
+    return Seen(ready(), {"r1": status} if status else {}, {"r1": digest}, {"r1": since})
 
 
 @pytest.mark.parametrize("state", [AgentState.FAILED, AgentState.BACKOFF, AgentState.REJECTED])
@@ -166,6 +167,20 @@ def test_a_robot_is_in_sync_only_on_the_desired_digest_and_only_after_an_alert()
         ]
     )
     assert kinds(steps) == [[], [], [Kind.ROBOT_DEGRADED], [], [Kind.ROBOT_IN_SYNC]]
+
+
+def test_back_in_sync_only_once_settled() -> None:
+    told, events = transitions(Told(), robots(robot(AgentState.BACKOFF)), 100.0)
+    assert [e.kind for e in events] == [Kind.ROBOT_DEGRADED]
+    # Running again since 98 (a crash loop runs a moment before each crash): not yet settled.
+    told, events = transitions(told, robots(robot(AgentState.RUNNING), since=98.0), 100.0)
+    assert events == [] and told.alerting == {"r1": Kind.ROBOT_DEGRADED}
+    told, events = transitions(told, robots(robot(AgentState.BACKOFF)), 101.0)
+    assert events == []  # still the same degradation
+    told, events = transitions(told, robots(robot(AgentState.RUNNING), since=101.0), 105.9)
+    assert events == []
+    told, events = transitions(told, robots(robot(AgentState.RUNNING), since=101.0), 106.0)
+    assert [e.kind for e in events] == [Kind.ROBOT_IN_SYNC] and not told.alerting
 
 
 def test_unassigned_robots_and_unknown_statuses_tell_nothing() -> None:
