@@ -16,6 +16,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 
 import pytest
+import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
 from configurator.mqtt import Connection
@@ -348,3 +349,36 @@ def test_a_metrics_port_in_use_is_a_one_line_error(lab: GitLab, mosquitto: Mosqu
             capture_output=True, text=True, timeout=60,
         )  # fmt: skip
     assert done.returncode == 2 and "cannot listen" in done.stderr, done.stderr
+
+
+def test_a_rolled_back_rollout_is_told_once(fleet: Fleet, receivers: dict[str, Receiver]) -> None:
+    ok = receivers["ok"]
+    assert fleet.reconciler is not None
+    fleet.reconciler.stop()
+    fleet.start_reconciler("--interval", "1", "--notify", ok.url)
+    robots = yaml.safe_load(fleet.lab.read(FLEET))["robots"]
+    for robot_id, assignment in robots.items():
+        assignment["labels"] = {"ring": "canary"} if robot_id == "tb3-01" else {}
+    fleet.lab.write(
+        FLEET,
+        yaml.safe_dump({"robots": robots}, sort_keys=True)
+        + "rollout:\n  waves: [{name: canary, selector: {ring: canary}}, {name: all}]\n"
+        "  healthy_after: 1\n  max_failures: 0\n  wave_timeout: 60\n  on_failure: rollback\n",
+    )
+    stable = fleet.lab.commit("roll out in waves")
+    fleet.watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == stable, "policy")
+    fleet.lab.replace(
+        "configs/scenarios/delivery-gazebo.yaml",
+        'knowledge: {TARGET: {GOAL_ID: "2"}}',
+        'knowledge: {TARGET: {GOAL_ID: "2"}, STANDIN_CRASH: 3}',
+    )
+    bad = fleet.lab.commit("a commit whose brain crashes")
+    fleet.watch.wait_reconciler(lambda s: s.reason == "RolledBack", "the rollback")
+    wait_for(lambda: ok.events("rollout_rolled_back", revision=bad), "the rollback told")
+    # The canary is rolled back to the stable request: back in sync, told once.
+    wait_for(lambda: ok.events("robot_in_sync", robot="tb3-01"), "the canary back in sync")
+    resyncs(fleet.watch, 2)
+    assert len(ok.events("rollout_rolled_back")) == 1
+    assert [e["robot"] for e in ok.events("robot_degraded")] == ["tb3-01"]
+    assert [e["revision"] for e in ok.events("robot_in_sync")] == [stable]
+    assert not ok.events("rollout_halted") and not ok.events("commit_refused")
