@@ -14,6 +14,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
@@ -60,6 +61,18 @@ class Signer(Protocol):
     def __call__(self, request: Signed, /) -> Signed: ...
 
 
+@dataclass(frozen=True)
+class Step:
+    """What one step did, as its `on_step` observer (alerts, metrics) is told after its report."""
+
+    status: ReconcilerStatus | None  # the status the step reported
+    serving: Desired | None  # the last good revision, applied or being applied
+    reason: Reason
+    published: int  # launch requests handed to the broker
+    cleared: int  # launch topics cleared
+    seconds: float  # how long the step took, report included
+
+
 class Outcome(enum.Enum):
     DONE = "done"  # the broker holds what the serving revision asks for
     WAIT = "wait"  # not connected: the next (re)connection wakes the loop
@@ -82,6 +95,7 @@ class Controller:
         on_reconciled: Callable[[ReconcilerStatus], None] | None = None,
         signer: Signer | None = None,
         builder: Builder = load_desired,
+        on_step: Callable[[Step], None] | None = None,
     ) -> None:
         self.source = source
         self.connection = connection
@@ -90,6 +104,7 @@ class Controller:
         self.publish_timeout = publish_timeout
         self._sign = signer
         self._builder = builder
+        self._on_step = on_step  # must return at once: it runs on the reconcile loop
         self._wake = threading.Event()
         self._stop = threading.Event()
         self.ignored = Ignored(log)  # unreadable payloads skipped, shown in the status
@@ -175,6 +190,7 @@ class Controller:
     def _step(self, resync: bool) -> Outcome | None:
         """One reconcile step, then its report: the step's one status write, whatever happened.
         None when the step raised (a bug: logged with its traceback, reported, retried)."""
+        started = time.monotonic()
         outcome: Outcome | None
         try:
             outcome, condition, actions = self.reconcile_once(fetch=resync)
@@ -188,7 +204,28 @@ class Controller:
         except Exception:
             log.exception("cannot report the reconciler status")
             return None
+        self._tell_step(condition, actions, time.monotonic() - started)
         return outcome
+
+    def _tell_step(
+        self, condition: Condition, actions: Actions[LaunchRequest] | None, seconds: float
+    ) -> None:
+        """The `on_step` observer learns what the step did; its failure is only logged."""
+        if self._on_step is None:
+            return
+        try:
+            self._on_step(
+                Step(
+                    self.writer.status,
+                    self.serving,
+                    condition.reason,
+                    len(actions.publish) if actions else 0,
+                    len(actions.clear) if actions else 0,
+                    seconds,
+                )
+            )
+        except Exception:
+            log.exception("the on_step observer failed; ignored")
 
     def _on_topic(self, topic: str) -> None:
         """Network thread: an Offline status while we run (the Last Will of one of our

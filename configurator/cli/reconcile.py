@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -15,6 +16,10 @@ from reconciler.lifecycle import log_to_stderr, on_stop_signals
 from reconciler.signer import make_signer
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 
+if TYPE_CHECKING:
+    from configurator.mqtt import Connection
+    from reconciler.telemetry import Telemetry
+
 
 def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | None) -> BranchSource:
     if remote:
@@ -22,6 +27,40 @@ def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | No
     source = LocalBranch(repo, branch)
     source.head()  # a branch that does not exist is a typo: say so now
     return source
+
+
+def make_telemetry(
+    connection: Connection, prefix: str, notify: tuple[str, ...], metrics_at: str | None
+) -> Telemetry | None:
+    """Alerts and metrics, when asked for (the default path starts nothing); a bad URL or
+    address, or a port that cannot be listened on, is a one-line error."""
+    if not notify and metrics_at is None:
+        return None
+    from reconciler.notify import Notifier, parse_receiver
+    from reconciler.telemetry import Telemetry
+
+    try:
+        receivers = [parse_receiver(url, index) for index, url in enumerate(notify, 1)]
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    metrics = None
+    if metrics_at is not None:
+        from reconciler.metrics import Metrics, parse_address
+
+        try:
+            host, port = parse_address(metrics_at)
+        except ValueError as exc:
+            raise CliError(str(exc)) from None
+        metrics = Metrics()
+        try:
+            metrics.serve(host, port)
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            raise CliError(f"--metrics {metrics_at}: cannot listen: {reason}") from None
+    notifier = None
+    if receivers:
+        notifier = Notifier(receivers, metrics.notified if metrics is not None else None)
+    return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
 
 
 @click.command("reconcile")
@@ -41,6 +80,20 @@ def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | No
     default=None,
     help="where --remote is cloned (default: ~/.cache/robotconf/remotes)",
 )
+@click.option(
+    "--notify",
+    multiple=True,
+    metavar="URL",
+    help="POST alert events as JSON to this http(s) URL (repeatable); slack:URL posts "
+    'a Slack-compatible {"text": ...} instead',
+)
+@click.option(
+    "--metrics",
+    "metrics_at",
+    default=None,
+    metavar="HOST:PORT",
+    help="serve Prometheus metrics at http://HOST:PORT/metrics (:PORT: every interface)",
+)
 def reconcile(
     repo: Path,
     mqtt: BrokerOptions,
@@ -49,6 +102,8 @@ def reconcile(
     interval: float,
     signing_key: Path | None,
     cache_dir: str | None,
+    notify: tuple[str, ...],
+    metrics_at: str | None,
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds; runs until SIGINT or SIGTERM."""
@@ -62,8 +117,16 @@ def reconcile(
         signer = make_signer(signing_key)
     except SigningKeyError as exc:
         raise CliError(str(exc)) from None
+    telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
-    controller = Controller(source, connection, mqtt.prefix, interval, signer=signer)
+    controller = Controller(
+        source,
+        connection,
+        mqtt.prefix,
+        interval,
+        signer=signer,
+        on_step=telemetry.on_step if telemetry is not None else None,
+    )
     on_stop_signals(callback=controller.stop)
     logging.getLogger("robotconf.reconciler").info(
         "reconciling %s (branch %s) to %s, prefix %s",
@@ -72,5 +135,11 @@ def reconcile(
         connection.address.url,
         mqtt.prefix,
     )
-    controller.run()
+    if telemetry is not None:
+        telemetry.start()
+    try:
+        controller.run()
+    finally:
+        if telemetry is not None:
+            telemetry.stop()
     return ExitCode.OK

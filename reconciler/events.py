@@ -1,0 +1,190 @@
+"""Alert events, pure: (what was told so far, what is seen now) -> the transitions to tell.
+
+Each event is told once per transition, never per resync: a refused commit once per revision,
+a halted or rolled back rollout once per revision, a robot once as it degrades or goes offline
+and once as it is back in sync (running the desired request for SETTLE seconds: a brain in a
+crash loop runs a moment before each crash, and that is no recovery).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
+
+SETTLE = 5.0  # seconds a robot told degraded or offline runs the desired request before in sync
+REMEMBERED = 64  # revisions remembered as told: a commit refused long ago is not told again
+_REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REFUSED.value}
+_DEGRADED = {AgentState.FAILED, AgentState.BACKOFF, AgentState.REJECTED}
+
+
+class Kind(str, enum.Enum):
+    COMMIT_REFUSED = "commit_refused"
+    ROLLOUT_HALTED = "rollout_halted"
+    ROLLOUT_ROLLED_BACK = "rollout_rolled_back"
+    ROBOT_DEGRADED = "robot_degraded"
+    ROBOT_OFFLINE = "robot_offline"
+    ROBOT_IN_SYNC = "robot_in_sync"
+
+
+_ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLLED_BACK}
+
+
+@dataclass(frozen=True)
+class Event:
+    """One thing worth telling a person, as receivers get it (`as_json`)."""
+
+    kind: Kind
+    message: str
+    at: float
+    branch: str | None = None
+    revision: str | None = None
+    robot: str | None = None
+    reason: str | None = None  # the reconciler's reason, or the robot's state
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "event": self.kind.value,
+            "at": self.at,
+            "branch": self.branch,
+            "revision": self.revision,
+            "robot": self.robot,
+            "reason": self.reason,
+            "message": self.message,
+        }
+
+    def text(self) -> str:
+        """One line for a chat (the Slack form)."""
+        return f"robotconf {self.kind.value.replace('_', ' ')}: {self.message}"
+
+
+@dataclass(frozen=True)
+class Seen:
+    """What is seen now: the reconciler's status, and the robots' statuses with the digest each
+    should run (None: the robots are not known yet)."""
+
+    status: ReconcilerStatus | None = None
+    robots: Mapping[str, AgentStatus] | None = None
+    desired: Mapping[str, str] = field(default_factory=dict)  # robot -> digest, unsuspended
+    # robot -> when it was first seen running the digest it reports (the observer's clock)
+    running_since: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Told:
+    """What was told so far: the memory that makes events transitions."""
+
+    refused: tuple[str, ...] = ()  # revisions told refused, oldest first
+    rollouts: tuple[tuple[str, str], ...] = ()  # (revision, state) told, oldest first
+    alerting: Mapping[str, Kind] = field(default_factory=dict)  # robot -> degraded or offline
+
+
+def _remember(items: tuple[Any, ...], item: Any) -> tuple[Any, ...]:
+    return (*items, item)[-REMEMBERED:]
+
+
+def robot_kind(status: AgentStatus, digest: str) -> Kind | None:
+    """Degraded, offline, in sync (running `digest`), or in between (None)."""
+    if status.state in _DEGRADED:
+        return Kind.ROBOT_DEGRADED
+    if status.state is AgentState.OFFLINE:
+        return Kind.ROBOT_OFFLINE
+    if status.state is AgentState.RUNNING and status.digest == digest:
+        return Kind.ROBOT_IN_SYNC
+    return None
+
+
+def transitions(
+    told: Told, seen: Seen, at: float, settle: float = SETTLE
+) -> tuple[Told, list[Event]]:
+    """The events `seen` makes, given what was `told`; and the memory after telling them."""
+    events: list[Event] = []
+    status = seen.status
+    branch = status.branch if status is not None else None
+    if status is not None and status.reason in _REFUSED and status.failed_revision:
+        revision = status.failed_revision
+        if revision not in told.refused:
+            told = replace(told, refused=_remember(told.refused, revision))
+            events.append(
+                Event(
+                    Kind.COMMIT_REFUSED,
+                    f"{short_rev(revision)} on {branch} refused ({status.reason}): "
+                    f"{status.message}",
+                    at,
+                    branch,
+                    revision,
+                    reason=status.reason,
+                )
+            )
+    rollout = status.rollout if status is not None else None
+    if rollout is not None and rollout.state in _ROLLOUT_KINDS:
+        key = (rollout.revision, rollout.state)
+        if key not in told.rollouts:
+            told = replace(told, rollouts=_remember(told.rollouts, key))
+            events.append(
+                Event(
+                    _ROLLOUT_KINDS[rollout.state],
+                    f"rollout of {short_rev(rollout.revision)} on {branch} "
+                    f"{'halted' if rollout.state == 'Halted' else 'rolled back'}: "
+                    f"{rollout.message}",
+                    at,
+                    branch,
+                    rollout.revision,
+                    reason=rollout.state,
+                )
+            )
+    if seen.robots is not None:
+        settled = {r for r, since in seen.running_since.items() if at - since >= settle}
+        told, robot_events = _robot_transitions(told, seen, settled, branch, at)
+        events += robot_events
+    return told, events
+
+
+def _robot_transitions(
+    told: Told, seen: Seen, settled: set[str], branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """Only robots the fleet assigns (and does not suspend) are judged; one that is no longer
+    assigned, or whose status is gone, is forgotten without a word."""
+    assert seen.robots is not None
+    events: list[Event] = []
+    alerting: dict[str, Kind] = {}
+    for robot_id, digest in sorted(seen.desired.items()):
+        status = seen.robots.get(robot_id)
+        was = told.alerting.get(robot_id)
+        if status is None:
+            continue
+        now = robot_kind(status, digest)
+        if now in (Kind.ROBOT_DEGRADED, Kind.ROBOT_OFFLINE):
+            alerting[robot_id] = now
+            if now is not was:
+                state = status.state.value
+                why = f": {status.message}" if status.message else ""
+                events.append(
+                    Event(
+                        now,
+                        f"{robot_id} is {state}{why}",
+                        at,
+                        branch,
+                        status.revision,
+                        robot_id,
+                        state,
+                    )
+                )
+        elif now is Kind.ROBOT_IN_SYNC and was is not None and robot_id in settled:
+            events.append(
+                Event(
+                    now,
+                    f"{robot_id} is back in sync, running {short_rev(status.revision)}",
+                    at,
+                    branch,
+                    status.revision,
+                    robot_id,
+                    status.state.value,
+                )
+            )
+        elif was is not None:  # on its way back (starting, settling): still told as it was
+            alerting[robot_id] = was
+    return replace(told, alerting=alerting), events

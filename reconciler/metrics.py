@@ -1,0 +1,111 @@
+"""`reconcile --metrics HOST:PORT`: Prometheus metrics, served by the official client library.
+
+A registry of our own (not the process-wide default), so that only robotconf_ metrics and the
+ones that explain them are scraped.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping
+from wsgiref.simple_server import WSGIServer
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, Info
+from prometheus_client.exposition import start_http_server
+
+from reconciler.verdicts import Verdict
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """`HOST:PORT` (`[::1]:PORT` for IPv6; `:PORT` listens on every interface, as Prometheus
+    exporters do). ValueError with a one-line reason."""
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"--metrics {text!r} must be HOST:PORT, e.g. 127.0.0.1:9108")
+    host = host.removeprefix("[").removesuffix("]")
+    return host or "0.0.0.0", int(port)
+
+
+class Metrics:
+    """The reconciler's metrics, and the HTTP server that serves them once `serve`d."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry(auto_describe=True)
+        r = self.registry
+        self.duration = Histogram(
+            "robotconf_reconcile_duration_seconds",
+            "Duration of one reconcile step (observe, decide, apply, report)",
+            registry=r,
+            buckets=(0.01, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60),
+        )
+        self.applied = Info(
+            "robotconf_applied_revision", "The revision applied last (serving)", registry=r
+        )
+        self.ready = Gauge("robotconf_ready", "1 when the branch's head is applied", registry=r)
+        self.robots = Gauge(
+            "robotconf_robots", "Robots per fleet status verdict", ["verdict"], registry=r
+        )
+        self.publishes = Counter(
+            "robotconf_publishes",
+            "Launch topic messages handed to the broker: requests published, topics cleared",
+            ["action"],
+            registry=r,
+        )
+        self.errors = Counter(
+            "robotconf_reconcile_errors",
+            "Reconcile steps that ended stalled, by reason",
+            ["reason"],
+            registry=r,
+        )
+        self.notifications = Counter(
+            "robotconf_notifications",
+            "Events per receiver: sent, failed (after retries) or dropped (queue full)",
+            ["receiver", "outcome"],
+            registry=r,
+        )
+        for verdict in Verdict:
+            self.robots.labels(verdict.value).set(0)
+        for action in ("publish", "clear"):
+            self.publishes.labels(action)
+        self._applied: str | None = None
+        self._lock = threading.Lock()
+        self._server: WSGIServer | None = None
+
+    def serve(self, host: str, port: int) -> None:
+        """Listens now (OSError when it cannot) and serves on a thread of the library's."""
+        self._server, _ = start_http_server(port, host, registry=self.registry)
+
+    def close(self) -> None:
+        if self._server is not None:
+            self._server.shutdown()
+            self._server.server_close()
+
+    def step(
+        self,
+        seconds: float,
+        *,
+        applied: str | None,
+        ready: bool,
+        published: int,
+        cleared: int,
+        error: str | None,
+    ) -> None:
+        self.duration.observe(seconds)
+        self.ready.set(1 if ready else 0)
+        if published:
+            self.publishes.labels("publish").inc(published)
+        if cleared:
+            self.publishes.labels("clear").inc(cleared)
+        if error is not None:
+            self.errors.labels(error).inc()
+        with self._lock:
+            if applied is not None and applied != self._applied:
+                self._applied = applied
+                self.applied.info({"revision": applied})
+
+    def verdicts(self, counts: Mapping[Verdict, int]) -> None:
+        for verdict in Verdict:
+            self.robots.labels(verdict.value).set(counts.get(verdict, 0))
+
+    def notified(self, receiver: str, outcome: str) -> None:
+        self.notifications.labels(receiver, outcome).inc()

@@ -1,0 +1,167 @@
+"""Alerts and metrics of `robotconf reconcile`, off the reconcile loop, on a thread of their own.
+
+Fed by the controller's `on_step` hook and by a view of the robots' statuses (started only when
+--notify or --metrics asks for it): it judges transitions (`events`), tells the receivers
+(`notify`) and sets the gauges (`metrics`).
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+from configurator.mqtt import Connection
+from configurator.wire import AgentState, AgentStatus, Topics
+from reconciler.controller import Step
+from reconciler.decide import state_of
+from reconciler.events import Seen, Told, transitions
+from reconciler.observed import RobotSeen, parse_retained
+from reconciler.retained import RetainedView
+from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, verdict
+
+if TYPE_CHECKING:
+    from reconciler.metrics import Metrics
+    from reconciler.notify import Notifier
+
+log = logging.getLogger("robotconf.reconciler")
+
+
+class Telemetry:
+    """Started before the controller runs, stopped after; `on_step` is its hook."""
+
+    def __init__(
+        self,
+        connection: Connection,
+        prefix: str,
+        *,
+        notifier: Notifier | None = None,
+        metrics: Metrics | None = None,
+    ) -> None:
+        self.topics = Topics(prefix)
+        self.notifier = notifier
+        self.metrics = metrics
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._step: Step | None = None
+        self._told = Told()
+        # robot -> ((digest, the agent's since), first seen running it by our clock)
+        self._running_since: dict[str, tuple[tuple[str, float], float]] = {}
+        self._desired: tuple[str | None, dict[str, DesiredRobot]] = (None, {})
+        self.view = RetainedView(
+            connection,
+            [self.topics.all_status],
+            f"{prefix}/sync",
+            role="reconciler-alerts",
+            on_change=self._wake.set,
+            on_synced=self._wake.set,
+        )
+        self._thread = threading.Thread(target=self._run, name="telemetry", daemon=True)
+
+    def start(self) -> None:
+        if self.notifier is not None:
+            self.notifier.start()
+        self.view.start()
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        self._thread.join(5)
+        self.view.stop()
+        if self.notifier is not None:
+            self.notifier.stop()
+        if self.metrics is not None:
+            self.metrics.close()
+
+    def on_step(self, step: Step) -> None:
+        """The reconcile loop's hook: counts the step and hands it over, never waiting."""
+        if self.metrics is not None:
+            self.metrics.step(
+                step.seconds,
+                applied=step.serving.revision if step.serving is not None else None,
+                ready=step.status is not None and step.status.ready,
+                published=step.published,
+                cleared=step.cleared,
+                error=step.reason.value if state_of(step.reason) == "Stalled" else None,
+            )
+        with self._lock:
+            self._step = step
+        self._wake.set()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            # A robot told degraded or offline may settle back in sync with nothing arriving.
+            self._wake.wait(1.0 if self._told.alerting else None)
+            self._wake.clear()
+            if self._stop.is_set():
+                return
+            try:
+                self._look()
+            except Exception:  # a bug here must not end alerting for good
+                log.exception("internal error in alerts or metrics; ignored")
+
+    def _look(self) -> None:
+        with self._lock:
+            step = self._step
+        if step is None:  # robots are judged against what the reconciler serves
+            return
+        now = time.time()  # events carry it, so unix time; runs settle by it too
+        robots = self._robots(now)
+        desired = self._desired_of(step)
+        if self.notifier is not None:
+            digests = {r: d.digest for r, d in desired.items() if not d.suspended}
+            since = {r: seen for r, (_, seen) in self._running_since.items()}
+            self._told, events = transitions(
+                self._told, Seen(step.status, robots, digests, since), now
+            )
+            self.notifier.tell(events)
+        if self.metrics is not None and robots is not None:
+            self.metrics.verdicts(verdict_counts(desired, robots))
+
+    def _robots(self, now: float) -> dict[str, AgentStatus] | None:
+        """The robots' statuses (None until known), and when each was first seen running."""
+        if not self.view.synced:
+            return None
+        seen = parse_retained(self.view.snapshot(), self.topics)
+        statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
+        # A run is known by its digest and the agent's time of entering it: a brain that
+        # crashed and runs again between two looks is a new run, not a settled one.
+        previous, self._running_since = self._running_since, {}
+        for robot_id, status in statuses.items():
+            if status.state is AgentState.RUNNING and status.digest:
+                run = (status.digest, status.since)
+                known = previous.get(robot_id)
+                self._running_since[robot_id] = (
+                    known if known is not None and known[0] == run else (run, now)
+                )
+        return statuses
+
+    def _desired_of(self, step: Step) -> dict[str, DesiredRobot]:
+        serving = step.serving
+        revision = serving.revision if serving is not None else None
+        if revision != self._desired[0]:
+            fleet = serving.fleet if serving is not None else None
+            self._desired = (revision, desired_from_fleet(fleet) if fleet is not None else {})
+        return self._desired[1]
+
+
+def verdict_counts(
+    desired: Mapping[str, DesiredRobot], robots: Mapping[str, AgentStatus]
+) -> dict[Verdict, int]:
+    """Robots per verdict as `robotconf status` judges them, from their statuses alone: a
+    desired request counts as published (the launch topics are the reconciler's own view)."""
+    counts: collections.Counter[Verdict] = collections.Counter()
+    for robot_id in set(desired) | set(robots):
+        want = desired.get(robot_id)
+        seen = RobotSeen(
+            launch_digest=want.digest if want is not None else None,
+            launch_retained=want is not None,
+            status=robots.get(robot_id),
+        )
+        counts[verdict(want, seen)[0]] += 1
+    return dict(counts)

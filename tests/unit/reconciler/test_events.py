@@ -1,0 +1,282 @@
+"""Alert events, pure: transitions only, once each; receiver URLs, bodies and metric addresses."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
+from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, transitions
+from reconciler.metrics import parse_address
+from reconciler.notify import parse_receiver
+from reconciler.telemetry import verdict_counts
+from reconciler.verdicts import DesiredRobot, Verdict
+
+D1 = "sha256:" + "1" * 64
+D2 = "sha256:" + "2" * 64
+GOOD, BAD, WORSE = "a" * 40, "b" * 40, "c" * 40
+
+
+def stalled(revision: str, reason: str = "BuildFailed") -> ReconcilerStatus:
+    return ReconcilerStatus(
+        state="Stalled",
+        ready=False,
+        reason=reason,
+        branch="main",
+        last_applied_revision=GOOD,
+        failed_revision=revision,
+        message="configs/fleet.yaml: error RC101 nope",
+    )
+
+
+def ready() -> ReconcilerStatus:
+    return ReconcilerStatus(
+        state="Ready", ready=True, reason="Applied", branch="main", last_applied_revision=GOOD
+    )
+
+
+def robot(state: AgentState, digest: str | None = D1, message: str = "") -> AgentStatus:
+    return AgentStatus(robot_id="r1", state=state, digest=digest, revision=GOOD, message=message)
+
+
+def run(seens: list[Seen]) -> list[list[Event]]:
+    """The events of each observation in turn, the memory carried along."""
+    told, out = Told(), []
+    for seen in seens:
+        told, events = transitions(told, seen, 1.0)
+        out.append(events)
+    return out
+
+
+def kinds(events: list[list[Event]]) -> list[list[Kind]]:
+    return [[e.kind for e in step] for step in events]
+
+
+def test_a_refused_commit_is_told_once_per_revision_whatever_comes_between() -> None:
+    steps = run(
+        [
+            Seen(ready()),
+            Seen(stalled(BAD)),
+            Seen(stalled(BAD)),  # a resync
+            Seen(stalled(BAD, "BrokerUnavailable")),  # something else stalls it a while
+            Seen(stalled(BAD)),
+            Seen(stalled(WORSE, "EmptyFleetRefused")),
+            Seen(stalled(WORSE, "EmptyFleetRefused")),
+        ]
+    )
+    assert kinds(steps) == [[], [Kind.COMMIT_REFUSED], [], [], [], [Kind.COMMIT_REFUSED], []]
+    first, second = steps[1][0], steps[5][0]
+    assert (first.revision, first.reason, first.branch) == (BAD, "BuildFailed", "main")
+    assert (second.revision, second.reason) == (WORSE, "EmptyFleetRefused")
+    assert "RC101" in first.message and BAD[:12] in first.message
+
+
+def test_other_stalls_are_not_refusals() -> None:
+    steps = run([Seen(stalled(BAD, "SourceUnavailable")), Seen(stalled(BAD, "InternalError"))])
+    assert kinds(steps) == [[], []]
+
+
+def test_the_memory_of_refused_revisions_is_bounded() -> None:
+    told = Told()
+    for n in range(REMEMBERED + 10):
+        told, _ = transitions(told, Seen(stalled(f"{n:040x}")), 1.0)
+    assert len(told.refused) == REMEMBERED and told.refused[-1] == f"{REMEMBERED + 9:040x}"
+
+
+def with_rollout(state: str, revision: str = BAD) -> ReconcilerStatus:
+    status = ready()
+    rollout = RolloutStatus(revision=revision, state=state, message="2 of 2 failed")  # type: ignore[arg-type]
+    return status.model_copy(update={"rollout": rollout})
+
+
+def test_a_halted_or_rolled_back_rollout_is_told_once_per_revision() -> None:
+    steps = run(
+        [
+            Seen(with_rollout("Progressing")),
+            Seen(with_rollout("Halted")),
+            Seen(with_rollout("Halted")),
+            Seen(with_rollout("Progressing", WORSE)),
+            Seen(with_rollout("RolledBack", WORSE)),
+            Seen(with_rollout("RolledBack", WORSE)),
+            Seen(with_rollout("Complete", GOOD)),
+        ]
+    )
+    assert kinds(steps) == [
+        [],
+        [Kind.ROLLOUT_HALTED],
+        [],
+        [],
+        [Kind.ROLLOUT_ROLLED_BACK],
+        [],
+        [],
+    ]
+    assert steps[1][0].revision == BAD and "halted" in steps[1][0].message
+
+
+def robots(status: AgentStatus | None, digest: str = D1, since: float = -100.0) -> Seen:
+    """r1 as `status` says, running (if it runs) since `since`: settled at time 1.0."""
+    return Seen(ready(), {"r1": status} if status else {}, {"r1": digest}, {"r1": since})
+
+
+@pytest.mark.parametrize("state", [AgentState.FAILED, AgentState.BACKOFF, AgentState.REJECTED])
+def test_a_robot_degrading_is_told_once_then_once_back_in_sync(state: AgentState) -> None:
+    steps = run(
+        [
+            robots(robot(AgentState.RUNNING)),
+            robots(robot(state, message="exit 3")),
+            robots(robot(state, message="exit 3")),
+            robots(robot(AgentState.STARTING)),
+            robots(robot(AgentState.BACKOFF)),  # still degraded: not told again
+            robots(robot(AgentState.RUNNING)),
+            robots(robot(AgentState.RUNNING)),
+        ]
+    )
+    assert kinds(steps) == [
+        [],
+        [Kind.ROBOT_DEGRADED],
+        [],
+        [],
+        [],
+        [Kind.ROBOT_IN_SYNC],
+        [],
+    ]
+    told = steps[1][0]
+    assert (told.robot, told.reason) == ("r1", state.value) and "exit 3" in told.message
+
+
+def test_offline_then_degraded_are_two_transitions() -> None:
+    steps = run(
+        [
+            robots(robot(AgentState.OFFLINE)),
+            robots(robot(AgentState.FAILED)),
+            robots(robot(AgentState.OFFLINE)),
+        ]
+    )
+    assert kinds(steps) == [[Kind.ROBOT_OFFLINE], [Kind.ROBOT_DEGRADED], [Kind.ROBOT_OFFLINE]]
+
+
+def test_a_robot_is_in_sync_only_on_the_desired_digest_and_only_after_an_alert() -> None:
+    steps = run(
+        [
+            robots(robot(AgentState.RUNNING, D2)),  # an older request: on its way
+            robots(robot(AgentState.RUNNING, D1)),  # a normal rollout: nothing to tell
+            robots(robot(AgentState.FAILED, D1)),
+            robots(robot(AgentState.RUNNING, D2)),  # running, but not what it should
+            robots(robot(AgentState.RUNNING, D1)),
+        ]
+    )
+    assert kinds(steps) == [[], [], [Kind.ROBOT_DEGRADED], [], [Kind.ROBOT_IN_SYNC]]
+
+
+def test_back_in_sync_only_once_settled() -> None:
+    told, events = transitions(Told(), robots(robot(AgentState.BACKOFF)), 100.0)
+    assert [e.kind for e in events] == [Kind.ROBOT_DEGRADED]
+    # Running again since 98 (a crash loop runs a moment before each crash): not yet settled.
+    told, events = transitions(told, robots(robot(AgentState.RUNNING), since=98.0), 100.0)
+    assert events == [] and told.alerting == {"r1": Kind.ROBOT_DEGRADED}
+    told, events = transitions(told, robots(robot(AgentState.BACKOFF)), 101.0)
+    assert events == []  # still the same degradation
+    told, events = transitions(told, robots(robot(AgentState.RUNNING), since=101.0), 105.9)
+    assert events == []
+    told, events = transitions(told, robots(robot(AgentState.RUNNING), since=101.0), 106.0)
+    assert [e.kind for e in events] == [Kind.ROBOT_IN_SYNC] and not told.alerting
+
+
+def test_unassigned_robots_and_unknown_statuses_tell_nothing() -> None:
+    failed = robot(AgentState.FAILED)
+    steps = run(
+        [
+            Seen(ready(), {"r1": failed}, {}),  # not assigned
+            Seen(ready(), None, {"r1": D1}),  # statuses not known yet
+            robots(None),  # never reported
+        ]
+    )
+    assert kinds(steps) == [[], [], []]
+    # Unassigned while alerting: forgotten, so a later assignment that fails is told again.
+    told, _ = transitions(Told(), robots(failed), 1.0)
+    told, events = transitions(told, Seen(ready(), {"r1": failed}, {}), 1.0)
+    assert not events and not told.alerting
+    assert [e.kind for e in transitions(told, robots(failed), 1.0)[1]] == [Kind.ROBOT_DEGRADED]
+
+
+def test_receivers_get_the_event_json_or_slack_text() -> None:
+    event = Event(Kind.COMMIT_REFUSED, "bbbb on main refused", 2.5, "main", BAD, None, "X")
+    plain = parse_receiver("http://127.0.0.1:9/hook")
+    slack = parse_receiver("slack:https://hooks.example/services/T/B/SECRET", 2)
+    assert json.loads(plain.body(event)) == {
+        "event": "commit_refused",
+        "at": 2.5,
+        "branch": "main",
+        "revision": BAD,
+        "robot": None,
+        "reason": "X",
+        "message": "bbbb on main refused",
+    }
+    assert json.loads(slack.body(event)) == {
+        "text": "robotconf commit refused: bbbb on main refused"
+    }
+    assert slack.slack and not plain.slack
+    assert slack.name == "#2 slack:https://hooks.example"
+
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "ftp://host/x",
+        "hooks.example/x",
+        "slack:mqtt://host",
+        "http:///nohost",
+        "http://user:hunter2@host:99999/x",
+    ],
+)
+def test_bad_receiver_urls_are_refused_without_their_secrets(url: str) -> None:
+    with pytest.raises(ValueError) as caught:
+        parse_receiver(url)
+    assert "--notify #1" in str(caught.value) and "hunter2" not in str(caught.value)
+
+
+def test_a_receiver_name_hides_credentials_and_path() -> None:
+    name = parse_receiver("https://user:hunter2@alerts.example:8443/token/XYZ").name
+    assert name == "#1 https://alerts.example:8443"
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("127.0.0.1:9108", ("127.0.0.1", 9108)),
+        (":9108", ("0.0.0.0", 9108)),
+        ("[::1]:9108", ("::1", 9108)),
+        ("localhost:1", ("localhost", 1)),
+    ],
+)
+def test_metrics_addresses(text: str, expected: tuple[str, int]) -> None:
+    assert parse_address(text) == expected
+
+
+@pytest.mark.parametrize("text", ["9108", "host:", "host:http", "host:0", "host:70000", ""])
+def test_bad_metrics_addresses(text: str) -> None:
+    with pytest.raises(ValueError, match="HOST:PORT"):
+        parse_address(text)
+
+
+def test_verdict_counts_judge_robots_from_their_statuses() -> None:
+    desired = {
+        "r1": DesiredRobot("r1", "s", D1),
+        "r2": DesiredRobot("r2", "s", D1),
+        "r3": DesiredRobot("r3", "s", D1, suspended=True),
+        "r4": DesiredRobot("r4", "s", D1),
+    }
+    statuses = {
+        "r1": robot(AgentState.RUNNING, D1),
+        "r2": robot(AgentState.FAILED, D1),
+        "r3": robot(AgentState.RUNNING, D2),
+        "r9": robot(AgentState.IDLE, None),
+    }
+    assert verdict_counts(desired, statuses) == {
+        Verdict.IN_SYNC: 1,
+        Verdict.DEGRADED: 1,
+        Verdict.SUSPENDED: 1,
+        Verdict.OFFLINE: 1,  # r4 never reported
+        Verdict.UNASSIGNED: 1,
+    }
