@@ -25,14 +25,15 @@ def _token_problem(token: str) -> str | None:
     if token == "":
         return "has an empty token ('//', or a '/' at the end)"
     if token[0].isdigit():
-        return f"token '{token}' starts with a digit"
+        return f"has token '{token}' starting with a digit"
     if _TOKEN.fullmatch(token) is None:
         bad = sorted({c for c in token if not (c.isascii() and (c.isalnum() or c == "_"))})
-        return f"token '{token}' has {', '.join(repr(c) for c in bad)}: use letters, digits, '_'"
+        chars = ", ".join(repr(c) for c in bad)
+        return f"has token '{token}' with {chars}: use letters, digits, '_'"
     if "__" in token:
-        return f"token '{token}' has a repeated underscore"
+        return f"has token '{token}' with a repeated underscore"
     if token.endswith("_"):
-        return f"token '{token}' ends with an underscore"
+        return f"has token '{token}' ending with an underscore"
     return None
 
 
@@ -50,8 +51,8 @@ def length_problem(full_name: str) -> str | None:
     if len(full_name) + tokens + _PREFIX_RESERVE > _DDS_LIMIT:
         limit = _DDS_LIMIT - _PREFIX_RESERVE
         return (
-            f"'{full_name}' is too long for DDS ({len(full_name)} characters and {tokens} "
-            f"tokens; together at most {limit})"
+            f"is too long for DDS: '{full_name}' has {len(full_name)} characters and {tokens} "
+            f"tokens, together at most {limit}"
         )
     return None
 
