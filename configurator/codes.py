@@ -154,7 +154,7 @@ RULES: dict[str, Rule] = {
             Severity.ERROR,
             "fleet: two robots in one environment (one world) on one platform bind a topic or "
             "action mapping to the same fully qualified name: they would drive each other (give "
-            "them namespaces and the scheme relative names)",
+            "them namespaces and the scheme relative names); suspended robots are left out",
         ),
         Rule("RC601", Severity.ERROR, "a setting's default does not fit its own definition"),
         Rule(

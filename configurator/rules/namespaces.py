@@ -136,6 +136,10 @@ def check_namespaces(repo: Repository, report: Reporter) -> None:
         robot = _robot_names(repo, fleet, robot_id, report)
         if robot is None or robot.world[0] == "":
             continue  # no environment: the robot shares no world with another
+        if fleet.model.robots[robot_id].suspended:
+            # Left as it is: its assignment does not reach it, so uses none of these names
+            # (it is checked when it is resumed).
+            continue
         clashes: dict[str, tuple[_Robot, list[tuple[str, str, bool]]]] = {}
         for key, (kind, name, absolute) in robot.names.items():
             if kind not in CLASHING_KINDS:

@@ -105,3 +105,13 @@ def test_shared_services_other_worlds_and_platforms_do_not_clash(lab: Lab) -> No
     assert lab.check().diagnostics == []
     render = lab.render("tb3-09")
     assert render.scenario.capability.mappings["door_opener"].name == "/sim/door_controller/open"
+
+
+def test_a_suspended_robot_clashes_with_no_one(lab: Lab) -> None:
+    # tb3-04 patrols the lab at the root on absolute names; a second patroller there would
+    # drive it, but a suspended one is left as it is: its assignment reaches it only later.
+    clash = "  tb3-09: {scenario: patrol-real, namespace: other}\n  tb3-04:"
+    lab.replace(FLEET, "  tb3-04:", clash)
+    assert "robots 'tb3-09' and 'tb3-04' both use /navigate_to_pose" in lab.only("RC505").message
+    lab.replace(FLEET, "namespace: other}", "namespace: other, suspended: true}")
+    assert lab.check().diagnostics == []
