@@ -6,13 +6,22 @@ Loading never raises a traceback at the user: every problem becomes one `ConfigE
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 from pydantic_core import ErrorDetails
 
 from configurator.diagnostics import did_you_mean
@@ -108,6 +117,65 @@ class LogConfig(StrictModel):
     backups: int = Field(default=3, ge=0)
 
 
+# ---------------------------------------------------------------- the brain's environment
+
+# POSIX's portable names: what every shell and `os.environ` takes as a variable name.
+_ENV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+# The variables the agent sets for its brain (ROBOTCONF_LAUNCH_REQUEST, ..._ROBOT_ID, ..._DIGEST,
+# and any later one): agent.yaml must not override what tells the brain its request.
+AGENT_ENV_PREFIX = "ROBOTCONF_"
+# Linux refuses one environment string longer than 128 KiB at exec time: the brain would never
+# start, and only the robot's log would say why. Far below, and plenty for any setting.
+MAX_ENV_VALUE = 32 * 1024
+# DDS derives its UDP ports from the domain id; beyond 232 they pass 65535 and the brain's
+# nodes fail at start (ROS 2 docs, "The ROS_DOMAIN_ID"). Checked here so a typo is an
+# agent.yaml error at start-up, not a brain restarting until it gives up.
+MAX_ROS_DOMAIN_ID = 232
+
+
+def _env_name(name: str) -> str:
+    if _ENV_NAME.fullmatch(name) is None:
+        raise ValueError(
+            "is not an environment variable name: letters, digits and '_', not starting with "
+            "a digit (e.g. ROS_DOMAIN_ID)"
+        )
+    if name.upper().startswith(AGENT_ENV_PREFIX):
+        raise ValueError(
+            f"is the agent's own: it sets {AGENT_ENV_PREFIX}* for the brain (the request's file, "
+            "the robot id, the digest); choose another name"
+        )
+    return name
+
+
+def _env_text(value: Any) -> Any:
+    # The value itself is never echoed: env may hold secrets (a token, a password).
+    if isinstance(value, (bool, int, float)):
+        raise ValueError('values are text: quote it, e.g. ROS_DOMAIN_ID: "7"')
+    return value
+
+
+def _env_value(value: str) -> str:
+    if "\0" in value:
+        raise ValueError("has a NUL character, which no environment variable can hold")
+    if len(value) > MAX_ENV_VALUE:
+        raise ValueError(f"is longer than {MAX_ENV_VALUE} characters")
+    return value
+
+
+EnvName = Annotated[str, AfterValidator(_env_name)]
+EnvValue = Annotated[str, BeforeValidator(_env_text), AfterValidator(_env_value)]
+
+
+def _domain_id_problem(value: str) -> str | None:
+    if not (value.isascii() and value.isdigit()) or int(value) > MAX_ROS_DOMAIN_ID:
+        return (
+            f"ROS_DOMAIN_ID {value!r} is not a domain id: an integer from 0 to "
+            f'{MAX_ROS_DOMAIN_ID} written as text, e.g. ROS_DOMAIN_ID: "7" (DDS derives its '
+            "ports from it; higher ones do not exist)"
+        )
+    return None
+
+
 class AgentConfig(StrictModel):
     broker: str = Field(default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER))
     prefix: str = DEFAULT_PREFIX
@@ -127,6 +195,10 @@ class AgentConfig(StrictModel):
     # The reconciler's Ed25519 public key (`robotconf keys generate`): when set, only requests
     # it signed are accepted.
     public_key: Path | None = Field(None, strict=False)
+    # Extra environment of the brain only (ROS_DOMAIN_ID, RMW_IMPLEMENTATION...): never logged
+    # or published, as it may hold secrets; so it stays out of the model's repr too.
+    # ROS_DOMAIN_ID is checked on reading (`_env_problems`), located at its own line.
+    env: dict[EnvName, EnvValue] = Field(default_factory=dict, repr=False)
 
     @field_validator("broker")
     @classmethod
@@ -262,6 +334,8 @@ _HINTS: dict[str, str] = {
 
 def _explain(error: ErrorDetails) -> tuple[Loc, str]:
     loc: Loc = tuple(error["loc"])
+    if loc[-1:] == ("[key]",):  # a mapping's key was refused: report it at the key
+        loc = loc[:-1]
     kind = error["type"]
     where = error_path(loc)
     if kind == "extra_forbidden":
@@ -287,7 +361,17 @@ def _explain(error: ErrorDetails) -> tuple[Loc, str]:
         if loc == () or str(loc[-1]) in message.split()[:3]:
             return loc, message
         return loc, f"{where}: {message}"
+    if loc[:1] == ("env",):
+        return loc, f"{where}: {message}"  # never the value: env may hold secrets
     return loc, f"{where}: {message} (got {error.get('input')!r})"
+
+
+def _env_problems(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
+    """What the ROS 2 variables of `env` must be (the rest is any text)."""
+    domain = config.env.get("ROS_DOMAIN_ID")
+    problem = None if domain is None else _domain_id_problem(domain)
+    if problem is not None:
+        yield ("env", "ROS_DOMAIN_ID"), f"env: {problem}"
 
 
 def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc, str]]:
@@ -369,7 +453,7 @@ def parse_config(
         raise ConfigInvalid(_errors(filename, doc, (_explain(e) for e in exc.errors()))) from None
     if base is not None:
         config = config.resolved(base)
-    problems = list(_check_environment(config, prepare))
+    problems = [*_env_problems(config), *_check_environment(config, prepare)]
     if problems:
         raise ConfigInvalid(_errors(filename, doc, problems))
     return config

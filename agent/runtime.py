@@ -115,8 +115,11 @@ class Agent:
         self._exit_fds: dict[int, process.Brain] = {}  # exit descriptors watched, until reaped
         self._accepted_payload: tuple[str, bytes] = ("", b"")  # digest, bytes as received
         self._held_until: float | None = None  # when a status held back is published
+        # agent.yaml's `env` reaches the brain only (never a log or a status: it may hold
+        # secrets); the agent's own ROBOTCONF_* variables, which it refuses to override, last.
         self._brain_env = process.brain_environment(
             {
+                **config.env,
                 "ROBOTCONF_LAUNCH_REQUEST": str(self.workdir / REQUEST_FILE),
                 "ROBOTCONF_ROBOT_ID": config.robot_id,
             }

@@ -136,6 +136,26 @@ RULES: dict[str, Rule] = {
             "fleet: a label key or value not written like a robot id (letters, digits, `_`, `.`, "
             "`-`; 1-64, starting with a letter or digit)",
         ),
+        Rule(
+            "RC503",
+            Severity.ERROR,
+            "fleet: a robot's `namespace` is not a ROS 2 namespace (tokens of letters, digits and "
+            "single `_`, not starting with a digit, separated by `/`; `tb3-01` -> `tb3_01`), or "
+            "makes a mapping name too long for DDS",
+        ),
+        Rule(
+            "RC504",
+            Severity.ERROR,
+            "fleet: a robot without `namespace` runs a mapping scheme whose names start with "
+            "`{namespace}`",
+        ),
+        Rule(
+            "RC505",
+            Severity.ERROR,
+            "fleet: two robots in one environment (one world) on one platform bind a topic or "
+            "action mapping to the same fully qualified name: they would drive each other (give "
+            "them namespaces and the scheme relative names); suspended robots are left out",
+        ),
         Rule("RC601", Severity.ERROR, "a setting's default does not fit its own definition"),
         Rule(
             "RC602",
@@ -152,6 +172,13 @@ RULES: dict[str, Rule] = {
             "RC608",
             Severity.WARNING,
             "a mapping scheme does not bind a mapping of a robot template of its platform",
+        ),
+        Rule(
+            "RC609",
+            Severity.ERROR,
+            "a mapping scheme's name is not a ROS 2 topic, service or action name: absolute "
+            "(`/cmd_vel`), relative (`cmd_vel`) or `{namespace}/...`; no `~`, other "
+            "substitutions, `//`, trailing `/` or `_`, `__`, or token starting with a digit",
         ),
         Rule(
             "RC701",

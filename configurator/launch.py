@@ -22,6 +22,10 @@ DIGEST_PATTERN = r"^sha256:[0-9a-f]{64}$"
 # out, a request keeps the digest it had before the field existed (an older reconciler's
 # request and a newer one's for the same content are the same: upgrading restarts no brain).
 DIGEST_EXCLUDED = frozenset({"revision", "digest", "restart_digest", "issued_at", "signature"})
+# Content a request carries only when set: unset, it is neither published nor digested, so a
+# robot that uses none has the request (and digests) it had before the field existed, and an
+# agent that predates the field (its models refuse unknown fields) still accepts it.
+CONTENT_WHEN_SET = ("namespace",)
 # A well-formed placeholder while a request is built; `with_digest` replaces it.
 _PENDING_DIGEST = "sha256:" + "0" * 64
 
@@ -64,7 +68,7 @@ class _Published(StrictModel):
     def wire(self, *, signature: bool = True) -> dict[str, Any]:
         """The JSON object published (signing fields and `restart_digest` only when set)."""
         # A Stop has no `restart_digest`: only fields this model has and that are None.
-        optional = ("issued_at", "signature", "restart_digest")
+        optional = ("issued_at", "signature", "restart_digest", *CONTENT_WHEN_SET)
         unset = {k for k in optional if k in type(self).model_fields and getattr(self, k) is None}
         if not signature:
             unset.add("signature")
@@ -90,6 +94,11 @@ class LaunchRequest(_Published):
         pattern=DIGEST_PATTERN,
         description="sha256 of what only a restart applies (scenario.capability); when only "
         "the rest changes, an agent configured to may reload the running brain instead",
+    )
+    namespace: str | None = Field(
+        None,
+        description="the robot's ROS 2 namespace, absolute (/tb3_01); the names in "
+        "scenario.capability.mappings are resolved in it already (fully qualified)",
     )
     scenario: LaunchScenario
 
@@ -130,14 +139,20 @@ def content_digest(content: Any) -> str:
 def digest_content(request: LaunchRequest) -> dict[str, Any]:
     """The one definition of what a request's digest covers: every field of the model (of a
     subclass too) but DIGEST_EXCLUDED. Rendering and the agent's check both come here."""
-    return request.model_dump(mode="json", exclude=set(DIGEST_EXCLUDED))
+    unset = {name for name in CONTENT_WHEN_SET if getattr(request, name) is None}
+    return request.model_dump(mode="json", exclude=set(DIGEST_EXCLUDED) | unset)
 
 
 def restart_content(request: LaunchRequest) -> dict[str, Any]:
     """The one definition of what only a restart applies: the capability (platform, mapping
     scheme, template, actions, logics, mappings). The rest (goals, knowledge, settings, the
-    robot's name) a brain that supports it may reload in place."""
-    return request.scenario.capability.model_dump(mode="json")
+    robot's name) a brain that supports it may reload in place. A namespace is restart
+    content too: a brain's nodes cannot move into another one in place."""
+    capability = request.scenario.capability.model_dump(mode="json")
+    if request.namespace is None:
+        # Without one, the content it always had: such a robot's restart digest is unchanged.
+        return capability
+    return {"capability": capability, "namespace": request.namespace}
 
 
 def restart_digest_of(request: LaunchRequest) -> str:
@@ -158,15 +173,20 @@ def with_digest(request: Request) -> Request:
 
 
 def make_launch_request(
-    robot_id: str, robot_name: str, revision: str, scenario: LaunchScenario
+    robot_id: str,
+    robot_name: str,
+    revision: str,
+    scenario: LaunchScenario,
+    namespace: str | None = None,
 ) -> LaunchRequest:
     """Build a request whose digest covers everything but the revision, and whose
-    restart_digest covers its capability."""
+    restart_digest covers its capability (and namespace)."""
     draft = LaunchRequest(
         robot_id=robot_id,
         robot_name=robot_name,
         revision=revision,
         digest=_PENDING_DIGEST,
+        namespace=namespace,
         scenario=scenario,
     )
     return with_digest(draft)

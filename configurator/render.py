@@ -19,8 +19,15 @@ from configurator.launch import (
     make_launch_request,
 )
 from configurator.repository import Repository
-from configurator.resolve import resolve_capability
-from configurator.types import JsonObject, RolloutPolicy, SettingDefinition
+from configurator.resolve import ResolvedCapability, resolve_capability
+from configurator.rosnames import UnresolvableName, absolute_namespace, resolve_name
+from configurator.types import (
+    JsonObject,
+    MappingBinding,
+    RobotAssignment,
+    RolloutPolicy,
+    SettingDefinition,
+)
 
 
 class RenderError(Exception):
@@ -57,14 +64,53 @@ def _settings(definitions: dict[str, SettingDefinition], chosen: dict[str, Any])
     return values
 
 
+def bound_mappings(resolved: ResolvedCapability) -> dict[str, MappingBinding]:
+    """The mappings the selected logics need, as the scheme binds them (names unresolved);
+    one the scheme does not bind is left out (validation reports it)."""
+    if resolved.scheme is None:
+        return {}
+    needed = sorted({m for s in resolved.selections.values() for m in s.logic.mappings})
+    bindings = resolved.scheme.mappings
+    return {m: bindings[m] for m in needed if m in bindings}
+
+
+def for_robot(scenario: LaunchScenario, robot_id: str, namespace: str | None) -> LaunchScenario:
+    """The scenario with its mapping names resolved for one robot (fully qualified)."""
+    capability = scenario.capability
+    try:
+        mappings = {
+            key: binding.model_copy(update={"name": resolve_name(binding.name, namespace)})
+            for key, binding in capability.mappings.items()
+        }
+    except UnresolvableName as e:
+        raise RenderError(f"robot '{robot_id}': {e}") from None
+    return scenario.model_copy(
+        update={"capability": capability.model_copy(update={"mappings": mappings})}
+    )
+
+
+def _request(
+    repo: Repository, robot_id: str, assignment: RobotAssignment, scenario: LaunchScenario
+) -> LaunchRequest:
+    namespace = assignment.namespace
+    return make_launch_request(
+        robot_id,
+        assignment.name or robot_id,
+        repo.revision,
+        for_robot(scenario, robot_id, namespace),
+        namespace=absolute_namespace(namespace) if namespace is not None else None,
+    )
+
+
 def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
+    """A scenario's content, shared by its robots: mapping names as the scheme writes them
+    (`for_robot` resolves them per robot)."""
     scenario = repo.scenarios[scenario_name].model
     capability = repo.capabilities[scenario.capability].model
     resolved = resolve_capability(repo, capability)
     if resolved.scheme is None:
         raise RenderError(f"capability '{scenario.capability}' has no usable mapping scheme")
     tasks = {name: entry.model for name, entry in repo.tasks.items()}
-    needed = sorted({m for s in resolved.selections.values() for m in s.logic.mappings})
     logic_settings = {
         s.logic_name: _settings(s.logic.settings, scenario.logic_settings.get(s.logic_name, {}))
         for s in resolved.selections.values()
@@ -99,7 +145,7 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
             tasks=achievable_tasks(tasks, capability.actions),
             actions=sorted(capability.actions),
             logics=dict(capability.actions),
-            mappings={m: resolved.scheme.mappings[m] for m in needed},
+            mappings=bound_mappings(resolved),
         ),
         environment_name=scenario.environment,
         environment_type=environment.type if environment else None,
@@ -122,9 +168,7 @@ def render_fleet(repo: Repository) -> FleetRender:
         scenario = scenarios.get(assignment.scenario)
         if scenario is None:
             scenario = scenarios[assignment.scenario] = render_scenario(repo, assignment.scenario)
-        result.requests[robot_id] = make_launch_request(
-            robot_id, assignment.name or robot_id, repo.revision, scenario
-        )
+        result.requests[robot_id] = _request(repo, robot_id, assignment, scenario)
         result.scenario_of[robot_id] = assignment.scenario
         result.labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
@@ -141,5 +185,4 @@ def render_robot(repo: Repository, robot_id: str) -> LaunchRequest:
             f"robot '{robot_id}' is not in configs/fleet.yaml"
             f"{did_you_mean(robot_id, repo.fleet.model.robots)}"
         )
-    scenario = render_scenario(repo, assignment.scenario)
-    return make_launch_request(robot_id, assignment.name or robot_id, repo.revision, scenario)
+    return _request(repo, robot_id, assignment, render_scenario(repo, assignment.scenario))

@@ -190,6 +190,12 @@ class RobotAssignment(StrictModel):
         description="groups the robot belongs to (ring: canary, site: hall-a); keys and values "
         "as robot ids: letters, digits, '_', '.', '-'",
     )
+    namespace: str | None = Field(
+        None,
+        description="the robot's ROS 2 namespace, e.g. tb3_01 (or /fleet/tb3_01): relative "
+        "mapping names resolve in it; tokens of letters, digits and single '_', not starting "
+        "with a digit; none by default",
+    )
 
 
 class Wave(StrictModel):

@@ -7,6 +7,7 @@ from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability
 from configurator.rules.catalogue import check_catalogue
 from configurator.rules.configs import check_capability, check_fleet, check_scenario
+from configurator.rules.namespaces import check_namespaces
 from configurator.rules.report import Reporter
 from configurator.rules.rollout import check_labels, check_rollout
 
@@ -21,6 +22,7 @@ def check_repository(repo: Repository) -> list[Diagnostic]:
     for scenario in repo.scenarios.values():
         check_scenario(repo, scenario, capabilities, report)
     check_fleet(repo, report)
+    check_namespaces(repo, report)
     if repo.fleet is not None:
         check_labels(repo.fleet, report)
         check_rollout(repo.fleet, report)

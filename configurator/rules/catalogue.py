@@ -6,6 +6,7 @@ from typing import Any
 
 from configurator.composition import definition_problems
 from configurator.repository import Entry, Repository
+from configurator.rosnames import mapping_name_problem
 from configurator.rules.report import Reporter
 from configurator.types import SettingDefinition
 
@@ -44,6 +45,17 @@ def check_catalogue(repo: Repository, report: Reporter) -> None:
                         f"does not bind {', '.join(unbound)} of robot template "
                         f"'{template.name}' ({platform.name}); logics needing them cannot run "
                         "under this scheme",
+                    )
+
+        for scheme in platform.schemes.values():
+            for key, binding in scheme.model.mappings.items():
+                problem = mapping_name_problem(binding.name)
+                if problem is not None:
+                    report.add(
+                        scheme,
+                        ["mappings", key, "name"],
+                        "RC609",
+                        f"mapping '{key}': name '{binding.name}' {problem}",
                     )
 
     for name, action in actions.items():

@@ -9,6 +9,7 @@ import stat
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 from agent.process import is_alive
 from configurator.wire import AgentState, AgentStatus, Topics
@@ -27,8 +28,6 @@ from tests.support.watch import FleetWatch, wait_for
 
 TOPICS = Topics()
 LAUNCH = TOPICS.launch(ROBOT)
-
-
 
 
 def test_launch_starts_the_brain_with_the_request(
@@ -74,6 +73,35 @@ def test_the_brain_gets_its_request_path_robot_and_digest_in_its_environment(
     wait_for(lambda: line in agent.brain_log(), "the brain's environment in its log")
 
 
+def test_agent_yaml_env_reaches_the_brain_only(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    secret = "s3cret-token-value"
+    show = 'echo "ros: $ROS_DOMAIN_ID $RMW_IMPLEMENTATION $LAB_TOKEN $ROBOTCONF_ROBOT_ID"'
+    agent = make_agent(
+        command=["sh", "-c", f"{show}; exec sleep 60"],
+        env={"ROS_DOMAIN_ID": "7", "RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp", "LAB_TOKEN": secret},
+    )
+    agent.start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = make_request()
+    publish(mosquitto.url, LAUNCH, request.payload())
+    running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(running.pid)
+    # The brain sees them, beside the agent's own variables.
+    line = f"ros: 7 rmw_cyclonedds_cpp {secret} {ROBOT}"
+    wait_for(lambda: line in agent.brain_log(), "the brain's environment in its log")
+    # Never logged (the agent logs at debug level here) nor published.
+    assert secret not in agent.log_tail(10_000)
+    assert "LAB_TOKEN" not in agent.log_tail(10_000)
+    for topic in (TOPICS.status(ROBOT), TOPICS.description(ROBOT)):
+        assert secret.encode() not in read_retained(mosquitto.url, topic)
+    # The agent itself runs without them: only the brain's environment has them.
+    assert agent.proc is not None
+    own = (Path("/proc") / str(agent.pid) / "environ").read_bytes()
+    assert secret.encode() not in own and b"ROS_DOMAIN_ID=7" not in own
+
+
 def test_same_digest_again_changes_nothing(
     mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
@@ -105,9 +133,7 @@ def test_new_digest_stops_then_starts(
     second_request = make_request(variant=1, revision="rev-2")
     publish(mosquitto.url, LAUNCH, second_request.payload())
 
-    second = watch.wait_state(
-        ROBOT, AgentState.RUNNING, agent=agent, digest=second_request.digest
-    )
+    second = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=second_request.digest)
     agent.note_brain(second.pid)
     assert second.pid != first.pid
     assert first.pid is not None and not is_alive(first.pid)
@@ -242,9 +268,7 @@ def test_stubborn_brain_is_killed_after_stop_timeout(
     second_request = make_request(variant=1)
     publish(mosquitto.url, LAUNCH, second_request.payload())
 
-    second = watch.wait_state(
-        ROBOT, AgentState.RUNNING, agent=agent, digest=second_request.digest
-    )
+    second = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=second_request.digest)
     agent.note_brain(second.pid)
     assert first.pid is not None and not is_alive(first.pid)
     history = watch.history(ROBOT)

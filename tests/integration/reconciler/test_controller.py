@@ -51,8 +51,8 @@ def test_suspended_robots_keep_what_they_have(
         before = watch.launch("tb3-02")
         lab.replace(
             "configs/fleet.yaml",
-            "tb3-02: {scenario: guide-gazebo, name: Guide bot}",
-            "tb3-02: {scenario: patrol-real, name: Guide bot, suspended: true}",
+            "tb3-02: {scenario: guide-gazebo, name: Guide bot",
+            "tb3-02: {scenario: patrol-real, name: Guide bot, suspended: true",
         )
         lab.replace("configs/fleet.yaml", "Lab patrol", "Lab patroller")
         head = lab.commit("suspend the guide while renaming the patrol")

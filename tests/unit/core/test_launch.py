@@ -11,6 +11,7 @@ from pydantic import BaseModel, ValidationError
 
 from agent.admission import Accept, interpret
 from configurator.launch import (
+    CONTENT_WHEN_SET,
     DIGEST_EXCLUDED,
     LaunchRequest,
     content_digest,
@@ -44,6 +45,8 @@ def test_a_field_added_to_the_request_is_covered_by_render_and_check_alike() -> 
 
 def _other(name: str, value: Any) -> Any:
     """A different value of the same type; a field of a new type must be taught here."""
+    if name == "namespace":  # content only when set: None to a namespace, one to another
+        return "/tb3_02" if value is None else value + "_b"
     if isinstance(value, str):
         return value + "~"
     if isinstance(value, float):
@@ -144,3 +147,27 @@ def test_strict_requests_still_take_json_as_the_agent_receives_it() -> None:
     data["issued_at"] = "1700000000"  # text is no number, on the wire as in YAML
     with pytest.raises(ValidationError, match="issued_at"):
         LaunchRequest.model_validate(data)
+
+
+def test_a_namespace_is_content_and_restart_content_only_when_set() -> None:
+    assert CONTENT_WHEN_SET == ("namespace",)
+    plain = make_request()
+    assert plain.namespace is None
+    # Unset: not on the wire and not digested, so an agent that predates the field accepts
+    # the request, and a robot without a namespace keeps its digests.
+    assert "namespace" not in json.loads(plain.payload())
+    assert "namespace" not in digest_content(plain)
+    received = LaunchRequest.model_validate_json(plain.payload())
+    assert received == plain and received.digest_matches()
+    # Set: published, digested, and a restart (a brain's nodes cannot move namespace in place).
+    placed = with_digest(plain.model_copy(update={"namespace": "/tb3_01"}))
+    assert json.loads(placed.payload())["namespace"] == "/tb3_01"
+    assert placed.digest != plain.digest and placed.restart_digest != plain.restart_digest
+    moved = with_digest(placed.model_copy(update={"namespace": "/tb3_02"}))
+    assert moved.restart_digest != placed.restart_digest
+    back = LaunchRequest.model_validate_json(placed.payload())
+    assert back == placed and back.digest_matches()
+    # Tampering with the namespace on the way fails the agent's check.
+    data = json.loads(placed.payload())
+    data["namespace"] = "/tb3_09"
+    assert not LaunchRequest.model_validate(data).digest_matches()

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
-from configurator.render import deep_merge
+import re
+
+import pytest
+
+from configurator.launch import LaunchRequest
+from configurator.render import RenderError, deep_merge, render_fleet, render_robot
 from tests.support.lab import Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
@@ -37,7 +42,8 @@ def test_request_shape_and_defaults(lab: Lab) -> None:
 def test_mappings_are_the_needed_ones_bound_by_the_scheme(lab: Lab) -> None:
     cap = lab.render().scenario.capability
     assert set(cap.mappings) == {"odometry", "cmd_vel", "camera"}
-    assert cap.mappings["cmd_vel"].name == "/cmd_vel"
+    # The gazebo scheme's names are relative: resolved in the robot's namespace.
+    assert cap.mappings["cmd_vel"].name == "/tb3_01/cmd_vel"
     lab.replace(
         "configs/capabilities/turtlebot3-camera.yaml",
         "mapping_scheme: gazebo",
@@ -74,3 +80,52 @@ def test_goal_locations_expand_to_their_objects(lab: Lab) -> None:
     assert location is not None
     assert location["name"] == "BallContainer" and location["type"] == "Location"
     assert "id" in location and len(location) > 3  # free extra fields (coordinates) come along
+
+
+GAZEBO = "models/platforms/ROS2/mapping-schemes/gazebo.yaml"
+FLEET = "configs/fleet.yaml"
+
+
+def names(request: LaunchRequest) -> dict[str, str]:
+    return {key: b.name for key, b in request.scenario.capability.mappings.items()}
+
+
+def test_each_robot_gets_its_fully_qualified_names_and_namespace(lab: Lab) -> None:
+    rendered = render_fleet(lab.check().repo).requests
+    guide, delivery = rendered["tb3-02"], rendered["tb3-01"]
+    assert guide.namespace == "/tb3_02" and delivery.namespace == "/tb3_01"
+    assert names(guide) == {
+        "navigate_to_pose": "/tb3_02/navigate_to_pose",
+        "odometry": "/tb3_02/odom",
+        "door_opener": "/sim/door_controller/open",  # absolute: the world's, shared
+    }
+    assert names(delivery)["odometry"] == "/tb3_01/odom"
+    assert render_robot(lab.check().repo, "tb3-02") == guide  # one robot as in the fleet
+    # A robot of another scenario keeps its absolute names, and has no namespace.
+    assert rendered["tb3-04"].namespace is None
+    assert names(rendered["tb3-04"])["odometry"] == "/odom"
+
+
+def test_a_namespace_written_relative_is_carried_absolute(lab: Lab) -> None:
+    lab.replace(FLEET, "namespace: tb3_02}", "namespace: /lab/tb3_02}")
+    request = lab.render("tb3-02")
+    assert request.namespace == "/lab/tb3_02"
+    assert names(request)["odometry"] == "/lab/tb3_02/odom"
+
+
+def test_without_a_namespace_relative_names_resolve_at_the_root(lab: Lab) -> None:
+    lab.replace(FLEET, ", namespace: tb3_02}", "}")
+    request = lab.render("tb3-02")
+    assert request.namespace is None and names(request)["odometry"] == "/odom"
+    assert "namespace" not in request.wire()
+
+
+def test_namespace_substitution(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: odom,", "name: '{namespace}/odometry/filtered',")
+    assert names(lab.render("tb3-02"))["odometry"] == "/tb3_02/odometry/filtered"
+    # Rendering refuses, rather than guess, what validation reports (RC504).
+    lab.replace(FLEET, ", namespace: tb3_02}", "}")
+    repo = lab.check().repo
+    needs = re.escape("robot 'tb3-02': '{namespace}/odometry/filtered' needs the robot's namespace")
+    with pytest.raises(RenderError, match=needs):
+        render_robot(repo, "tb3-02")

@@ -53,7 +53,11 @@ def test_a_label_key_is_written_like_a_robot_id(lab: Lab, key: str) -> None:
 
 
 def test_a_label_value_is_written_like_a_robot_id_and_is_located_at_the_value(lab: Lab) -> None:
-    lab.replace(FLEET, "{ring: canary, site: sim}, name: Delivery", "{ring: 'can ary'}, name: X")
+    lab.replace(
+        FLEET,
+        "{ring: canary, site: sim}, namespace: tb3_01, name: Delivery",
+        "{ring: 'can ary'}, name: X",
+    )
     d = lab.only("RC502")
     assert "label 'ring' has value 'can ary', not usable" in d.message
     assert d.col == column_of(lab, d.line, "'can ary'")
@@ -170,7 +174,9 @@ def test_every_robot_must_fall_in_a_wave(lab: Lab) -> None:
 
 
 def test_a_long_list_of_robots_left_out_is_cut_short(lab: Lab) -> None:
-    extra = "".join(f"  tb3-{n}: {{scenario: guide-gazebo}}\n" for n in range(10, 16))
+    extra = "".join(
+        f"  tb3-{n}: {{scenario: guide-gazebo, namespace: tb3_{n}}}\n" for n in range(10, 16)
+    )
     lab.replace(FLEET, "robots:\n", "robots:\n" + extra)
     enable_rollout(lab, "[{name: canary, selector: {ring: canary}}]")
     assert "tb3-02, tb3-04, tb3-05, tb3-10, tb3-11, ... (9 in all)" in lab.only("RC705").message

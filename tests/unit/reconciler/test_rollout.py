@@ -31,7 +31,8 @@ def fleet(
     lab: Lab, version: str, on_failure: str = "rollback", paused: bool = False
 ) -> FleetRender:
     robots = "".join(
-        f"  {robot}: {{scenario: {SCENARIOS[i % 4]}, name: bot {version}"
+        f"  {robot}: {{scenario: {SCENARIOS[i % 4]}, name: bot {version}, "
+        f"namespace: {robot.replace('-', '_')}"
         + (", labels: {ring: canary}" if robot in CANARY else "")
         + "}\n"
         for i, robot in enumerate(ROBOTS)

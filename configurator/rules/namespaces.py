@@ -1,0 +1,157 @@
+"""ROS 2 names in the fleet (RC503-RC505): namespaces, `{namespace}`, and robots of one world
+whose names clash."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from configurator.render import bound_mappings
+from configurator.repository import Entry, Repository
+from configurator.resolve import resolve_capability
+from configurator.rosnames import (
+    length_problem,
+    mapping_name_problem,
+    namespace_problem,
+    needs_namespace,
+    resolve_name,
+    suggest_namespace,
+)
+from configurator.rules.report import Reporter
+from configurator.types import Fleet
+
+# A service is a server the robots call: one of the world (a door controller) is shared on
+# purpose, and two clients calling it do not drive each other. Topics and actions are a robot's
+# own (its velocity, its navigation), so two robots on one name is the mistake to catch.
+CLASHING_KINDS = ("topic", "action_client")
+
+
+@dataclass(frozen=True)
+class _Robot:
+    robot_id: str
+    namespace: str | None
+    world: tuple[str, str]  # (environment, platform): robots that share one ROS graph
+    scheme: str
+    names: dict[str, tuple[str, str, bool]]  # mapping -> (kind, resolved name, written absolute)
+
+
+def _robot_names(
+    repo: Repository, fleet: Entry[Fleet], robot_id: str, report: Reporter
+) -> _Robot | None:
+    """One robot's mappings, resolved; None when there is nothing (valid) to resolve, or when
+    it is reported here (a namespace needed, a name too long)."""
+    assignment = fleet.model.robots[robot_id]
+    namespace = assignment.namespace
+    if namespace is not None and namespace_problem(namespace) is not None:
+        return None
+    scenario = repo.scenarios.get(assignment.scenario)
+    if scenario is None:
+        return None
+    capability = repo.capabilities.get(scenario.model.capability)
+    if capability is None:
+        return None
+    resolved = resolve_capability(repo, capability.model)
+    if resolved.platform is None or resolved.scheme is None:
+        return None
+    scheme = f"{resolved.platform.name}/{capability.model.mapping_scheme}"
+    bindings = {
+        key: b
+        for key, b in bound_mappings(resolved).items()
+        if mapping_name_problem(b.name) is None
+    }
+    if namespace is None:
+        needing = sorted(key for key, b in bindings.items() if needs_namespace(b.name))
+        if needing:
+            example = bindings[needing[0]].name
+            report.add(
+                fleet,
+                ["robots", robot_id],
+                "RC504",
+                f"robot '{robot_id}' has no namespace, and mapping scheme {scheme} names "
+                f"{', '.join(needing)} in it ('{example}'): give the robot one, e.g. "
+                f"`namespace: {suggest_namespace(robot_id)}`",
+                key=True,
+            )
+            return None
+    names: dict[str, tuple[str, str, bool]] = {}
+    for key, binding in bindings.items():
+        full = resolve_name(binding.name, namespace)
+        problem = length_problem(full)
+        if problem is not None:
+            report.add(
+                fleet,
+                ["robots", robot_id, "namespace"],
+                "RC503",
+                f"in namespace '{namespace}', mapping '{key}' {problem}: use a shorter namespace",
+            )
+            return None
+        names[key] = (binding.kind, full, binding.name.startswith("/"))
+    world = (scenario.model.environment or "", resolved.platform.name)
+    return _Robot(robot_id, namespace, world, scheme, names)
+
+
+def _check_namespace(fleet: Entry[Fleet], robot_id: str, report: Reporter) -> None:
+    namespace = fleet.model.robots[robot_id].namespace
+    if namespace is None:
+        return
+    problem = namespace_problem(namespace)
+    if problem is not None:
+        report.add(
+            fleet,
+            ["robots", robot_id, "namespace"],
+            "RC503",
+            f"namespace '{namespace}' {problem}; a ROS 2 namespace is tokens of letters, digits "
+            f"and single '_', not starting with a digit, separated by '/', e.g. "
+            f"`namespace: {suggest_namespace(namespace)}`",
+        )
+
+
+def _clash_message(first: _Robot, second: _Robot, shared: list[tuple[str, str, bool]]) -> str:
+    names = ", ".join(f"{name} ({key})" for key, name, _ in shared)
+    unnamed = [r.robot_id for r in (first, second) if r.namespace is None]
+    examples = ", ".join(f"`namespace: {suggest_namespace(r)}`" for r in unnamed)
+    if any(absolute for _, _, absolute in shared):
+        # An absolute name ignores namespaces: the scheme has to change first.
+        fix = (
+            f"write these names relative in mapping scheme {second.scheme} (cmd_vel, not /cmd_vel)"
+        )
+        if unnamed:
+            fix += f" and give them namespaces ({examples})"
+    elif unnamed:
+        fix = f"give them namespaces ({examples})"
+    else:
+        fix = "give them different namespaces"
+    return (
+        f"robots '{first.robot_id}' and '{second.robot_id}' both use {names} in environment "
+        f"{first.world[0]} ({first.world[1]}): they would drive each other; {fix}"
+    )
+
+
+def check_namespaces(repo: Repository, report: Reporter) -> None:
+    fleet = repo.fleet
+    if fleet is None:
+        return
+    seen: dict[tuple[str, str, str, str], _Robot] = {}  # (world, kind, name) -> first robot
+    for robot_id in fleet.model.robots:
+        _check_namespace(fleet, robot_id, report)
+        robot = _robot_names(repo, fleet, robot_id, report)
+        if robot is None or robot.world[0] == "":
+            continue  # no environment: the robot shares no world with another
+        if fleet.model.robots[robot_id].suspended:
+            # Left as it is: its assignment does not reach it, so uses none of these names
+            # (it is checked when it is resumed).
+            continue
+        clashes: dict[str, tuple[_Robot, list[tuple[str, str, bool]]]] = {}
+        for key, (kind, name, absolute) in robot.names.items():
+            if kind not in CLASHING_KINDS:
+                continue
+            first = seen.setdefault((*robot.world, kind, name), robot)
+            if first is not robot:
+                clashes.setdefault(first.robot_id, (first, []))[1].append((key, name, absolute))
+        for first, shared in clashes.values():
+            report.add(
+                fleet,
+                ["robots", robot_id],
+                "RC505",
+                _clash_message(first, robot, shared),
+                key=True,
+            )

@@ -1,0 +1,117 @@
+"""ROS 2 names validated: mapping names (RC609), namespaces (RC503), `{namespace}` without one
+(RC504) and robots of one world on the same names (RC505): code, place and words."""
+
+from __future__ import annotations
+
+from tests.support.lab import Lab
+
+FLEET = "configs/fleet.yaml"
+GAZEBO = "models/platforms/ROS2/mapping-schemes/gazebo.yaml"
+
+
+def column_of(lab: Lab, rel: str, line: int, needle: str) -> int:
+    return lab.read(rel).splitlines()[line - 1].index(needle) + 1
+
+
+def test_a_mapping_name_is_a_ros2_name_located_at_the_name(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: camera/image_raw,", "name: camera/1raw,")
+    d = lab.only("RC609")
+    assert d.path == GAZEBO and d.line == lab.line_of(GAZEBO, "camera/1raw")
+    assert d.col == column_of(lab, GAZEBO, d.line, "camera/1raw")
+    assert d.message == (
+        "mapping 'camera': name 'camera/1raw' has token '1raw' starting with a digit"
+    )
+
+
+def test_a_private_name_is_refused_with_the_reason(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: scan,", "name: ~/scan,")
+    assert "private ('~'): it depends on the brain's node name" in lab.only("RC609").message
+
+
+def test_a_bad_namespace_is_located_at_the_value_with_a_fix(lab: Lab) -> None:
+    lab.replace(FLEET, "namespace: tb3_02}", "namespace: tb3-02}")
+    d = lab.only("RC503")
+    assert d.path == FLEET and d.line == lab.line_of(FLEET, "tb3-02:")
+    assert d.col == column_of(lab, FLEET, d.line, "tb3-02}")
+    assert "namespace 'tb3-02' has token 'tb3-02' with '-'" in d.message
+    assert d.message.endswith("e.g. `namespace: tb3_02`")
+
+
+def test_the_root_namespace_is_written_by_leaving_it_out(lab: Lab) -> None:
+    lab.replace(FLEET, "namespace: tb3_02}", "namespace: /}")
+    assert "leave `namespace` out" in lab.only("RC503").message
+
+
+def test_a_namespace_that_makes_a_name_too_long_for_dds(lab: Lab) -> None:
+    long = "/".join(["n" * 57] * 4)  # valid alone, and with /odom; not with /navigate_to_pose
+    lab.replace(FLEET, "namespace: tb3_02}", f"namespace: {long}}}")
+    d = lab.only("RC503")
+    assert "mapping 'navigate_to_pose' is too long for DDS" in d.message
+    assert d.line == lab.line_of(FLEET, "tb3-02:")
+
+
+def test_namespace_substitution_needs_a_namespace_at_the_robot(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: odom,", "name: '{namespace}/odom',")
+    assert lab.check().diagnostics == []  # every robot using it has a namespace
+    lab.replace(FLEET, "Guide bot, namespace: tb3_02}", "Guide bot}")
+    d = lab.only("RC504")
+    assert (d.path, d.line, d.col) == (FLEET, lab.line_of(FLEET, "tb3-02:"), 3)
+    assert d.message == (
+        "robot 'tb3-02' has no namespace, and mapping scheme ROS2/gazebo names odometry in it "
+        "('{namespace}/odom'): give the robot one, e.g. `namespace: tb3_02`"
+    )
+
+
+def test_two_robots_of_one_world_on_the_same_names_would_drive_each_other(lab: Lab) -> None:
+    lab.replace(FLEET, ", namespace: tb3_01, name: Delivery bot}", ", name: Delivery bot}")
+    lab.replace(FLEET, "Guide bot, namespace: tb3_02}", "Guide bot}")
+    d = lab.only("RC505")
+    # At the second robot: the first keeps its place, the message names both.
+    assert (d.path, d.line, d.col) == (FLEET, lab.line_of(FLEET, "tb3-02:"), 3)
+    assert d.message == (
+        "robots 'tb3-01' and 'tb3-02' both use /odom (odometry) in environment GazeboDemo1 "
+        "(ROS2): they would drive each other; give them namespaces (`namespace: tb3_01`, "
+        "`namespace: tb3_02`)"
+    )
+
+
+def test_absolute_names_clash_whatever_the_namespaces(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: cmd_vel,", "name: /cmd_vel,")
+    d = lab.only("RC505")
+    assert d.line == lab.line_of(FLEET, "tb3-03:")
+    assert "robots 'tb3-01' and 'tb3-03' both use /cmd_vel (cmd_vel)" in d.message
+    # Both have namespaces already: an absolute name ignores them, the scheme is the fix.
+    assert d.message.endswith(
+        "would drive each other; write these names relative in mapping scheme ROS2/gazebo "
+        "(cmd_vel, not /cmd_vel)"
+    )
+
+
+def test_one_namespace_for_two_robots_clashes(lab: Lab) -> None:
+    lab.replace(FLEET, "namespace: tb3_02}", "namespace: /tb3_01}")
+    d = lab.only("RC505")
+    assert "both use /tb3_01/odom (odometry)" in d.message
+    assert d.message.endswith("give them different namespaces")
+
+
+def test_shared_services_other_worlds_and_platforms_do_not_clash(lab: Lab) -> None:
+    # Two guides call the world's door controller (a service): shared on purpose.
+    lab.replace(
+        FLEET, "  tb3-04:", "  tb3-09: {scenario: guide-gazebo, namespace: guide2}\n  tb3-04:"
+    )
+    # One robot at the root of the world: alone there, nothing to clash with; the ROS 1 robot
+    # (tb3-05: /cmd_vel, /odom) is on another graph, tb3-04 in another environment.
+    lab.replace(FLEET, ", namespace: tb3_03}", "}")
+    assert lab.check().diagnostics == []
+    render = lab.render("tb3-09")
+    assert render.scenario.capability.mappings["door_opener"].name == "/sim/door_controller/open"
+
+
+def test_a_suspended_robot_clashes_with_no_one(lab: Lab) -> None:
+    # tb3-04 patrols the lab at the root on absolute names; a second patroller there would
+    # drive it, but a suspended one is left as it is: its assignment reaches it only later.
+    clash = "  tb3-09: {scenario: patrol-real, namespace: other}\n  tb3-04:"
+    lab.replace(FLEET, "  tb3-04:", clash)
+    assert "robots 'tb3-09' and 'tb3-04' both use /navigate_to_pose" in lab.only("RC505").message
+    lab.replace(FLEET, "namespace: other}", "namespace: other, suspended: true}")
+    assert lab.check().diagnostics == []
