@@ -2,7 +2,7 @@
 
 Agents run as `robotconf agent` subprocesses with a stand-in brain; the reconciler runs in this
 process. Ctrl-C, SIGTERM or SIGHUP stop the agents (and their brains) first, then the reconciler,
-then the broker; if `up` is killed, the agents get SIGTERM from the kernel (agent/parent_death.py).
+then the broker; if `up` is killed, the kernel tells its agents (agent/parent_death.py).
 What is shown, and how, is the caller's (configurator/cli/up.py): an UpScreen.
 """
 
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import itertools
 import logging
 import os
 import signal
@@ -182,11 +183,17 @@ def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:
     stop them, or they are still stopping): each holds its work directory's lock."""
     if not workdir.is_dir():
         return
-    held = {}
+    held: dict[Path, int] = {}
     for folder in sorted(p for p in workdir.iterdir() if (p / LOCK_FILE).is_file()):
         pid = WorkdirLock(folder).holder()
-        if pid is not None:
-            held[folder] = pid
+        if pid is None:
+            continue
+        if pid > 0 and not _runs_config(pid, folder / "agent.yaml"):
+            # Not an agent `up` started (say, a robot's own, given --workdir): not ours to stop.
+            raise CliError(
+                f"another agent (pid {pid}) is using {folder}; give robotconf up another --workdir"
+            )
+        held[folder] = pid
     for folder, pid in held.items():
         if pid > 0:
             say(f"stopping agent pid {pid} left running in {folder} by a previous robotconf up")
@@ -204,6 +211,16 @@ def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:
             time.sleep(0.1)
         if lock.holder() is not None:
             raise CliError(f"an agent still holds {folder / LOCK_FILE}; stop it and start again")
+
+
+def _runs_config(pid: int, config: Path) -> bool:
+    """True when process `pid` was started with `--config config`, as `up` starts agents."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    wanted = os.fsencode(config)
+    return any(a == b"--config" and b == wanted for a, b in itertools.pairwise(argv))
 
 
 class Agents:

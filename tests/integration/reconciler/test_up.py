@@ -327,11 +327,38 @@ def test_up_stops_an_agent_a_previous_up_left_running(lab: GitLab, tmp_path: Pat
     assert processes_mentioning(up_folder(lab)) == []
 
 
-def start_agent_from(robot: Path, tmp_path: Path) -> Proc:
+def start_agent_from(robot: Path, tmp_path: Path, config: Path | None = None) -> Proc:
     """The agent of an earlier up's robot, started by hand (so not told to die with any up)."""
-    return Proc(
-        robotconf_argv("agent", "--config", str(robot / "agent.yaml")), tmp_path / "left.out"
-    )
+    config = config or robot / "agent.yaml"
+    return Proc(robotconf_argv("agent", "--config", str(config)), tmp_path / "left.out")
+
+
+def test_up_leaves_alone_an_agent_it_did_not_start(lab: GitLab, tmp_path: Path) -> None:
+    """An agent of the same work directory run from another agent.yaml (a robot's own, say)
+    is not up's to stop: up says so and starts nothing."""
+    first = start_up(lab, tmp_path, log="first.out")
+    try:
+        in_sync(first, lab)
+    finally:
+        assert first.stop(signal.SIGINT, timeout=60) == 0, first.output()
+    robot = lab.root / ".robotconf" / "up" / "tb3-01"
+    own = tmp_path / "own-agent.yaml"
+    own.write_text((robot / "agent.yaml").read_text(encoding="utf-8"), encoding="utf-8")
+    other = start_agent_from(robot, tmp_path, own)
+    try:
+        wait_for(lambda: (robot / "agent.lock").read_text().strip() == str(other.pid), "its lock")
+        done = subprocess.run(
+            robotconf_argv("up", "--repo", str(lab.root)),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2, done.stdout + done.stderr
+        assert f"another agent (pid {other.pid}) is using {robot}" in done.stderr
+        assert other.alive()
+    finally:
+        other.stop()
+    assert processes_mentioning(up_folder(lab)) == []
 
 
 def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path) -> None:
