@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from agent import parent_death, process
 from agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
 from agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
 from agent.workdir import WorkdirLock
@@ -83,6 +84,7 @@ def _run(argv: list[str]) -> int:
             print(f"{path}: ok (robot {config.robot_id})")
         return ExitCode.OK
     _log_to_stderr(args.log_level, configs)
+    parent = parent_death.take_request()  # before the agents copy the environment
     locks: list[WorkdirLock] = []
     try:
         for config in configs:
@@ -97,6 +99,10 @@ def _run(argv: list[str]) -> int:
             # e.g. a TLS certificate or key that exists but cannot be loaded.
             raise CliError(f"cannot set up: {exc}") from None
         install_signal_handlers(agents)
+        if parent is not None:  # `robotconf up` runs this agent: die with it, brains with us
+            if not parent_death.die_with_parent(parent):
+                raise CliError(f"robotconf up (pid {parent}) ended before this agent started")
+            process.brain_preexec = parent_death.child_setup()
         run_agents(agents)
         return ExitCode.OK
     finally:

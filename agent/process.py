@@ -198,6 +198,11 @@ class BrainLog:
 
 # ---------------------------------------------------------------- spawning
 
+# Run in each brain's child before exec; set when `robotconf up` runs this agent, so that a
+# brain gets SIGTERM if its agent dies (agent/parent_death.py). None on a robot: there a brain
+# outlives its agent's crash, and the restarted agent adopts or stops it (stop_orphan).
+brain_preexec: Callable[[], None] | None = None
+
 
 class Brain:
     """One started brain process, and how its exit is noticed.
@@ -263,6 +268,7 @@ def spawn(
         env=env,
         start_new_session=True,
         close_fds=True,
+        preexec_fn=brain_preexec,
     )
     return Brain(popen, on_exit)
 

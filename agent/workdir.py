@@ -104,6 +104,24 @@ class WorkdirLock:
         self._fd = fd
         return None
 
+    def holder(self) -> int | None:
+        """The pid of the agent holding this lock (0 if it has not written it yet), None when
+        nobody does: the kernel releases the lock of a dead agent, so no lock is ever stale."""
+        try:
+            fd = os.open(self._path, os.O_RDONLY | os.O_CLOEXEC)
+        except FileNotFoundError:
+            return None
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except OSError:
+                raw = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+                return int(raw) if raw.isdigit() else 0
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            return None
+        finally:
+            os.close(fd)
+
     def release(self) -> None:
         if self._fd is not None:
             os.close(self._fd)

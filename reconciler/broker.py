@@ -11,6 +11,8 @@ import errno
 import logging
 import socket
 import threading
+from collections.abc import Iterator
+from importlib import metadata
 from typing import Any
 
 DEFAULT_PORT = 1883
@@ -35,6 +37,39 @@ def free_port(host: str) -> int:
         sock.bind((host, 0))
         port: int = sock.getsockname()[1]
         return port
+
+
+class _SnapshotDict(dict[str, Any]):
+    """A dict whose iteration walks a copy of its keys.
+
+    amqtt (0.11 and 0.12) loops over its subscriptions with an `await` inside the loop when a
+    client connects; another client subscribing meanwhile changes the dict, the loop raises
+    "RuntimeError: dictionary changed size during iteration", asyncio logs it and the
+    connecting client is dropped (it reconnects). `up` connects five agents at once: that
+    happened at most starts. Iterating a copy is what amqtt's loop means to do."""
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(super().__iter__()))
+
+    def items(self) -> Any:
+        return list(super().items())
+
+
+def _harden(broker: Any) -> None:
+    subscriptions = getattr(broker, "_subscriptions", None)
+    if type(subscriptions) is dict:
+        broker._subscriptions = _SnapshotDict(subscriptions)
+    else:  # an amqtt outside the pinned range: it may or may not have the bug
+        logging.getLogger("robotconf.broker").warning(
+            "amqtt %s: subscriptions not hardened (see reconciler/broker.py)", _version()
+        )
+
+
+def _version() -> str:
+    try:
+        return metadata.version("amqtt")
+    except metadata.PackageNotFoundError:
+        return "?"
 
 
 class EmbeddedBroker:
@@ -106,6 +141,7 @@ class EmbeddedBroker:
 
         async def main() -> None:
             self._broker = Broker(config, loop=loop)
+            _harden(self._broker)
             await self._broker.start()
 
         try:

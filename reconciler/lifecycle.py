@@ -16,12 +16,15 @@ def on_stop_signals(
     callback: Callable[[], None] | None = None,
     again: Callable[[], None] | None = None,
 ) -> None:
-    """SIGINT and SIGTERM end the command cleanly instead of raising in a random place; a
-    second one calls `again` (for those who will not wait) when given."""
+    """SIGINT, SIGTERM and SIGHUP (the terminal was closed) end the command cleanly instead
+    of raising in a random place or, for SIGHUP, killing it without its cleanup; a second one
+    calls `again` (for those who will not wait) when given."""
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        if again is not None and stop is not None and stop.is_set():
-            again()
+        if stop is not None and stop.is_set():
+            # A closed terminal may send SIGHUP twice (the kernel, then the shell): not a hurry.
+            if again is not None and signum != signal.SIGHUP:
+                again()
             return
         if stop is not None:
             stop.set()
@@ -30,6 +33,7 @@ def on_stop_signals(
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGHUP, handler)
 
 
 def _quiet_chatty_loggers() -> None:

@@ -1,13 +1,16 @@
 """`robotconf up`: the whole loop on one machine — broker, reconciler, one agent per robot, status.
 
 Agents run as `robotconf agent` subprocesses with a stand-in brain; the reconciler runs in this
-process. Ctrl-C stops the agents (and their brains) first, then the reconciler, then the broker.
+process. Ctrl-C, SIGTERM or SIGHUP stop the agents (and their brains) first, then the reconciler,
+then the broker; if `up` is killed, the kernel tells its agents (agent/parent_death.py).
 What is shown, and how, is the caller's (configurator/cli/up.py): an UpScreen.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import itertools
 import logging
 import os
 import signal
@@ -22,12 +25,14 @@ from typing import Any, Protocol
 
 import yaml
 
+from agent.parent_death import ENV as DIE_WITH_PARENT
+from agent.workdir import LOCK_FILE, WorkdirLock
 from configurator.cli.errors import CliError, ExitCode
 from configurator.mqtt import Connection
 from configurator.render import FleetRender
 from configurator.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from configurator.source import SourceError
-from configurator.wire import Topics, redact_url, short_rev
+from configurator.wire import ReconcilerReason, ReconcilerStatus, Topics, redact_url, short_rev
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
 from reconciler.fleet_status import change_key, open_view
@@ -36,12 +41,14 @@ from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.signer import make_signer
 from reconciler.source import LocalBranch, open_repo
-from reconciler.verdicts import FleetStatus, build_rows, desired_from_fleet
+from reconciler.verdicts import FleetStatus, build_rows, clean, desired_from_fleet
 
 log = logging.getLogger("robotconf.up")
 
 AGENT_STOP_TIMEOUT = 5.0  # the stand-in brain stops at once; this bounds a stubborn one
 RESYNC_INTERVAL = 10.0
+REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REFUSED.value}
+REFUSED_DIAGNOSTICS = 3  # the first ones say what to fix; `robotconf validate` lists them all
 
 
 @dataclass
@@ -140,9 +147,86 @@ def agent_yaml(
     return config
 
 
+class UpLock:
+    """One `up` per work directory. A flock: the kernel releases it when `up` dies, so the lock
+    of a crashed `up` is never stale."""
+
+    def __init__(self, workdir: Path) -> None:
+        self.path = workdir / "up.lock"
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        """Raises CliError when another `up` holds it."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            raise CliError(
+                f"another robotconf up (pid {holder}) is running with {self.path.parent}; "
+                "stop it first, or give this one its own --workdir"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:
+    """Stops the agents a killed `up` left running (where the kernel could not be asked to
+    stop them, or they are still stopping): each holds its work directory's lock."""
+    if not workdir.is_dir():
+        return
+    held: dict[Path, int] = {}
+    for folder in sorted(p for p in workdir.iterdir() if (p / LOCK_FILE).is_file()):
+        pid = WorkdirLock(folder).holder()
+        if pid is None:
+            continue
+        if pid > 0 and not _runs_config(pid, folder / "agent.yaml"):
+            # Not an agent `up` started (say, a robot's own, given --workdir): not ours to stop.
+            raise CliError(
+                f"another agent (pid {pid}) is using {folder}; give robotconf up another --workdir"
+            )
+        held[folder] = pid
+    for folder, pid in held.items():
+        if pid > 0:
+            say(f"stopping agent pid {pid} left running in {folder} by a previous robotconf up")
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGTERM)  # it stops its brain and says so
+    deadline = time.monotonic() + AGENT_STOP_TIMEOUT + 5.0
+    for folder, pid in held.items():
+        lock = WorkdirLock(folder)
+        while lock.holder() is not None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if lock.holder() is not None and pid > 0:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(pid, signal.SIGKILL)  # its brain is stopped by the next agent
+        while lock.holder() is not None and time.monotonic() < deadline + 5.0:
+            time.sleep(0.1)
+        if lock.holder() is not None:
+            raise CliError(f"an agent still holds {folder / LOCK_FILE}; stop it and start again")
+
+
+def _runs_config(pid: int, config: Path) -> bool:
+    """True when process `pid` was started with `--config config`, as `up` starts agents."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    wanted = os.fsencode(config)
+    return any(a == b"--config" and b == wanted for a, b in itertools.pairwise(argv))
+
+
 class Agents:
     """One `robotconf agent` subprocess per robot, each in its own session so that Ctrl-C
-    reaches this process only and the agents are stopped in order."""
+    reaches this process only and the agents are stopped in order. Each is asked to die with
+    this process (and its brain with it), so that not even a SIGKILL of `up` leaves them."""
 
     def __init__(
         self, workdir: Path, connection: Connection, prefix: str, public_key: Path | None = None
@@ -171,6 +255,10 @@ class Agents:
                     stdout=out,
                     stderr=out,
                     start_new_session=True,
+                    # Asked of the kernel by the agent itself (no preexec_fn in this threaded
+                    # process); agents are started on the main thread, which lives as long as
+                    # `up`: the parent-death signal follows the thread, not the process.
+                    env={**os.environ, DIE_WITH_PARENT: str(os.getpid())},
                 )
 
     def died(self) -> list[tuple[str, int]]:
@@ -222,6 +310,29 @@ class UpScreen(Protocol):
         ...
 
 
+def refusal_lines(status: ReconcilerStatus | None) -> list[str]:
+    """A commit the reconciler refused, in words: which, why, what the robots keep, and its
+    first diagnostics; [] when none is refused. Shown as prominently as the robots."""
+    if status is None or status.reason not in REFUSED or not status.failed_revision:
+        return []
+    where = f" of '{clean(status.branch)}'" if status.branch else ""
+    keep = (
+        f"the robots keep {short_rev(status.last_applied_revision)}"
+        if status.last_applied_revision
+        else "nothing is applied"
+    )
+    lines = [
+        f"REFUSED: commit {short_rev(status.failed_revision)}{where} is not applied "
+        f"({clean(status.reason)}); {keep}. Fix it (robotconf validate) and commit again."
+    ]
+    shown = status.diagnostics[:REFUSED_DIAGNOSTICS]
+    lines += [f"  {clean(str(d))}" for d in shown]
+    more = len(status.diagnostics) - len(shown) + status.more_diagnostics
+    if more > 0:
+        lines.append(f"  ... {more} more")
+    return lines
+
+
 def run_up(
     setup: UpSetup,
     given_broker: str | None,
@@ -230,10 +341,27 @@ def run_up(
     signing: bool,
     screen: UpScreen,
 ) -> ExitCode:
-    """Runs the loop until SIGINT or SIGTERM; `connect` makes the connection to a broker URL
-    (raising CliError); without `given_broker`, an embedded broker is started."""
+    """Runs the loop until SIGINT, SIGTERM or SIGHUP; `connect` makes the connection to a broker
+    URL (raising CliError); without `given_broker`, an embedded broker is started."""
+    lock = UpLock(setup.workdir)
+    lock.acquire()
+    try:
+        return _run_up(setup, given_broker, connect, prefix, signing, screen)
+    finally:
+        lock.release()
+
+
+def _run_up(
+    setup: UpSetup,
+    given_broker: str | None,
+    connect: Callable[[str], Connection],
+    prefix: str,
+    signing: bool,
+    screen: UpScreen,
+) -> ExitCode:
     log_to_file(setup.workdir / "up.log")
     say = screen.say
+    recover_agents(setup.workdir, say)
     for note in setup.notes:
         say(f"note: {note}")
 
@@ -277,7 +405,7 @@ def run_up(
     agents = Agents(setup.workdir, connection, prefix, public_key)
     view = open_view(connection, prefix, changed.set)
 
-    def at_once() -> None:  # a second Ctrl-C: do not wait for anyone
+    def at_once() -> None:  # a second Ctrl-C: do not wait (the brains get SIGTERM as orphans)
         for proc in agents.procs.values():
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(proc.pid, signal.SIGKILL)
@@ -329,6 +457,7 @@ def _loop(
     """Shows the fleet while it changes; starts agents for robots that later commits add."""
     say = screen.say
     shown = ""
+    refusal: list[str] = []
     in_sync_at: str | None = None
     reported_dead: set[str] = set()
     started = time.monotonic()
@@ -357,6 +486,11 @@ def _loop(
             if key != shown:
                 shown = key
                 screen.show(fleet)
+                refused = refusal_lines(fleet.reconciler)
+                if refused != refusal:  # said once per refused commit, even on a live screen
+                    refusal = refused
+                    for line in refused:
+                        say(line)
                 if fleet.in_sync and in_sync_at != serving.revision:
                     in_sync_at = serving.revision
                     say(

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
 import click
-from rich.console import Group
+from rich.console import Group, RenderableType
 from rich.live import Live
+from rich.panel import Panel
 
 from configurator.cli.broker_options import BrokerOptions, broker_options
 from configurator.cli.errors import ExitCode
@@ -17,34 +20,74 @@ from reconciler.verdicts import FleetStatus
 
 
 class Screen:
-    """Lines prefixed `robotconf up:`; on a terminal, the fleet redrawn in place below them."""
+    """Lines prefixed `robotconf up:`; on a terminal, the fleet redrawn in place below them.
+
+    A closed terminal (SIGHUP) makes every write fail: from then on nothing is shown, so that
+    `up` still stops its agents and brains instead of dying of an I/O error."""
 
     def __init__(self, live: bool) -> None:
         self.live = live
         self._header: list[str] = []
         self._live: Live | None = None  # while the fleet is shown on a terminal
+        self._gone = False  # the terminal or pipe is gone
+
+    def _lost(self) -> None:
+        self._gone = True
+        self._live = None
+        # Python flushes stdout at exit; with nowhere to write, that would print an error.
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, sys.stdout.fileno())
+            os.dup2(null, sys.stderr.fileno())
+            os.close(null)
+        except (OSError, ValueError):
+            pass
 
     def say(self, line: str) -> None:
+        if self._gone:
+            return
         text = f"robotconf up: {line}"
-        if self._live is not None:
-            self._live.console.print(safe(text))  # above the live fleet
-        else:
-            print(text, flush=True)
+        try:
+            if self._live is not None:
+                self._live.console.print(safe(text))  # above the live fleet
+            else:
+                print(text, flush=True)
+        except OSError:
+            self._lost()
 
     def begin(self, header: list[str]) -> None:
         self._header = header
-        if self.live:
+        if self.live and not self._gone:
             self._live = Live(console=terminal_console(), auto_refresh=False)
-            self._live.start()
+            try:
+                self._live.start()
+            except OSError:
+                self._lost()
 
     def show(self, fleet: FleetStatus) -> None:
-        if self._live is not None:
-            head = [safe(line) for line in self._header]
-            self._live.update(Group(*head, fleet_status_view(fleet)), refresh=True)
+        if self._live is None:
+            return
+        from reconciler.up import refusal_lines
+
+        parts: list[RenderableType] = [safe(line) for line in self._header]
+        refused = refusal_lines(fleet.reconciler)
+        if refused:  # above the robots, framed in red: nobody misses that a commit was refused
+            body = Group(
+                *(safe(line, "bold red" if n == 0 else "") for n, line in enumerate(refused))
+            )
+            parts.append(Panel(body, border_style="bold red", title="commit refused"))
+        parts.append(fleet_status_view(fleet))
+        try:
+            self._live.update(Group(*parts), refresh=True)
+        except OSError:
+            self._lost()
 
     def end(self) -> None:
         if self._live is not None:
-            self._live.stop()
+            try:
+                self._live.stop()
+            except OSError:
+                self._lost()
             self._live = None
 
 

@@ -1,20 +1,32 @@
-"""`robotconf up` as a user runs it: a subprocess, stopped with Ctrl-C (SIGINT)."""
+"""`robotconf up` as a user runs it: a subprocess, stopped with Ctrl-C (SIGINT), SIGTERM, SIGHUP,
+a closed terminal or SIGKILL; what it runs never outlives it."""
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import logging
+import os
+import pty
 import re
+import select
 import signal
 import socket
 import subprocess
+import termios
+import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
+import paho.mqtt.client as paho
 import pytest
 import yaml
+from paho.mqtt.enums import CallbackAPIVersion
 
 from agent.config import parse_config
 from configurator.mqtt import Connection
+from reconciler.broker import EmbeddedBroker, free_port
 from reconciler.desired import load_desired
 from reconciler.up import agent_yaml
 from tests.support.fleet import GitLab, Proc, robotconf_argv
@@ -51,10 +63,24 @@ def processes_mentioning(text: str) -> list[int]:
     return found
 
 
-def start_up(lab: GitLab, tmp_path: Path, *extra: str) -> Proc:
-    return Proc(
-        robotconf_argv("up", "--repo", str(lab.root), *extra), tmp_path / "up.out", cwd=lab.root
-    )
+def start_up(lab: GitLab, tmp_path: Path, *extra: str, log: str = "up.out") -> Proc:
+    return Proc(robotconf_argv("up", "--repo", str(lab.root), *extra), tmp_path / log, cwd=lab.root)
+
+
+def up_folder(lab: GitLab) -> str:
+    return str(lab.root / ".robotconf" / "up")
+
+
+def in_sync(up: Proc, lab: GitLab) -> None:
+    wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
+    assert len(processes_mentioning(up_folder(lab))) == 10  # five agents, five brains
+
+
+def none_left(folder: str) -> None:
+    """Waits (bounded) until no process runs from `folder`, and says which do if some still do."""
+    with contextlib.suppress(AssertionError):
+        wait_for(lambda: not processes_mentioning(folder), "every agent and brain to end")
+    assert processes_mentioning(folder) == [], "still running from " + folder
 
 
 def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -> None:
@@ -91,6 +117,8 @@ def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -
     assert "stopped" in up.output()
     assert processes_mentioning(workdir) == []
     assert "Traceback" not in up.output()
+    log = (lab.root / ".robotconf" / "up" / "up.log").read_text(encoding="utf-8")
+    assert " ERROR " not in log and "Traceback" not in log, log
 
 
 def test_up_with_an_existing_broker(lab: GitLab, tmp_path: Path, mosquitto: Mosquitto) -> None:
@@ -161,3 +189,250 @@ def test_the_generated_agent_yaml_is_valid_with_credentials_and_tls(
     )
     assert config.connection().address.tls and config.username == "lab"
     assert config.tls is not None and config.tls.ca_file == secrets["ca.crt"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_stop_signal_stops_every_agent_and_brain(
+    lab: GitLab, tmp_path: Path, sig: signal.Signals
+) -> None:
+    up = start_up(lab, tmp_path)
+    try:
+        in_sync(up, lab)
+    finally:
+        code = up.stop(sig, timeout=60)
+    assert code == 0, up.output()
+    assert "stopped" in up.output() and "Traceback" not in up.output()
+    # up waits for its agents, and each agent for its brain: nothing is left, at once.
+    assert processes_mentioning(up_folder(lab)) == []
+
+
+class Terminal:
+    """A pseudo-terminal that becomes a process's controlling terminal, as a shell's is, so
+    that closing it hangs the process up for real; what is drawn on it is kept."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = pty.openpty()
+        self.screen = bytearray()
+        self._stop = threading.Event()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        # select, not a blocking read: a read in progress would keep the master open after
+        # close() and the hangup would never happen.
+        while not self._stop.is_set():
+            if select.select([self.master], [], [], 0.1)[0]:
+                try:
+                    self.screen.extend(os.read(self.master, 65536))
+                except OSError:
+                    return
+
+    def run(self, argv: list[str], cwd: Path) -> subprocess.Popen[bytes]:
+        proc = subprocess.Popen(
+            argv,
+            stdin=self.slave,
+            stdout=self.slave,
+            stderr=self.slave,
+            cwd=cwd,
+            start_new_session=True,
+            preexec_fn=lambda: fcntl.ioctl(0, termios.TIOCSCTTY, 0),
+        )
+        os.close(self.slave)
+        return proc
+
+    def close(self) -> None:
+        """The terminal window is closed."""
+        if not self._stop.is_set():
+            self._stop.set()
+            self._reader.join()
+            os.close(self.master)
+
+
+def test_closing_the_terminal_stops_everything(lab: GitLab, tmp_path: Path) -> None:
+    """up on a terminal (the live screen) whose terminal goes away: the kernel's SIGHUP, then
+    every write failing. The refused commit is drawn on the live screen, framed."""
+    terminal = Terminal()
+    up = terminal.run(robotconf_argv("up", "--repo", str(lab.root)), lab.root)
+    try:
+        screen = terminal.screen
+        wait_for(lambda: b"all robots InSync" in screen, "the live screen to report InSync")
+        assert b"tb3-05" in screen  # the fleet is drawn, not said as lines
+        assert len(processes_mentioning(up_folder(lab))) == 10
+        lab.replace("configs/scenarios/guide-gazebo.yaml", "capability: ", "capability: nope-")
+        bad = lab.commit("typo")
+        # Framed above the robots on the live screen, not only said in a line over it.
+        wait_for(lambda: b"commit refused" in screen, "the live screen to show the refusal")
+        assert f"REFUSED: commit {bad[:12]}".encode() in screen
+        terminal.close()
+        assert up.wait(60) == 0  # up stopped itself: SIGHUP did not just kill it
+    finally:
+        terminal.close()
+        if up.poll() is None:
+            up.kill()
+            up.wait()
+    none_left(up_folder(lab))
+    log = (lab.root / ".robotconf" / "up" / "up.log").read_text(encoding="utf-8")
+    assert "Traceback" not in log
+
+
+def test_a_killed_up_takes_its_agents_and_brains_along_and_the_next_starts_cleanly(
+    lab: GitLab, tmp_path: Path
+) -> None:
+    folder = up_folder(lab)
+    first = start_up(lab, tmp_path, log="first.out")
+    try:
+        in_sync(first, lab)
+        os.kill(first.pid, signal.SIGKILL)  # up alone: no chance to stop anything itself
+        first.popen.wait()
+        none_left(folder)
+    finally:
+        first.kill()
+    for robot_id in lab.robots():
+        robot = lab.root / ".robotconf" / "up" / robot_id
+        # Each agent stopped its brain cleanly (not killed): it was told that up died.
+        assert "SIGHUP received: stopping" in (robot / "agent.log").read_text(), robot_id
+        assert "SIGTERM received, stopping" in (robot / "brain.log").read_text(), robot_id
+
+    second = start_up(lab, tmp_path, log="second.out")
+    try:
+        in_sync(second, lab)
+    finally:
+        code = second.stop(signal.SIGINT, timeout=60)
+    assert code == 0, second.output()
+    assert "Traceback" not in second.output() and "left running" not in second.output()
+
+
+def test_up_stops_an_agent_a_previous_up_left_running(lab: GitLab, tmp_path: Path) -> None:
+    """Where no parent-death signal stopped it (another OS, or an agent still stopping): its
+    work directory's lock names it, and the next up stops it before starting its own."""
+    first = start_up(lab, tmp_path, log="first.out")
+    try:
+        in_sync(first, lab)
+    finally:
+        assert first.stop(signal.SIGINT, timeout=60) == 0, first.output()
+    robot = lab.root / ".robotconf" / "up" / "tb3-01"
+    left = start_agent_from(robot, tmp_path)
+    try:
+        wait_for(lambda: (robot / "agent.lock").read_text().strip() == str(left.pid), "its lock")
+        second = start_up(lab, tmp_path, log="second.out")
+        try:
+            in_sync(second, lab)
+            out = second.output()
+            assert f"stopping agent pid {left.pid} left running in {robot}" in out, out
+            assert not left.alive()
+        finally:
+            assert second.stop(signal.SIGINT, timeout=60) == 0, second.output()
+    finally:
+        left.kill()
+    assert processes_mentioning(up_folder(lab)) == []
+
+
+def start_agent_from(robot: Path, tmp_path: Path, config: Path | None = None) -> Proc:
+    """The agent of an earlier up's robot, started by hand (so not told to die with any up)."""
+    config = config or robot / "agent.yaml"
+    return Proc(robotconf_argv("agent", "--config", str(config)), tmp_path / "left.out")
+
+
+def test_up_leaves_alone_an_agent_it_did_not_start(lab: GitLab, tmp_path: Path) -> None:
+    """An agent of the same work directory run from another agent.yaml (a robot's own, say)
+    is not up's to stop: up says so and starts nothing."""
+    first = start_up(lab, tmp_path, log="first.out")
+    try:
+        in_sync(first, lab)
+    finally:
+        assert first.stop(signal.SIGINT, timeout=60) == 0, first.output()
+    robot = lab.root / ".robotconf" / "up" / "tb3-01"
+    own = tmp_path / "own-agent.yaml"
+    own.write_text((robot / "agent.yaml").read_text(encoding="utf-8"), encoding="utf-8")
+    other = start_agent_from(robot, tmp_path, own)
+    try:
+        wait_for(lambda: (robot / "agent.lock").read_text().strip() == str(other.pid), "its lock")
+        done = subprocess.run(
+            robotconf_argv("up", "--repo", str(lab.root)),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2, done.stdout + done.stderr
+        assert f"another agent (pid {other.pid}) is using {robot}" in done.stderr
+        assert other.alive()
+    finally:
+        other.stop()
+    assert processes_mentioning(up_folder(lab)) == []
+
+
+def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path) -> None:
+    up = start_up(lab, tmp_path)
+    try:
+        in_sync(up, lab)
+        good = lab.head()
+        lab.replace(
+            "configs/scenarios/delivery-gazebo.yaml",
+            "capability: turtlebot3-camera",
+            "capability: nope",
+        )
+        bad = lab.commit("typo")
+        said = f"REFUSED: commit {bad[:12]} of 'main' is not applied (BuildFailed); "
+        wait_for(lambda: said in up.output(), "up to say the commit is refused")
+        out = up.output()
+        after = out[out.index(said) :].splitlines()
+        assert f"the robots keep {good[:12]}" in after[0], after[0]
+        # The first diagnostics follow, each naming its file: what to fix, without a search.
+        assert "delivery-gazebo.yaml" in after[1] and "nope" in after[1], after[:4]
+    finally:
+        assert up.stop(signal.SIGINT, timeout=60) == 0, up.output()
+    assert out.count(said) == 1  # said once, not at every status change
+
+
+def test_the_embedded_broker_takes_many_clients_at_once_without_an_error() -> None:
+    """amqtt 0.11/0.12 raised "dictionary changed size during iteration" when a client
+    connected while others subscribed (reconciler/broker.py): up's five agents did, at most
+    starts. Thirty clients with five subscriptions each make it happen at every run."""
+    errors: list[logging.LogRecord] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            errors.append(record)
+
+    keep = Keep(logging.ERROR)
+    logging.getLogger().addHandler(keep)
+    broker = EmbeddedBroker(port=free_port("127.0.0.1"))
+    broker.start()
+    clients: list[paho.Client] = []
+    try:
+        publisher = paho.Client(CallbackAPIVersion.VERSION2)
+        publisher.connect("127.0.0.1", broker.port)
+        publisher.loop_start()
+        clients.append(publisher)
+        for n in range(50):
+            publisher.publish(f"r/{n}/status", "x", qos=1, retain=True).wait_for_publish(10)
+        subscribed = threading.Semaphore(0)
+
+        def on_connect(client: paho.Client, first: Any, *_: Any) -> None:
+            client.subscribe([(f"r/{n}/#", 0) for n in range(first, first + 5)])
+
+        def on_subscribe(*_: Any) -> None:
+            subscribed.release()
+
+        def connect(n: int) -> None:
+            client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"c{n}", userdata=n)
+            client.on_connect = on_connect
+            client.on_subscribe = on_subscribe
+            client.connect("127.0.0.1", broker.port)
+            client.loop_start()
+            clients.append(client)
+
+        starting = [threading.Thread(target=connect, args=(n,)) for n in range(30)]
+        for thread in starting:
+            thread.start()
+        for thread in starting:
+            thread.join()
+        for _ in starting:  # each client connected and subscribed: none was dropped
+            assert subscribed.acquire(timeout=30), [r.getMessage() for r in errors]
+    finally:
+        for client in clients:
+            client.loop_stop()
+            client.disconnect()
+        broker.stop()
+        logging.getLogger().removeHandler(keep)
+    assert [r.getMessage() for r in errors] == []
