@@ -41,7 +41,7 @@ from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.signer import make_signer
 from reconciler.source import LocalBranch, open_repo
-from reconciler.verdicts import FleetStatus, build_rows, clean, desired_from_fleet
+from reconciler.verdicts import FleetStatus, build_rows, clean, desired_from_fleet, rollout_line
 
 log = logging.getLogger("robotconf.up")
 
@@ -504,5 +504,10 @@ def _loop(
 
 
 def summary(fleet: FleetStatus) -> str:
+    """One line for the line output: the robots per verdict, and a rollout under way."""
     counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
-    return f"{len(fleet.rows)} robots: {counts}"
+    line = f"{len(fleet.rows)} robots: {counts}"
+    rollout = fleet.reconciler.rollout if fleet.reconciler is not None else None
+    if rollout is not None and rollout.state != "Complete":
+        line += f"; {rollout_line(rollout)}"
+    return line
