@@ -41,7 +41,14 @@ from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.signer import make_signer
 from reconciler.source import LocalBranch, open_repo
-from reconciler.verdicts import FleetStatus, build_rows, clean, desired_from_fleet, rollout_line
+from reconciler.verdicts import (
+    FleetStatus,
+    build_rows,
+    clean,
+    desired_from_fleet,
+    diagnostic_lines,
+    rollout_line,
+)
 
 log = logging.getLogger("robotconf.up")
 
@@ -325,12 +332,7 @@ def refusal_lines(status: ReconcilerStatus | None) -> list[str]:
         f"REFUSED: commit {short_rev(status.failed_revision)}{where} is not applied "
         f"({clean(status.reason)}); {keep}. Fix it (robotconf validate) and commit again."
     ]
-    shown = status.diagnostics[:REFUSED_DIAGNOSTICS]
-    lines += [f"  {clean(str(d))}" for d in shown]
-    more = len(status.diagnostics) - len(shown) + status.more_diagnostics
-    if more > 0:
-        lines.append(f"  ... {more} more")
-    return lines
+    return lines + diagnostic_lines(status, REFUSED_DIAGNOSTICS)
 
 
 def run_up(

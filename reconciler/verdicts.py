@@ -319,8 +319,14 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
         )
     if status.rollout is not None:
         lines.append(rollout_line(status.rollout))
-    shown = status.diagnostics[:10]
-    lines += [f"  {clean(str(d))}" for d in shown]
+    return lines + diagnostic_lines(status, 10)
+
+
+def diagnostic_lines(status: ReconcilerStatus, limit: int) -> list[str]:
+    """The status's first `limit` diagnostics, indented, and how many more there are (those
+    left out of the status itself included)."""
+    shown = status.diagnostics[:limit]
+    lines = [f"  {clean(str(d))}" for d in shown]
     more = len(status.diagnostics) - len(shown) + status.more_diagnostics
     if more > 0:
         lines.append(f"  ... {more} more")
