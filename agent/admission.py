@@ -1,7 +1,7 @@
-"""Admission: whether a launch-topic payload is admitted for this robot (clear, accept with
-warnings, or reject).
+"""Admission: whether a payload for this robot is admitted — a launch request (clear, accept
+with warnings, or reject) or a restart asked for from the desk (carry out, or reject).
 
-Pure: validated with the shared LaunchRequest type, checked against the robot's description.
+Pure: validated with the shared request types, checked against the robot's description.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from pydantic import ValidationError
 from configurator.launch import (
     API_VERSION,
     LaunchRequest,
+    RestartRequest,
     StopRequest,
     canonical_json,
     template_mismatch,
@@ -49,6 +50,19 @@ Verifier = Callable[[dict[str, Any]], "str | None"]
 
 # A launch request is a few kB; the broker's own limit may be higher.
 MAX_REQUEST_BYTES = 1024 * 1024
+# A restart or a logs request is a few hundred bytes.
+MAX_COMMAND_BYTES = 4 * 1024
+# A restart is carried out only this close (either way, seconds) to when it was issued: a
+# captured one cannot be held back and replayed later.
+RESTART_MAX_AGE = 300.0
+
+
+@dataclass(frozen=True)
+class Restart:
+    """A restart to carry out: who asked, and when it was issued."""
+
+    requested_by: str
+    issued_at: float
 
 
 @dataclass(frozen=True)
@@ -162,3 +176,51 @@ def _short(value: Any) -> str:
     """A value from the payload as a message may quote it: bounded."""
     text = repr(value)
     return text if len(text) <= 80 else text[:77] + "..."
+
+
+def interpret_restart(
+    payload: bytes,
+    robot_id: str,
+    verify: Verifier | None,
+    newest_issued_at: float | None,
+    now: float,
+) -> Restart | Reject:
+    """The admission of one restart-topic payload, in the order of `interpret`: bounded parse,
+    address, signature (when this agent verifies), then the model; then freshness: issued
+    within RESTART_MAX_AGE of `now` (wall time) and after the newest restart carried out, so
+    that each restart happens once, a duplicate delivery included."""
+    try:
+        data = parse_object(payload, max_bytes=MAX_COMMAND_BYTES)
+    except PayloadError as exc:
+        return Reject(f"malformed restart request: {exc}")
+    if data.get("apiVersion") != API_VERSION or data.get("kind") != "Restart":
+        return Reject(
+            f"not a restart request (apiVersion {_short(data.get('apiVersion'))}, kind "
+            f"{_short(data.get('kind'))}); expected {API_VERSION!r} and 'Restart'"
+        )
+    addressed = data.get("robot_id")
+    if addressed != robot_id:
+        return Reject(f"the restart is for robot {_short(addressed)}, this is {robot_id!r}")
+    if verify is not None:
+        if payload != canonical_json(data):
+            return Reject("a signed restart must be in canonical JSON form, as signed")
+        problem = verify(data)
+        if problem is not None:
+            return Reject(problem.replace("request", "restart", 1))
+    try:
+        request = RestartRequest.model_validate(data)
+    except ValidationError as exc:
+        return Reject(f"not a valid restart request: {_validation_summary(exc)}")
+    issued = request.issued_at
+    if abs(now - issued) > RESTART_MAX_AGE:
+        return Reject(
+            f"restart issued at {_iso(issued)}, and this robot's clock says {_iso(now)}: more "
+            f"than {RESTART_MAX_AGE:g} s apart (an old restart replayed, or a clock is wrong: "
+            "check NTP)"
+        )
+    if newest_issued_at is not None and issued <= newest_issued_at:
+        return Reject(
+            f"restart issued at {_iso(issued)} is not newer than the last one carried out "
+            f"({_iso(newest_issued_at)}): a duplicate or a replay"
+        )
+    return Restart(request.requested_by, issued)

@@ -19,13 +19,15 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.reasoncodes import ReasonCode
 
-from agent.admission import MAX_REQUEST_BYTES
+from agent.admission import MAX_COMMAND_BYTES, MAX_REQUEST_BYTES
 from agent.events import (
     Connected,
     ConnectFailed,
     Disconnected,
     Inbox,
     LaunchMessage,
+    LogsMessage,
+    RestartMessage,
     StatusMessage,
 )
 from agent.workdir import SeqStore
@@ -69,6 +71,9 @@ class BrokerLink:
         self.launch_topic = self.topics.launch(robot_id)
         self.status_topic = self.topics.status(robot_id)
         self.description_topic = self.topics.description(robot_id)
+        self.restart_topic = self.topics.restart(robot_id)
+        self.logs_request_topic = self.topics.logs_request(robot_id)
+        self.logs_topic = self.topics.logs(robot_id)
         self._connection = connection
         self._keepalive = keepalive
         self._inbox = inbox
@@ -122,7 +127,16 @@ class BrokerLink:
         # Subscribing here, not once at start-up, restores the subscriptions after a reconnect.
         # The own status topic is watched for a late Last Will; QoS 0 is enough, since every
         # reconnection delivers the retained status anew, and spares a PUBACK per echo.
-        client.subscribe([(self.launch_topic, QOS), (self.status_topic, 0)])
+        # Restarts and log requests from the desk come on topics of their own (the ACL lets
+        # operators write them, and robots only read their own).
+        client.subscribe(
+            [
+                (self.launch_topic, QOS),
+                (self.status_topic, 0),
+                (self.restart_topic, QOS),
+                (self.logs_request_topic, QOS),
+            ]
+        )
         self._inbox.put_local(Connected(self._conn_seq))
 
     def _on_disconnect(
@@ -144,6 +158,12 @@ class BrokerLink:
             payload = bytes(message.payload[: MAX_STATUS_BYTES + 1])
             if payload not in self._echoes:
                 self._inbox.put_local(StatusMessage(payload))
+        elif message.topic == self.restart_topic:
+            payload = bytes(message.payload[: MAX_COMMAND_BYTES + 1])
+            self._inbox.put_local(RestartMessage(payload, bool(message.retain)))
+        elif message.topic == self.logs_request_topic and not message.retain:
+            # A retained log request is stale by nature: nobody waits for its answer.
+            self._inbox.put_local(LogsMessage(bytes(message.payload[: MAX_COMMAND_BYTES + 1])))
 
     # ------------------------------------------------------------ the agent's loop
 
@@ -260,6 +280,11 @@ class BrokerLink:
     def publish_description(self, description: RobotDescription) -> None:
         payload = description.model_dump_json(exclude_none=True).encode("utf-8")
         self.client.publish(self.description_topic, payload, qos=QOS, retain=True)
+
+    def publish_logs(self, payload: bytes) -> None:
+        # Not retained: an answer is for who asks now. Paced by LogStream, so QoS 1 costs
+        # a few PUBACKs a second, and a tail's end marker is not lost.
+        self.client.publish(self.logs_topic, payload, qos=QOS, retain=False)
 
     def close(self, final: AgentStatus | None, timeout: float = 5.0) -> None:
         """Publish the final status if connected, then disconnect cleanly (no Last Will)."""

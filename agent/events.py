@@ -39,6 +39,17 @@ class StatusMessage:
 
 
 @dataclass(frozen=True)
+class RestartMessage:
+    payload: bytes
+    retained: bool  # delivered from the broker's retained store: never carried out
+
+
+@dataclass(frozen=True)
+class LogsMessage:
+    payload: bytes
+
+
+@dataclass(frozen=True)
 class BrainExited:
     pid: int
     code: int
@@ -55,6 +66,8 @@ Event = (
     | Disconnected
     | LaunchMessage
     | StatusMessage
+    | RestartMessage
+    | LogsMessage
     | BrainExited
     | Shutdown
 )

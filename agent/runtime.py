@@ -14,6 +14,7 @@ import os
 import selectors
 import signal
 import time
+from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from contextvars import ContextVar
 from types import FrameType
@@ -31,9 +32,12 @@ from agent.events import (
     Event,
     Inbox,
     LaunchMessage,
+    LogsMessage,
+    RestartMessage,
     Shutdown,
     StatusMessage,
 )
+from agent.logs import LogStream, Redactor
 from agent.supervisor import (
     Effect,
     Kill,
@@ -49,6 +53,7 @@ from agent.workdir import (
     LOG_FILE,
     PID_FILE,
     REQUEST_FILE,
+    RESTART_ISSUED_FILE,
     SEQ_FILE,
     STAGED_FILE,
     IssuedStore,
@@ -57,7 +62,8 @@ from agent.workdir import (
 )
 from configurator.launch import LaunchRequest
 from configurator.safejson import PayloadError, parse_object
-from configurator.wire import AgentState, AgentStatus
+from configurator.typing_errors import error_line
+from configurator.wire import AgentState, AgentStatus, LogsRequest
 from configurator.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
@@ -68,6 +74,7 @@ _acting_for: ContextVar[str | None] = ContextVar("robotconf_agent_robot", defaul
 LOG_CHECK_INTERVAL = 2.0  # seconds between brain log size checks
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
 STOPPING_QUIET = 0.05  # seconds a brain may take to stop before `stopping` is published
+REFUSAL_LOG_EVERY = 10.0  # seconds: at most a few lines per this about refused desk requests
 
 
 def policy_of(config: AgentConfig) -> Policy:
@@ -93,10 +100,13 @@ class Agent:
         self.inbox = Inbox()
         self.seq = SeqStore(self.workdir / SEQ_FILE)
         self.issued = IssuedStore(self.workdir / ISSUED_FILE)
+        self.restart_issued = IssuedStore(self.workdir / RESTART_ISSUED_FILE)
+        self.refusals = Throttle(REFUSAL_LOG_EVERY)
         self.supervisor = Supervisor(config.robot_id, policy_of(config))
         self.brain_log = process.BrainLog(
             self.workdir / LOG_FILE, config.log.max_bytes, config.log.backups
         )
+        self.logs = LogStream(self.workdir / LOG_FILE, config.robot_id, redactor_of(config))
         self.link = BrokerLink(
             config.connection(),
             config.prefix,
@@ -181,6 +191,7 @@ class Agent:
             self._apply(self.supervisor.tick(now))
             handled = True
         self._maybe_rotate_log(now)
+        self._send_logs(now)
         report = self._held_until
         if handled or (report is not None and now >= report):
             # The status changes with events and deadlines, nothing else.
@@ -215,6 +226,9 @@ class Agent:
             due = min(due, self._next_log_check)
         if self._held_until is not None:
             due = min(due, self._held_until)
+        logs = self.logs.due(now)
+        if logs is not None and self.connected:
+            due = min(due, logs)
         link = self.link.wait_limit(now)
         if link is not None:
             due = min(due, now + link)
@@ -256,6 +270,7 @@ class Agent:
             if self.connected:
                 log.warning("disconnected from the broker (%s); reconnecting", event.reason)
             self.connected = False
+            self.logs.stop()  # followers ask again once they can; nothing waits for the link
         elif isinstance(event, ConnectFailed):
             self.connected = False
             if event.reason != self._last_connect_problem:
@@ -265,6 +280,10 @@ class Agent:
             self._on_launch(event.payload, now)
         elif isinstance(event, StatusMessage):
             self._on_own_status(event.payload)
+        elif isinstance(event, RestartMessage):
+            self._on_restart(event, now)
+        elif isinstance(event, LogsMessage):
+            self._on_logs(event.payload, now)
         elif isinstance(event, BrainExited):
             self._on_brain_exit(event, now)
         elif isinstance(event, Shutdown):
@@ -285,6 +304,7 @@ class Agent:
             self._apply(sup.clear(now))
         elif isinstance(outcome, admission.Reject):
             log.warning("launch request rejected: %s", outcome.reason)
+            self.brain_log.note(f"launch request rejected: {outcome.reason}")
             self._apply(sup.reject(outcome.reason, now))
         else:
             for warning in outcome.warnings:
@@ -333,6 +353,63 @@ class Agent:
             self.conn_seq,
         )
         self._publish(force=True)
+
+    def _on_restart(self, event: RestartMessage, now: float) -> None:
+        """A restart from the desk: carried out once verified, fresh and addressed here;
+        anything else does nothing but a (throttled) line in the agent's and the brain's log."""
+        if event.retained:
+            self._refused(
+                "restart refused: it came retained, and a retained restart would fire at "
+                "every reconnect; publish it without the retain flag"
+            )
+            return
+        outcome = admission.interpret_restart(
+            event.payload, self.config.robot_id, self.verify, self.restart_issued.newest, now_wall()
+        )
+        if isinstance(outcome, admission.Reject):
+            self._refused(f"restart refused: {outcome.reason}")
+            return
+        self.restart_issued.accepted(outcome.issued_at)
+        effects, problem = self.supervisor.restart(outcome.requested_by, outcome.issued_at, now)
+        if problem is not None:
+            self._refused(f"restart requested by {outcome.requested_by} not carried out: {problem}")
+            return
+        log.info("restart requested by %s", outcome.requested_by)
+        self.brain_log.note(f"restart requested by {outcome.requested_by}")
+        self._apply(effects)
+
+    def _on_logs(self, payload: bytes, now: float) -> None:
+        try:
+            request = LogsRequest.model_validate(
+                parse_object(payload, max_bytes=admission.MAX_COMMAND_BYTES)
+            )
+        except PayloadError as exc:
+            self._refused(f"logs request refused: {exc}")
+            return
+        except ValidationError as exc:
+            first = error_line(exc.errors(include_url=False)[0])
+            self._refused(f"logs request refused: {first[:200]}")
+            return
+        if not self.logs.following and request.follow:
+            log.info("streaming the brain's log to the desk while asked")
+        if not self.logs.ask(request, now):
+            self._refused("logs request ignored: more than a few a second")
+
+    def _refused(self, line: str) -> None:
+        """A desk request that does nothing: said in the agent's log and, for the operator
+        (`robotconf logs`), in the brain's; a few times per REFUSAL_LOG_EVERY at most, since
+        anyone who may publish on this robot's topics could otherwise fill its disk."""
+        said = self.refusals.admit(line, time.monotonic())
+        if said is not None:
+            log.warning("%s", said)
+            self.brain_log.note(said)
+
+    def _send_logs(self, now: float) -> None:
+        if not self.connected:
+            return
+        self.logs.poll(now)
+        for chunk in self.logs.take(now):
+            self.link.publish_logs(chunk.model_dump_json().encode("utf-8"))
 
     def _on_brain_exit(self, event: BrainExited, now: float) -> None:
         if self.brain is not None and self.brain.pid == event.pid:
@@ -476,6 +553,41 @@ class Agent:
         self._held_until = None
         self.link.publish_status(status)
         self._last_published = status
+
+
+def redactor_of(config: AgentConfig) -> Redactor:
+    """What must never leave the robot in a log line: the `env:` values (which may hold
+    tokens) and the broker password, wherever it is configured."""
+    secrets = list(config.env.values())
+    connection = config.connection()
+    try:
+        password = connection.password()
+    except (OSError, ValueError):
+        password = None
+    if password:
+        secrets.append(password)
+    return Redactor(secrets, config.env.keys())
+
+
+class Throttle:
+    """At most `limit` lines per `every` seconds; the next one admitted says how many were
+    not. A few refusals in a row are all said (an operator's second try is not hidden)."""
+
+    def __init__(self, every: float, limit: int = 5) -> None:
+        self.every = every
+        self.limit = limit
+        self._said: deque[float] = deque()
+        self._quiet = 0
+
+    def admit(self, line: str, now: float) -> str | None:
+        while self._said and now - self._said[0] >= self.every:
+            self._said.popleft()
+        if len(self._said) >= self.limit:
+            self._quiet += 1
+            return None
+        self._said.append(now)
+        quiet, self._quiet = self._quiet, 0
+        return line + (f" (and {quiet} more not logged)" if quiet else "")
 
 
 def _os_error(exc: OSError) -> str:

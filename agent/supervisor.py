@@ -102,6 +102,9 @@ class Supervisor:
         self.message = "waiting for a launch request"
         self.rejection: str | None = None
         self.shutting_down = False
+        # The last restart asked for from the desk and carried out: who asked, issued when.
+        self.restart_requested_by: str | None = None
+        self.restart_requested_at: float | None = None
         self._started_at = 0.0
         self._killed = False
         self._since = round(self._wall(), 3)
@@ -139,6 +142,8 @@ class Supervisor:
             since=self._since,
             message=message,
             warnings=list(brain.warnings) if brain else [],
+            restart_requested_by=self.restart_requested_by,
+            restart_requested_at=self.restart_requested_at,
         )
 
     # ------------------------------------------------------------ events
@@ -254,6 +259,29 @@ class Supervisor:
         self.deadline = now + delay
         self._enter(AgentState.BACKOFF, f"brain {how}; restarting in {delay:g} s")
         return []
+
+    def restart(
+        self, requested_by: str, issued_at: float, now: float
+    ) -> tuple[list[Effect], str | None]:
+        """A restart asked for from the desk: the assigned request's brain starts again, with
+        its restart count and backoff reset, so a `failed` brain gets a new chance and a
+        wedged one is stopped first. Returns the effects, and why nothing happens when the
+        restart cannot be carried out."""
+        if self.shutting_down:
+            return [], "the agent is shutting down"
+        if self.desired is None:
+            return [], "nothing to restart: no launch request is assigned to this robot"
+        self.restart_requested_by = requested_by
+        self.restart_requested_at = issued_at
+        self.restarts = 0
+        self.streak = 0
+        why = f"restart requested by {requested_by}"
+        if self.pid is not None:
+            if self.phase == AgentState.STOPPING:
+                self.message = f"{why}: the brain is stopping, then starts again"
+                return [], None  # its exit starts the assigned request
+            return self._begin_stop(now, f"{why}: stopping the brain"), None
+        return self._spawn(now), None
 
     def tick(self, now: float) -> list[Effect]:
         """Time passed; does something only once `deadline` is reached."""

@@ -22,6 +22,7 @@ PID_FILE = "brain.pid"
 SEQ_FILE = "agent.seq"
 LOCK_FILE = "agent.lock"
 ISSUED_FILE = "newest-issued-at"
+RESTART_ISSUED_FILE = "newest-restart-issued-at"  # of the newest restart carried out
 
 
 class SeqStore:
@@ -64,8 +65,8 @@ class SeqStore:
 
 
 class IssuedStore:
-    """The issue time of the newest signed request accepted, kept across agent restarts so that
-    an old, validly signed request replayed later cannot roll the robot back."""
+    """The issue time of the newest signed request accepted (or restart carried out), kept
+    across agent restarts so that an old, validly signed one replayed later does nothing."""
 
     def __init__(self, path: Path) -> None:
         self._path = path

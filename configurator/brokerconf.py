@@ -16,9 +16,10 @@ class ServiceUsers:
     # The defaults are the names `validate` reserves (configurator.types.SERVICE_USERS).
     reconciler: str = SERVICE_USERS[0]
     viewer: str = SERVICE_USERS[1]
+    operator: str = SERVICE_USERS[2]
 
     def names(self) -> set[str]:
-        return {self.reconciler, self.viewer}
+        return {self.reconciler, self.viewer, self.operator}
 
 
 def render_acl(prefix: str, robots: list[str], users: ServiceUsers) -> str:
@@ -30,21 +31,27 @@ def render_acl(prefix: str, robots: list[str], users: ServiceUsers) -> str:
 #
 # A robot reads only its own Launch Request and writes only its own status and description
 # (it also reads its own status back, to overwrite a late Last Will of an older connection).
+# From the desk it reads only its own restarts and log requests, and writes its own log:
+# no robot may ask another for either.
 pattern read {prefix}/robots/%u/launch
 pattern readwrite {prefix}/robots/%u/status
 pattern write {prefix}/robots/%u/description
+pattern read {prefix}/robots/%u/restart
+pattern read {prefix}/robots/%u/logs/request
+pattern write {prefix}/robots/%u/logs
 
 # Every client may use its own private marker topic: the reconciler and `robotconf status` know
 # a snapshot of the retained topics is complete when their marker comes back.
 pattern readwrite {prefix}/sync/%c
 
 # The reconciler writes every launch topic (and reads them back: what is published is its only
-# memory), writes its own status, and reads what the robots report.
+# memory), writes its own status, reads what the robots report, and may ask for a restart.
 user {users.reconciler}
 topic readwrite {prefix}/robots/+/launch
 topic readwrite {prefix}/reconciler/status
 topic read {prefix}/robots/+/status
 topic read {prefix}/robots/+/description
+topic write {prefix}/robots/+/restart
 
 # `robotconf status` reads everything and writes nothing.
 user {users.viewer}
@@ -52,6 +59,17 @@ topic read {prefix}/robots/+/launch
 topic read {prefix}/robots/+/status
 topic read {prefix}/robots/+/description
 topic read {prefix}/reconciler/status
+
+# Operators (`robotconf logs`, `robotconf restart`) read everything `status` reads and the
+# robots' logs, and may ask any robot for its log and for a restart; they publish nothing else.
+user {users.operator}
+topic read {prefix}/robots/+/launch
+topic read {prefix}/robots/+/status
+topic read {prefix}/robots/+/description
+topic read {prefix}/reconciler/status
+topic read {prefix}/robots/+/logs
+topic write {prefix}/robots/+/logs/request
+topic write {prefix}/robots/+/restart
 """
 
 
@@ -68,7 +86,7 @@ class Listener:
 def render_conf(listener: Listener, service_port: int, files: Path) -> str:
     """Two listeners with settings of their own: robots on `listener.port`, where a client's id
     is forced to its user name (its robot id), so that no robot can take another's session
-    and set off its Last Will; the service users (reconciler, viewer), who hold several
+    and set off its Last Will; the service users (reconciler, viewer, operator), who hold several
     connections each, on `service_port`, where robots' credentials do not exist. `files` is
     where the broker host keeps `acl`, `passwd` and `passwd-services`."""
     lines = [
@@ -81,7 +99,7 @@ def render_conf(listener: Listener, service_port: int, files: Path) -> str:
         f"password_file {files / 'passwd'}",
         "use_username_as_clientid true",
         "",
-        "# The reconciler and viewers: robots' credentials are not valid here.",
+        "# The reconciler, viewers and operators: robots' credentials are not valid here.",
         *_listener_lines(listener, service_port, files),
         f"password_file {files / 'passwd-services'}",
     ]

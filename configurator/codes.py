@@ -128,7 +128,8 @@ RULES: dict[str, Rule] = {
             "RC501",
             Severity.ERROR,
             "robot id not usable as an MQTT topic level (matched in full: a trailing newline is not"
-            " an id), or reserved: a service user name (`reconciler`, `viewer`, in any case)",
+            " an id), or reserved: a service user name (`reconciler`, `viewer`, `operator`, in any"
+            " case)",
         ),
         Rule(
             "RC502",

@@ -125,6 +125,23 @@ class StopRequest(_Published):
     revision: str = Field(description="the git commit that unassigned the robot")
 
 
+# Who asked, as a restart request names it: a user name or an address, never free text.
+REQUESTER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.@+-]{0,63}$"
+
+
+class RestartRequest(_Published):
+    """A request from the desk (`robotconf restart`) to start a robot's brain again without a
+    commit. Signed with the launch requests' key when the robot's agent verifies them; its
+    `issued_at` is required either way: the agent carries out each restart once, and only a
+    recent one (replay protection)."""
+
+    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
+    kind: Literal["Restart"] = "Restart"
+    robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
+    requested_by: str = Field(pattern=REQUESTER_PATTERN, description="who asked")
+    issued_at: float = Field(description="unix time the restart was asked for")
+
+
 def canonical_json(value: Any) -> bytes:
     """Sorted keys, no insignificant white space, UTF-8: equal content, equal bytes."""
     return json.dumps(

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from configurator.files import write_atomic
-from configurator.launch import LaunchRequest, StopRequest, canonical_json
+from configurator.launch import LaunchRequest, RestartRequest, StopRequest, canonical_json
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
         Ed25519PublicKey,
     )
 
-Signed = TypeVar("Signed", LaunchRequest, StopRequest)
+Signed = TypeVar("Signed", LaunchRequest, StopRequest, RestartRequest)
 
 PRIVATE_NAME = "launch-signing.key"
 PUBLIC_NAME = "launch-signing.pub"
@@ -96,12 +96,13 @@ def load_public_key(path: Path) -> Ed25519PublicKey:
     return key
 
 
-def signed_bytes(request: LaunchRequest | StopRequest) -> bytes:
+def signed_bytes(request: LaunchRequest | StopRequest | RestartRequest) -> bytes:
     return canonical_json(request.wire(signature=False))
 
 
 def sign(request: Signed, key: Ed25519PrivateKey, issued_at: float | None = None) -> Signed:
-    """The request (a launch or a stop) stamped with `issued_at` and signed over all of it."""
+    """The request (a launch, a stop or a restart) stamped with `issued_at`, signed over all of
+    it."""
     stamped = request.model_copy(
         update={
             "issued_at": round(time.time() if issued_at is None else issued_at, 6),
@@ -112,7 +113,9 @@ def sign(request: Signed, key: Ed25519PrivateKey, issued_at: float | None = None
     return stamped.model_copy(update={"signature": signature})
 
 
-def verify(request: LaunchRequest | StopRequest, key: Ed25519PublicKey) -> str | None:
+def verify(
+    request: LaunchRequest | StopRequest | RestartRequest, key: Ed25519PublicKey
+) -> str | None:
     """None when the reconciler's key signed exactly this request, else why not."""
     return verify_object(request.wire(), key)
 

@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 _ROBOT_ID = re.compile(ROBOT_ID_PATTERN)
 # The broker users of the service side (broker-config): no robot may log in as one of them.
-SERVICE_USERS = ("reconciler", "viewer")
+SERVICE_USERS = ("reconciler", "viewer", "operator")
 
 
 def is_robot_id(text: str) -> bool:

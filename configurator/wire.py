@@ -37,6 +37,18 @@ class Topics:
     def description(self, robot_id: str) -> str:
         return f"{self.prefix}/robots/{robot_id}/description"
 
+    def logs(self, robot_id: str) -> str:
+        """The brain's log while someone asks for it (agent -> operators; not retained)."""
+        return f"{self.prefix}/robots/{robot_id}/logs"
+
+    def logs_request(self, robot_id: str) -> str:
+        """Operators ask for a robot's log here (operators -> agent; not retained)."""
+        return f"{self.prefix}/robots/{robot_id}/logs/request"
+
+    def restart(self, robot_id: str) -> str:
+        """Restart requests (operators and the reconciler -> agent; not retained)."""
+        return f"{self.prefix}/robots/{robot_id}/restart"
+
     @property
     def reconciler_status(self) -> str:
         return f"{self.prefix}/reconciler/status"
@@ -196,6 +208,43 @@ class AgentStatus(_Message):
     message: str = ""
     warnings: list[str] = Field(default_factory=list)
     seq: int = 0
+    # The last restart asked for from the desk (`robotconf restart`) and carried out: who
+    # asked (as the request says) and when it was issued (unix time).
+    restart_requested_by: str | None = None
+    restart_requested_at: float | None = None
+
+
+# Logs from the desk (`robotconf logs`): the operator asks on `logs_request`, the agent answers
+# on `logs`, only while asked. Bounds for both sides of that exchange:
+MAX_LOG_MESSAGE_BYTES = 64 * 1024  # one answer message; a longer line is cut, with a marker
+MAX_TAIL_LINES = 1000  # the most lines one request may ask for
+LOG_FOLLOW_TTL = 30.0  # seconds the agent keeps streaming after the last request
+SESSION_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+
+
+class LogsRequest(_Message):
+    """Asks an agent for the last `lines` of its brain's log (with the agent's own events in
+    it), and with `follow` for what comes next, until LOG_FOLLOW_TTL after the newest ask."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
+    kind: Literal["LogsRequest"] = "LogsRequest"
+    session: str = Field(pattern=SESSION_PATTERN, description="names the answers to this ask")
+    lines: int = Field(50, ge=0, le=MAX_TAIL_LINES)
+    follow: bool = False
+
+
+class LogsChunk(_Message):
+    """Part of a log on the `logs` topic: the tail answering `session`, or (session None) the
+    stream that every follower reads."""
+
+    robot_id: str
+    session: str | None = None
+    lines: list[str] = Field(default_factory=list)
+    dropped: int = Field(0, description="lines left out before these: over the rate limit")
+    end: bool = Field(False, description="the last chunk of the tail for `session`")
+    following: bool = Field(False, description="the agent streams new lines after this")
 
 
 class StatusDiagnostic(_Message):

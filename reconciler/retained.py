@@ -120,6 +120,7 @@ class RetainedView:
         on_change: Callable[[], None] | None = None,
         on_synced: Callable[[], None] | None = None,
         on_topic: Callable[[str], None] | None = None,
+        on_payload: Callable[[str, bytes], None] | None = None,
         max_inflight: int = 0,
         max_payload: int = MAX_PAYLOAD_BYTES,
     ) -> None:
@@ -130,6 +131,7 @@ class RetainedView:
         self._on_change = on_change
         self._on_synced = on_synced
         self._on_topic = on_topic
+        self._on_payload = on_payload  # each message as it comes (a stream, not a copy)
         self.max_payload = max_payload
         self.oversized = 0  # payloads dropped on arrival for their size
         self._dropped = Ignored()
@@ -240,6 +242,18 @@ class RetainedView:
                     self._topics.pop(topic, None)
         return ok
 
+    def publish(self, topic: str, payload: bytes, timeout: float) -> bool:
+        """One message, not retained, QoS 1; True once the broker acknowledged it in time."""
+        if not self._connected:
+            return False
+        info = self._client.publish(topic, payload, qos=1, retain=False)
+        try:
+            info.wait_for_publish(timeout)
+        except (RuntimeError, ValueError) as exc:
+            self.last_error = str(exc)
+            return False
+        return info.is_published()
+
     # ------------------------------------------------------------------ paho callbacks
     # They run on paho's network thread: update memory, set events, never block.
 
@@ -321,6 +335,8 @@ class RetainedView:
                 self._topics.pop(message.topic, None)
         if self._on_topic is not None:
             self._on_topic(message.topic)
+        if self._on_payload is not None:
+            self._on_payload(message.topic, bytes(payload))
         if self._on_change is not None:
             self._on_change()
 

@@ -99,6 +99,9 @@ class RobotRow:
     warnings: list[str] = field(default_factory=list)
     labels: dict[str, str] = field(default_factory=dict)  # fleet.yaml's; none when not desired
     wave: str | None = None  # its rollout wave, when fleet.yaml has a rollout policy
+    # The last restart asked for from the desk that its agent carried out: who, issued when.
+    restart_requested_by: str | None = None
+    restart_requested_at: float | None = None
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -116,7 +119,24 @@ class RobotRow:
             "restarts": self.restarts,
             "reloads": self.reloads,
             "warnings": self.warnings,
+            "restart": (
+                {"requested_by": self.restart_requested_by, "at": self.restart_requested_at}
+                if self.restart_requested_by is not None
+                else None
+            ),
         }
+
+    def restart_line(self) -> str | None:
+        """`restart: tb3-01 by alice at 2026-11-24 12:00:03 UTC`, when one was carried out."""
+        if self.restart_requested_by is None:
+            return None
+        at = self.restart_requested_at
+        when = (
+            time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(at))
+            if at is not None and 0 <= at < 1e11
+            else "an unknown time"
+        )
+        return f"restart: {clean(self.robot_id)} by {clean(self.restart_requested_by)} at {when}"
 
 
 def verdict(desired: DesiredRobot | None, robot: RobotSeen) -> tuple[Verdict, str]:
@@ -181,6 +201,8 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 warnings=warnings,
                 labels=dict(want.labels) if want else {},
                 wave=want.wave if want else None,
+                restart_requested_by=status.restart_requested_by if status else None,
+                restart_requested_at=status.restart_requested_at if status else None,
             )
         )
     rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), r.robot_id))

@@ -90,6 +90,10 @@ def fleet_status_view(fleet: FleetStatus) -> Group:
     if warnings:
         parts.append(Text(""))
         parts += [safe(w, "yellow") for w in warnings]
+    restarts = [line for r in fleet.rows if (line := r.restart_line()) is not None]
+    if restarts:
+        parts.append(Text(""))
+        parts += [safe(line) for line in restarts]
     counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
     parts.append(Text(""))
     parts.append(

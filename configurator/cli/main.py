@@ -42,6 +42,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "configurator.cli.status:status",
         "show the fleet: desired vs reported, worst first",
     ),
+    "logs": (
+        "configurator.cli.logs:logs",
+        "show a robot's brain log from the desk (--follow for new lines)",
+    ),
+    "restart": (
+        "configurator.cli.restart:restart",
+        "start a robot's brain again from the desk, without a commit",
+    ),
     "up": (
         "configurator.cli.up:up",
         "the whole loop on this machine: broker, reconciler, agents, status",

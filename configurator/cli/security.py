@@ -89,7 +89,12 @@ _PATH = click.Path(path_type=Path)
 @click.option("--cafile", type=_PATH, default=None, help="CA for client certificates")
 @click.option("--require-certificate", is_flag=True, help="clients must present one")
 @click.option("--reconciler-user", default="reconciler")
-@click.option("--viewer-user", default="viewer")
+@click.option("--viewer-user", default="viewer", help="reads the fleet's topics, writes nothing")
+@click.option(
+    "--operator-user",
+    default="operator",
+    help="reads everything and the robots' logs; asks for logs and restarts",
+)
 @click.option("--check", "check_only", is_flag=True, help="fail when the files are stale")
 def broker_config(
     repo: Path,
@@ -107,6 +112,7 @@ def broker_config(
     require_certificate: bool,
     reconciler_user: str,
     viewer_user: str,
+    operator_user: str,
     check_only: bool,
 ) -> ExitCode:
     """Write Mosquitto ACL, password files and TLS listeners from configs/fleet.yaml."""
@@ -119,12 +125,16 @@ def broker_config(
         sys.stderr.write(format_text(checked.errors))
         raise CliError("broker-config needs a valid configs/fleet.yaml", ExitCode.FINDINGS)
     robots = sorted(checked.repo.fleet.model.robots)
-    users = ServiceUsers(reconciler_user, viewer_user)
+    users = ServiceUsers(reconciler_user, viewer_user, operator_user)
+    if len(users.names()) < 3:
+        raise CliError(
+            "--reconciler-user, --viewer-user and --operator-user must be three different names"
+        )
     clash = clashes(robots, users)
     if clash:
         raise CliError(
             f"robot id(s) {', '.join(clash)} equal a service user name; "
-            "rename the robot or pass --reconciler-user/--viewer-user",
+            "rename the robot or pass --reconciler-user/--viewer-user/--operator-user",
             ExitCode.FINDINGS,
         )
     acl_file, conf_file = out / "acl", out / "mosquitto.conf"
@@ -178,7 +188,7 @@ def broker_config(
     conf_file.write_text(conf, encoding="utf-8")
     count = len(robots) + len(users.names())
     print(f"wrote {conf_file}, {acl_file}, {', '.join(str(p) for p in passwd)} ({count} users)")
-    print(f"robots connect on port {port}, the reconciler and viewers on {service_port}")
+    print(f"robots connect on port {port}; the reconciler, viewers and operators on {service_port}")
     print(f"passwords: {secrets_dir}/<user>.password (0600); give each robot its own file")
     print("the broker reads passwd and acl: make them readable by its user (chown mosquitto)")
     return ExitCode.OK

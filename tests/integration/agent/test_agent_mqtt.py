@@ -122,7 +122,8 @@ def test_same_digest_again_changes_nothing(
     assert again.revision == running.revision  # the brain still runs what it was started with
     states = {s.state for s in watch.history(ROBOT)[seen_before:]}
     assert states == {AgentState.REJECTED, AgentState.RUNNING}
-    assert agent.brain_log().count("--- robotconf agent") == 1  # started once, never again
+    assert agent.brain_log().count("started pid") == 1  # started once, never again
+    assert "launch request rejected: malformed launch request" in agent.brain_log()
 
 
 def test_new_digest_stops_then_starts(

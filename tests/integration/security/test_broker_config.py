@@ -271,3 +271,47 @@ def test_robots_have_no_credentials_on_the_service_listener(broker: Secured) -> 
     finally:
         for session in sessions:
             session.close()
+
+
+def _subscribed(session: Session, *topics: str) -> Session:
+    session.suback.clear()
+    session.client.subscribe([(t, 1) for t in topics])
+    assert session.suback.wait(WAIT)
+    session.messages.clear()
+    return session
+
+
+def test_only_operators_and_the_reconciler_ask_a_robot_for_restarts_and_logs(
+    broker: Secured,
+) -> None:
+    """The desk's topics: operators ask for logs and restarts and read the logs; the
+    reconciler may ask for a restart; a viewer and another robot may do neither."""
+    base = "robotconf/robots/tb3-01"
+    users = {u: connect(broker.connection(u), u) for u in ("operator", "reconciler", "viewer")}
+    robot = connect(broker.connection("tb3-01"), "tb3-01")
+    other = connect(broker.connection("tb3-02"), "tb3-02")
+    sessions = [*users.values(), robot, other]
+    try:
+        assert all(s.reason == "Success" for s in sessions)
+        _subscribed(robot, f"{base}/restart", f"{base}/logs/request")
+        _subscribed(users["operator"], f"{base}/logs")
+        _subscribed(users["viewer"], f"{base}/logs")
+        _subscribed(other, f"{base}/logs", "robotconf/robots/tb3-02/restart")
+        for name, session in [*users.items(), ("tb3-02", other)]:
+            publish(session, f"{base}/restart", f"restart from {name}".encode(), retain=False)
+            publish(session, f"{base}/logs/request", f"logs from {name}".encode(), retain=False)
+        publish(robot, f"{base}/logs", b"the log", retain=False)
+        # A robot cannot ask another, nor answer in another's name.
+        publish(robot, "robotconf/robots/tb3-02/restart", b"robot to robot", retain=False)
+        publish(other, f"{base}/logs", b"forged log", retain=False)
+        deadline = time.monotonic() + WAIT
+        while time.monotonic() < deadline and not users["operator"].messages:
+            time.sleep(0.05)
+        time.sleep(1.0)
+        got = sorted(p for _, p in robot.messages)
+        assert got == [b"logs from operator", b"restart from operator", b"restart from reconciler"]
+        assert [p for _, p in users["operator"].messages] == [b"the log"]
+        assert users["viewer"].messages == [] and other.messages == []
+    finally:
+        for session in sessions:
+            session.close()

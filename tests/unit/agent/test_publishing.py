@@ -25,3 +25,14 @@ def test_every_other_state_goes_at_once() -> None:
         if state is not AgentState.STOPPING:
             assert publish_delay(status(state), status(AgentState.STOPPING)) == 0.0
             assert publish_delay(status(state), None) == 0.0
+
+
+def test_refusals_are_logged_a_few_at_a_time_with_a_count_of_the_rest() -> None:
+    from agent.runtime import Throttle
+
+    throttle = Throttle(10.0, limit=2)
+    assert throttle.admit("a", 0.0) == "a"
+    assert throttle.admit("b", 1.0) == "b"
+    assert [throttle.admit("flood", 2.0 + n / 100) for n in range(50)] == [None] * 50
+    assert throttle.admit("c", 10.5) == "c (and 50 more not logged)"
+    assert throttle.admit("d", 10.6) is None

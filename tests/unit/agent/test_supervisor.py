@@ -402,3 +402,50 @@ def test_clear_after_reloads_resets_them() -> None:
     sup.exited(100, -15, 6.5)
     status = sup.status()
     assert status.state == AgentState.IDLE and status.reloads == 0
+
+
+def test_a_restart_from_the_desk_starts_a_failed_brain_again() -> None:
+    sup = supervisor(max_restarts=0)
+    sup.accept(A, [], 0.0)
+    sup.spawned(1, 0.0)
+    sup.exited(1, 3, 0.5)
+    assert sup.state == AgentState.FAILED
+    effects, problem = sup.restart("alice", 1234.5, 1.0)
+    assert problem is None and effects == [Spawn(A)]
+    assert sup.state == AgentState.STARTING
+    status = sup.status()
+    assert (status.restart_requested_by, status.restart_requested_at) == ("alice", 1234.5)
+    assert status.restarts == 0
+    sup.spawned(2, 1.0)
+    sup.tick(2.0)
+    assert sup.state == AgentState.RUNNING and sup.status().pid == 2
+
+
+def test_a_restart_stops_a_running_brain_first_then_starts_it() -> None:
+    sup = running(supervisor(), pid=100)
+    effects, problem = sup.restart("bob", 1.0, 5.0)
+    assert problem is None and effects == [Terminate(100)]
+    assert sup.state == AgentState.STOPPING
+    assert "restart requested by bob" in sup.status().message
+    # A wedged brain that ignores SIGTERM is killed after the stop timeout, as for any stop.
+    assert sup.tick(5.0 + sup.policy.stop_timeout) == [Kill(100)]
+    assert sup.exited(100, -9, 16.0) == [Spawn(A)]
+
+
+def test_a_restart_in_backoff_starts_at_once() -> None:
+    sup = running(supervisor(), pid=100)
+    sup.exited(100, 1, 2.0)
+    assert sup.state == AgentState.BACKOFF and sup.deadline is not None
+    effects, problem = sup.restart("alice", 1.0, 2.1)
+    assert problem is None and effects == [Spawn(A)] and sup.streak == 0
+
+
+def test_a_restart_with_nothing_assigned_or_while_shutting_down_does_nothing() -> None:
+    sup = supervisor()
+    effects, problem = sup.restart("alice", 1.0, 0.0)
+    assert effects == [] and problem is not None and "no launch request" in problem
+    assert sup.status().restart_requested_by is None
+    sup = running(supervisor(), pid=7)
+    sup.shutdown(1.0)
+    effects, problem = sup.restart("alice", 1.0, 1.5)
+    assert effects == [] and problem == "the agent is shutting down"

@@ -1,0 +1,415 @@
+"""Logs and restarts from the desk, end to end: real agents, a real Mosquitto, `robotconf logs`
+and `robotconf restart` as processes."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import paho.mqtt.client as paho
+import pytest
+
+from agent.logs import BURST, RATE
+from configurator.launch import RestartRequest
+from configurator.mqtt import Connection, make_client
+from configurator.signing import generate_keys, load_private_key, sign
+from configurator.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, AgentState, Topics
+from tests.integration.agent.conftest import AgentFactory
+from tests.support.agents import ROBOT, TIMEOUT, make_request, publish
+from tests.support.lab import ROBOTCONF
+from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
+
+TOPICS = Topics()
+SECRET = "s3cr3t-api-token-42"
+# Prints a secret from its environment, then a numbered tick five times a second.
+CHATTY = [
+    sys.executable,
+    "-u",
+    "-c",
+    "import os, time\n"
+    "print('token', os.environ['API_TOKEN'])\n"
+    "n = 0\n"
+    "while True:\n"
+    "    print('tick', n)\n"
+    "    n += 1\n"
+    "    time.sleep(0.2)\n",
+    "{launch_request}",
+]
+# Fails at its first start, runs at every later one: `failed` until someone restarts it.
+FAILS_ONCE = [
+    sys.executable,
+    "-c",
+    "import os, sys, time\n"
+    "first = not os.path.exists('ran-once')\n"
+    "open('ran-once', 'a').close()\n"
+    "print('brain up', os.getpid(), flush=True)\n"
+    "sys.exit(3) if first else time.sleep(600)\n",
+    "{launch_request}",
+]
+# A long line, then a flood of lines at once, then quiet.
+FLOOD = [
+    sys.executable,
+    "-c",
+    "import sys, time\n"
+    "sys.stdout.write('L' * 300000 + '\\n')\n"
+    "sys.stdout.write(''.join('flood %d\\n' % n for n in range(3000)))\n"
+    "sys.stdout.flush()\n"
+    "time.sleep(600)\n",
+    "{launch_request}",
+]
+
+
+def robotconf(
+    *args: str, broker: Mosquitto, timeout: float = 60.0
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(ROBOTCONF), *args, "--broker", broker.url],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def run_brain(
+    make_agent: AgentFactory,
+    watch: FleetWatch,
+    broker: Mosquitto,
+    command: list[str],
+    **settings: Any,
+) -> Any:
+    agent = make_agent(command=command, **settings).start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = make_request()
+    publish(broker.url, TOPICS.launch(ROBOT), request.payload())
+    return agent, request
+
+
+class Listener:
+    """A raw subscriber on one topic: every message, its size and when it came."""
+
+    def __init__(self, broker: Mosquitto, topic: str) -> None:
+        self.messages: list[tuple[float, bytes]] = []
+        self._lock = threading.Lock()
+        subscribed = threading.Event()
+        self.client = make_client(Connection(url=broker.url), f"listener-{time.monotonic_ns()}")
+
+        def on_connect(c: paho.Client, u: Any, f: Any, rc: Any, p: Any) -> None:
+            c.subscribe(topic, qos=1)
+
+        def on_subscribe(c: paho.Client, u: Any, mid: Any, rc: Any, p: Any) -> None:
+            subscribed.set()
+
+        def on_message(c: paho.Client, u: Any, msg: paho.MQTTMessage) -> None:
+            with self._lock:
+                self.messages.append((time.monotonic(), bytes(msg.payload)))
+
+        self.client.on_connect = on_connect
+        self.client.on_subscribe = on_subscribe
+        self.client.on_message = on_message
+        self.client.connect(broker.host, broker.port)
+        self.client.loop_start()
+        assert subscribed.wait(TIMEOUT)
+
+    def taken(self) -> list[tuple[float, bytes]]:
+        with self._lock:
+            return list(self.messages)
+
+    def close(self) -> None:
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+# ---------------------------------------------------------------- logs
+
+
+def test_logs_show_the_brain_and_its_agent_without_secrets(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": SECRET})
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    wait_for(lambda: "tick 3" in agent.brain_log(), "the brain's ticks")
+    assert SECRET in agent.brain_log()  # the brain printed it; the desk must not see it
+
+    done = robotconf("logs", ROBOT, "--lines", "20", broker=mosquitto)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert 6 <= len(lines) <= 20
+    assert SECRET not in done.stdout and "token [redacted]" in done.stdout
+    assert "--- robotconf agent" in done.stdout and "started pid" in done.stdout
+    # Ticks in order, the newest last: the tail of the log.
+    ticks = [int(line.split()[1]) for line in lines if line.startswith("tick ")]
+    assert ticks == sorted(ticks) and len(ticks) >= 3
+    last = robotconf("logs", ROBOT, "-n", "3", broker=mosquitto).stdout.splitlines()
+    assert len(last) == 3 and all(line.startswith("tick ") for line in last)
+
+
+def test_logs_follow_streams_until_nobody_asks(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": SECRET})
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    wait_for(lambda: "tick 1" in agent.brain_log(), "the brain's ticks")
+    follower = subprocess.Popen(
+        [str(ROBOTCONF), "logs", ROBOT, "--follow", "--lines", "1", "--broker", mosquitto.url],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    listener = Listener(mosquitto, TOPICS.logs(ROBOT))
+    try:
+        assert follower.stdout is not None
+        seen: list[str] = []
+        deadline = time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline and sum(s.startswith("tick") for s in seen) < 6:
+            seen.append(follower.stdout.readline().rstrip("\n"))
+        ticks = [int(s.split()[1]) for s in seen if s.startswith("tick ")]
+        # New lines keep coming, each once, in order.
+        assert len(ticks) >= 6 and ticks == list(range(ticks[0], ticks[0] + len(ticks)))
+        follower.send_signal(signal.SIGINT)
+        assert follower.wait(TIMEOUT) == 0
+        stopped_asking = time.monotonic()
+        # The agent streams on for at most LOG_FOLLOW_TTL after the last ask, then stops,
+        # while its brain goes on writing.
+        time.sleep(LOG_FOLLOW_TTL + 3)
+        quiet_from = len(listener.taken())
+        time.sleep(2.0)
+        assert len(listener.taken()) == quiet_from, "the agent still streams its log"
+        last = max(t for t, _ in listener.taken())
+        assert last - stopped_asking <= LOG_FOLLOW_TTL + 3
+        assert "tick" in agent.brain_log().splitlines()[-1]  # the brain did not stop
+    finally:
+        listener.close()
+        if follower.poll() is None:
+            follower.kill()
+        follower.communicate()
+
+
+def test_log_messages_are_bounded_cut_and_paced(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, FLOOD)
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    wait_for(lambda: "flood 2999" in agent.brain_log(), "the flood in the brain's log")
+    listener = Listener(mosquitto, TOPICS.logs(ROBOT))
+    try:
+        asked = time.monotonic()
+        done = robotconf("logs", ROBOT, "--lines", "1000", broker=mosquitto)
+        assert done.returncode == 0, done.stderr
+        lines = done.stdout.splitlines()
+        assert len(lines) == 1000 and lines[-1] == "flood 2999"
+        messages = listener.taken()
+        assert messages and all(len(p) <= MAX_LOG_MESSAGE_BYTES for _, p in messages)
+        # About RATE lines a second: never more than the burst and the rate allow.
+        for at, _ in messages:
+            sent = sum(len(json.loads(p)["lines"]) for t, p in messages if t <= at)
+            assert sent <= BURST + RATE * (at - asked) + 20
+        tail = robotconf("logs", ROBOT, "--lines", "3", broker=mosquitto).stdout.splitlines()
+        assert tail == ["flood 2997", "flood 2998", "flood 2999"]
+    finally:
+        listener.close()
+    long_line = [line for line in agent.brain_log().splitlines() if line.startswith("LLLL")]
+    assert len(long_line[0]) == 300_000
+
+
+def test_a_long_line_reaches_the_desk_cut_with_a_marker(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    command = [
+        sys.executable,
+        "-c",
+        "import sys, time\nprint('L' * 300000, flush=True)\nprint('after', flush=True)\n"
+        "time.sleep(600)",
+        "{launch_request}",
+    ]
+    agent, request = run_brain(make_agent, watch, mosquitto, command)
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    wait_for(lambda: "after" in agent.brain_log(), "the brain's lines")
+    done = robotconf("logs", ROBOT, "--lines", "2", broker=mosquitto)
+    assert done.returncode == 0, done.stderr
+    cut, after = done.stdout.splitlines()
+    assert cut.startswith("L" * 1000) and cut.endswith("[robotconf: line cut, 300,000 bytes]")
+    assert len(cut.encode()) < MAX_LOG_MESSAGE_BYTES and after == "after"
+
+
+def test_logs_of_an_unknown_or_offline_robot_are_refused(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": "x"})
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    unknown = robotconf("logs", "tb3-O1", broker=mosquitto)
+    assert unknown.returncode == 1
+    assert "unknown robot 'tb3-O1'" in unknown.stderr and "did you mean tb3-01" in unknown.stderr
+    assert "Traceback" not in unknown.stderr
+    bad = robotconf("logs", "../tb3-01/#", broker=mosquitto)
+    assert bad.returncode == 1 and "is not a robot id" in bad.stderr
+    agent.signal(signal.SIGTERM)
+    agent.wait()
+    watch.wait_state(ROBOT, AgentState.OFFLINE)
+    offline = robotconf("logs", ROBOT, broker=mosquitto)
+    assert offline.returncode == 1 and "is offline" in offline.stderr
+
+
+def test_garbage_log_requests_leave_the_agent_serving(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": "x"})
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    topic = TOPICS.logs_request(ROBOT)
+    for payload in (
+        b"[" * 100_000,
+        b"\xff\xfe",
+        b'{"session": "s", "lines": 100000000}',
+        b'{"session": "../#", "lines": 1}',
+        json.dumps({"session": "s", "lines": 1, "follow": True}).encode() * 1000,
+        b"{}",
+    ):
+        publish(mosquitto.url, topic, payload, retain=False)
+    publish(mosquitto.url, topic, b'{"session": "s", "lines": 5}', retain=True)  # stale
+    done = robotconf("logs", ROBOT, "--lines", "2", broker=mosquitto)
+    assert done.returncode == 0, done.stderr
+    assert agent.proc is not None and agent.proc.poll() is None
+    assert "logs request refused" in agent.log_tail(200)
+    assert "Traceback" not in agent.log_tail(400)
+    publish(mosquitto.url, topic, b"", retain=True)
+
+
+# ---------------------------------------------------------------- restart
+
+
+def status_json(broker: Mosquitto, cwd: Path) -> dict[str, Any]:
+    done = subprocess.run(
+        [str(ROBOTCONF), "status", "--json", "--broker", broker.url, "--repo", str(cwd)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    data: dict[str, Any] = json.loads(done.stdout)
+    return data
+
+
+def test_restart_starts_a_failed_brain_again_and_status_says_who(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    agent, request = run_brain(
+        make_agent,
+        watch,
+        mosquitto,
+        FAILS_ONCE,
+        restart={"policy": "on-failure", "max_restarts": 0},
+    )
+    failed = watch.wait_state(ROBOT, AgentState.FAILED, agent=agent, digest=request.digest)
+    assert failed.restart_requested_by is None
+    done = robotconf("restart", ROBOT, "--as", "alice", broker=mosquitto)
+    assert done.returncode == 0, done.stderr
+    assert f"{ROBOT}: restart requested by alice" in done.stdout
+    running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    assert running.restart_requested_by == "alice" and running.restart_requested_at is not None
+    assert running.restarts == 0
+    assert "restart requested by alice" in agent.brain_log()
+    robot = next(r for r in status_json(mosquitto, tmp_path)["robots"] if r["robot_id"] == ROBOT)
+    assert robot["restart"]["requested_by"] == "alice"
+    text = subprocess.run(
+        [str(ROBOTCONF), "status", "--broker", mosquitto.url, "--repo", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    ).stdout
+    assert f"restart: {ROBOT} by alice at " in text
+
+
+def test_restart_replaces_a_running_brain(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": "x"})
+    first = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(first.pid)
+    done = robotconf("restart", ROBOT, broker=mosquitto)
+    assert done.returncode == 0, done.stderr
+    again = watch.wait_for(
+        ROBOT,
+        lambda s: s.state is AgentState.RUNNING and s.pid not in (None, first.pid),
+        "running with a new pid",
+        agent=agent,
+    )
+    agent.note_brain(again.pid)
+    assert again.digest == request.digest and again.restart_requested_by is not None
+
+
+def test_restart_is_refused_for_unknown_idle_and_offline_robots(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    unknown = robotconf("restart", "tb3-99", broker=mosquitto)
+    assert unknown.returncode == 1 and "unknown robot 'tb3-99'" in unknown.stderr
+    agent = make_agent().start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    idle = robotconf("restart", ROBOT, broker=mosquitto)
+    assert idle.returncode == 1 and "nothing to restart" in idle.stderr
+    agent.signal(signal.SIGTERM)
+    agent.wait()
+    watch.wait_state(ROBOT, AgentState.OFFLINE)
+    offline = robotconf("restart", ROBOT, broker=mosquitto)
+    assert offline.returncode == 1 and "is offline" in offline.stderr
+    for done in (unknown, idle, offline):
+        assert "Traceback" not in done.stderr
+
+
+def test_a_verifying_agent_restarts_only_for_a_fresh_signed_request(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    keys = generate_keys(tmp_path / "keys")
+    private = load_private_key(keys.private)
+    agent = make_agent(command=CHATTY, env={"API_TOKEN": "x"}, public_key=str(keys.public))
+    agent.start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = sign(make_request(), private)
+    publish(mosquitto.url, TOPICS.launch(ROBOT), request.payload())
+    first = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(first.pid)
+    restarts = Listener(mosquitto, TOPICS.restart(ROBOT))
+    try:
+        unsigned = robotconf("restart", ROBOT, "--wait", "3", broker=mosquitto)
+        assert unsigned.returncode == 1 and "did not confirm" in unsigned.stderr
+        wait_for(lambda: "restart refused: restart is not signed" in agent.log_tail(100), "why")
+
+        signed = robotconf(
+            "restart", ROBOT, "--signing-key", str(keys.private), "--as", "ops", broker=mosquitto
+        )
+        assert signed.returncode == 0, signed.stderr
+        second = watch.wait_for(
+            ROBOT,
+            lambda s: s.state is AgentState.RUNNING and s.pid not in (None, first.pid),
+            "running again after the signed restart",
+            agent=agent,
+        )
+        agent.note_brain(second.pid)
+        assert second.restart_requested_by == "ops"
+        # The signed restart, replayed as it was captured, and forged: nothing happens.
+        captured = restarts.taken()[-1][1]
+        publish(mosquitto.url, TOPICS.restart(ROBOT), captured, retain=False)
+        forged = json.loads(captured)
+        forged["issued_at"] = time.time()
+        forged_bytes = RestartRequest.model_validate(forged).payload()
+        publish(mosquitto.url, TOPICS.restart(ROBOT), forged_bytes, retain=False)
+        wait_for(lambda: "not newer than the last one" in agent.log_tail(100), "the replay")
+        wait_for(lambda: "signature does not verify" in agent.log_tail(100), "the forgery")
+        time.sleep(1.0)
+        latest = watch.latest(ROBOT)
+        assert latest is not None and latest.pid == second.pid
+        assert latest.state is AgentState.RUNNING
+    finally:
+        restarts.close()
+
+
+@pytest.mark.parametrize("name", ["", "alice; rm -rf /", "x" * 65])
+def test_restart_refuses_a_requester_name_that_cannot_be_recorded(
+    mosquitto: Mosquitto, name: str
+) -> None:
+    done = robotconf("restart", ROBOT, "--as", name, broker=mosquitto)
+    assert done.returncode == 2 and "cannot name who asks" in done.stderr

@@ -1,0 +1,120 @@
+"""Restarts from the desk: which restart-topic payloads an agent carries out, without a broker."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from agent.admission import (
+    MAX_COMMAND_BYTES,
+    RESTART_MAX_AGE,
+    Reject,
+    Restart,
+    Verifier,
+    interpret_restart,
+)
+from configurator.launch import RestartRequest
+from configurator.signing import (
+    generate_keys,
+    load_private_key,
+    load_public_key,
+    sign,
+    verify_object,
+)
+
+NOW = 1_800_000_000.0
+
+
+def restart(robot_id: str = "tb3-01", at: float = NOW, by: str = "alice") -> RestartRequest:
+    return RestartRequest(robot_id=robot_id, requested_by=by, issued_at=at)
+
+
+def outcome(
+    payload: bytes, verify: Verifier | None = None, newest: float | None = None
+) -> Restart | Reject:
+    return interpret_restart(payload, "tb3-01", verify, newest, NOW)
+
+
+def reason(payload: bytes, verify: Verifier | None = None, newest: float | None = None) -> str:
+    found = outcome(payload, verify, newest)
+    assert isinstance(found, Reject), found
+    return found.reason
+
+
+@pytest.fixture
+def keyed(tmp_path: Path) -> tuple[Any, Verifier]:
+    pair = generate_keys(tmp_path)
+    public = load_public_key(pair.public)
+    return load_private_key(pair.private), lambda data: verify_object(data, public)
+
+
+def test_an_unsigned_restart_is_carried_out_by_an_agent_without_a_key() -> None:
+    assert outcome(restart().payload()) == Restart("alice", NOW)
+
+
+def test_a_restart_for_another_robot_is_refused() -> None:
+    assert "for robot 'tb3-02'" in reason(restart("tb3-02").payload())
+
+
+@pytest.mark.parametrize(
+    "payload, expected",
+    [
+        (b"", "malformed restart request"),
+        (b"{", "malformed restart request"),
+        (b"[]", "expected a JSON object"),
+        (b"x" * (MAX_COMMAND_BYTES + 1), "malformed restart request"),
+        (b'{"apiVersion": "robotconf/v1", "kind": "LaunchRequest"}', "not a restart request"),
+        (b"[" * 100_000, "malformed restart request"),
+    ],
+)
+def test_garbage_is_refused_with_a_reason(payload: bytes, expected: str) -> None:
+    assert expected in reason(payload)
+
+
+def test_fields_are_validated_after_the_address() -> None:
+    data = json.loads(restart().payload())
+    data["requested_by"] = "alice; rm -rf /"
+    assert "requested_by" in reason(json.dumps(data).encode())
+    data = json.loads(restart().payload())
+    data["extra"] = 1
+    assert "extra" in reason(json.dumps(data).encode())
+
+
+@pytest.mark.parametrize("offset", [RESTART_MAX_AGE + 1, -(RESTART_MAX_AGE + 1), 1e300, -1e300])
+def test_a_restart_far_from_now_is_refused(offset: float) -> None:
+    assert "apart" in reason(restart(at=NOW + offset).payload())
+
+
+def test_each_restart_is_carried_out_once() -> None:
+    payload = restart(at=NOW - 10).payload()
+    assert isinstance(outcome(payload), Restart)
+    assert "not newer than the last one" in reason(payload, newest=NOW - 10)
+    assert "not newer than the last one" in reason(payload, newest=NOW - 5)
+    assert isinstance(outcome(restart(at=NOW - 4).payload(), newest=NOW - 5), Restart)
+
+
+def test_with_a_key_only_a_signed_restart_is_carried_out(keyed: tuple[Any, Verifier]) -> None:
+    private, check = keyed
+    assert "not signed" in reason(restart().payload(), check)
+    signed = sign(restart(), private, NOW)
+    assert outcome(signed.payload(), check) == Restart("alice", NOW)
+    # Who asked is covered by the signature: changing it is a forgery.
+    forged = json.loads(signed.payload())
+    forged["requested_by"] = "mallory"
+    forged_bytes = json.dumps(forged, sort_keys=True, separators=(",", ":")).encode()
+    assert "does not verify" in reason(forged_bytes, check)
+    # Exactly the signed bytes: white space riding along is refused.
+    assert "canonical" in reason(json.dumps(json.loads(signed.payload())).encode(), check)
+    # A signed restart replayed: refused once one as new was carried out.
+    assert "not newer" in reason(signed.payload(), check, newest=NOW)
+
+
+def test_a_signed_launch_request_is_not_a_restart(keyed: tuple[Any, Verifier]) -> None:
+    from tests.support.agents import make_request
+
+    private, check = keyed
+    launch = sign(make_request(), private, NOW)
+    assert "not a restart request" in reason(launch.payload(), check)
