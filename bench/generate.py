@@ -256,7 +256,9 @@ class Generator:
                     camel = "".join(part.capitalize() for part in mapping.split("_"))
                     type_ = f"lab_msgs/{iface}/{camel}" if ros2 else f"lab_msgs/{camel}"
                     lines.append(
-                        f"  {mapping}: {{kind: {kind}, name: /ns{j}/{mapping}, type: {type_}}}\n"
+                        # Relative: resolved in each robot's namespace, so that robots of
+                        # one world never share a topic (RC505).
+                        f"  {mapping}: {{kind: {kind}, name: ns{j}/{mapping}, type: {type_}}}\n"
                     )
                 self.write(f"{base}/mapping-schemes/{scheme}.yaml", "".join(lines))
             count = per_platform
@@ -509,7 +511,10 @@ class Generator:
         for i in range(self.s.robots):
             scenario = rng.choice(self.scenarios)
             extra = ", suspended: true" if i % 50 == 49 else ""
-            lines.append(f'  robot-{i:05d}: {{scenario: {scenario}, name: "Robot {i}"{extra}}}\n')
+            lines.append(
+                f'  robot-{i:05d}: {{scenario: {scenario}, name: "Robot {i}", '
+                f"namespace: robot_{i:05d}{extra}}}\n"
+            )
         self.write("configs/fleet.yaml", "".join(lines))
 
 
