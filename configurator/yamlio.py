@@ -7,6 +7,7 @@ indentation, several documents, non-UTF-8 bytes, odd line breaks, oversized or d
 from __future__ import annotations
 
 import codecs
+import contextlib
 import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
@@ -305,20 +306,29 @@ def _scan_events(text: str) -> None:
     more than MAX_EVENTS, from libyaml's events (its parser keeps no C stack per level).
     Syntax errors are left to the composer, which locates them."""
     loader = _Loader(text)
-    depth = events = 0
     try:
-        while (event := loader.get_event()) is not None:
-            events += 1
-            if events > MAX_EVENTS:
-                raise YamlReadError([_too_many_events()])
-            step = _DEPTH_STEP.get(type(event), 0)
-            if step > 0 and depth > MAX_DEPTH:
-                raise YamlReadError([_problem(event.start_mark, "RC009", _TOO_DEEP)])
-            depth += step
-    except yaml.YAMLError:
+        _check_events(iter(loader.get_event, None))
+    except yaml.YAMLError as exc:
+        if _LIBYAML and "maximum nesting depth" in str(exc):
+            # Newer libyaml (PyYAML 6.0.4's wheels) stops at 1,000 flow levels while scanning
+            # ahead, before it gives an event of them; the Python parser looks ahead one simple
+            # key only, so it reaches the level the builder would refuse, and stops there.
+            with contextlib.suppress(yaml.YAMLError):
+                _check_events(yaml.parse(text, Loader=yaml.SafeLoader))
         return
     finally:
         loader.dispose()
+
+
+def _check_events(stream: Iterable[yaml.Event]) -> None:
+    depth = 0
+    for events, event in enumerate(stream, 1):
+        if events > MAX_EVENTS:
+            raise YamlReadError([_too_many_events()])
+        step = _DEPTH_STEP.get(type(event), 0)
+        if step > 0 and depth > MAX_DEPTH:
+            raise YamlReadError([_problem(event.start_mark, "RC009", _TOO_DEEP)])
+        depth += step
 
 
 def _count_events(text: str) -> None:

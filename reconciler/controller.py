@@ -106,6 +106,7 @@ class Controller:
         self._builder = builder
         self._on_step = on_step  # must return at once: it runs on the reconcile loop
         self._wake = threading.Event()
+        self._resync_asked = threading.Event()  # a push announced (webhook): fetch now
         self._stop = threading.Event()
         self.ignored = Ignored(log)  # unreadable payloads skipped, shown in the status
         # Statuses are not mirrored: during a rollout every robot reports several times, and
@@ -143,6 +144,12 @@ class Controller:
     def wake(self) -> None:
         self._wake.set()
 
+    def resync_now(self) -> None:
+        """Any thread (a webhook's push): the next step fetches and resyncs, as at the end of an
+        interval, and the interval starts again from it. Pushes faster than steps make one."""
+        self._resync_asked.set()
+        self._wake.set()
+
     def stop(self) -> None:
         self._stop.set()
         self._wake.set()
@@ -159,6 +166,11 @@ class Controller:
                 self._wake.clear()
                 now_ = time.monotonic()
                 resync = now_ >= next_resync
+                if self._resync_asked.is_set():
+                    # Cleared before the fetch: a push told until then is fetched by this step,
+                    # one told later wakes the next; none is lost.
+                    self._resync_asked.clear()
+                    resync = True
                 if resync:
                     next_resync = now_ + self.interval
                 outcome = self._step(resync)

@@ -1,14 +1,17 @@
-"""Long-running commands' process setup: stop signals, and where the logs go."""
+"""Long-running commands' process setup: stop signals, where the logs go, addresses to listen at."""
 
 from __future__ import annotations
 
 import logging
+import re
 import signal
 import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
+
+_PORT = re.compile(r"[0-9]{1,5}")
 
 
 def on_stop_signals(
@@ -57,3 +60,13 @@ def log_to_file(path: Path) -> None:
     root.addHandler(handler)
     root.setLevel(logging.INFO)
     _quiet_chatty_loggers()
+
+
+def parse_address(text: str, option: str, example: str) -> tuple[str, int]:
+    """`HOST:PORT` of a listening option (`[::1]:PORT` for IPv6; `:PORT` listens on every
+    interface, as Prometheus exporters do). ValueError with a one-line reason."""
+    host, sep, port = text.rpartition(":")
+    if not sep or not _PORT.fullmatch(port) or not 0 < int(port) < 65536:
+        raise ValueError(f"{option} {text!r} must be HOST:PORT, e.g. {example}")
+    host = host.removeprefix("[").removesuffix("]")
+    return host or "0.0.0.0", int(port)

@@ -16,16 +16,6 @@ from prometheus_client.exposition import start_http_server
 from reconciler.verdicts import Verdict
 
 
-def parse_address(text: str) -> tuple[str, int]:
-    """`HOST:PORT` (`[::1]:PORT` for IPv6; `:PORT` listens on every interface, as Prometheus
-    exporters do). ValueError with a one-line reason."""
-    host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ValueError(f"--metrics {text!r} must be HOST:PORT, e.g. 127.0.0.1:9108")
-    host = host.removeprefix("[").removesuffix("]")
-    return host or "0.0.0.0", int(port)
-
-
 class Metrics:
     """The reconciler's metrics, and the HTTP server that serves them once `serve`d."""
 
@@ -61,6 +51,13 @@ class Metrics:
             "robotconf_notifications",
             "Events per receiver: sent, failed (after retries) or dropped (queue full)",
             ["receiver", "outcome"],
+            registry=r,
+        )
+        self.webhooks = Counter(
+            "robotconf_webhooks",
+            "Webhook requests (reconcile --webhook), by git server and outcome: fetch (a push "
+            "of the branch, fetched at once), ignored (another branch or event), refused",
+            ["server", "outcome"],
             registry=r,
         )
         for verdict in Verdict:
@@ -109,3 +106,6 @@ class Metrics:
 
     def notified(self, receiver: str, outcome: str) -> None:
         self.notifications.labels(receiver, outcome).inc()
+
+    def webhook(self, server: str, outcome: str) -> None:
+        self.webhooks.labels(server, outcome).inc()

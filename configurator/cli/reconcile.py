@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -12,13 +14,15 @@ from configurator.cli.broker_options import BrokerOptions, broker_options
 from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.options import repo_option
 from configurator.signing import SigningKeyError
-from reconciler.lifecycle import log_to_stderr, on_stop_signals
+from reconciler.lifecycle import log_to_stderr, on_stop_signals, parse_address
 from reconciler.signer import make_signer
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 
 if TYPE_CHECKING:
     from configurator.mqtt import Connection
+    from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
+    from reconciler.webhook_server import WebhookServer
 
 
 def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | None) -> BranchSource:
@@ -45,10 +49,10 @@ def make_telemetry(
         raise CliError(str(exc)) from None
     metrics = None
     if metrics_at is not None:
-        from reconciler.metrics import Metrics, parse_address
+        from reconciler.metrics import Metrics
 
         try:
-            host, port = parse_address(metrics_at)
+            host, port = parse_address(metrics_at, "--metrics", "127.0.0.1:9108")
         except ValueError as exc:
             raise CliError(str(exc)) from None
         metrics = Metrics()
@@ -61,6 +65,62 @@ def make_telemetry(
     if receivers:
         notifier = Notifier(receivers, metrics.notified if metrics is not None else None)
     return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
+
+
+@dataclass(frozen=True)
+class WebhookOptions:
+    host: str
+    port: int
+    secret: bytes
+
+
+def webhook_options(webhook_at: str | None, secret_file: Path | None) -> WebhookOptions | None:
+    """--webhook and its secret, checked before anything starts (None without --webhook)."""
+    if webhook_at is None:
+        if secret_file is not None:
+            raise CliError("--webhook-secret-file is given without --webhook HOST:PORT")
+        return None
+    try:
+        host, port = parse_address(webhook_at, "--webhook", "127.0.0.1:9292")
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if secret_file is None:
+        raise CliError(
+            "--webhook needs --webhook-secret-file FILE: the secret the git server signs its "
+            "pushes with (never on the command line); refusing to accept unsigned pushes"
+        )
+    from reconciler.webhook_server import read_secret
+
+    try:
+        return WebhookOptions(host, port, read_secret(secret_file))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
+def start_webhook(
+    webhook: WebhookOptions, branch: str, on_push: Callable[[], None], metrics: Metrics | None
+) -> WebhookServer:
+    """The push receiver, listening; a port that cannot be listened on is a one-line error."""
+    from reconciler.webhook_server import WebhookServer
+
+    receiver = WebhookServer(
+        webhook.secret, branch, on_push, metrics.webhook if metrics is not None else None
+    )
+    try:
+        receiver.serve(webhook.host, webhook.port)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise CliError(
+            f"--webhook {webhook.host}:{webhook.port}: cannot listen: {reason}"
+        ) from None
+    host = f"[{webhook.host}]" if ":" in webhook.host else webhook.host
+    logging.getLogger("robotconf.reconciler").info(
+        "webhook: listening at http://%s:%d/ for pushes of %s (GitHub, GitLab, Gitea, Forgejo)",
+        host,
+        receiver.port,
+        branch,
+    )
+    return receiver
 
 
 @click.command("reconcile")
@@ -94,6 +154,22 @@ def make_telemetry(
     metavar="HOST:PORT",
     help="serve Prometheus metrics at http://HOST:PORT/metrics (:PORT: every interface)",
 )
+@click.option(
+    "--webhook",
+    "webhook_at",
+    default=None,
+    metavar="HOST:PORT",
+    help="accept push events of GitHub, GitLab, Gitea and Forgejo at http://HOST:PORT/ "
+    "(:PORT: every interface): a push of --branch fetches at once, not at the next interval",
+)
+@click.option(
+    "--webhook-secret-file",
+    type=click.Path(path_type=Path),
+    default=None,
+    metavar="FILE",
+    help="the webhook's secret (GitHub, Gitea, Forgejo: HMAC-SHA256 key; GitLab: token); "
+    "required with --webhook",
+)
 def reconcile(
     repo: Path,
     mqtt: BrokerOptions,
@@ -104,9 +180,11 @@ def reconcile(
     cache_dir: str | None,
     notify: tuple[str, ...],
     metrics_at: str | None,
+    webhook_at: str | None,
+    webhook_secret_file: Path | None,
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
-    --interval seconds; runs until SIGINT or SIGTERM."""
+    --interval seconds, and at once when --webhook receives a push; runs until signalled."""
     from reconciler.controller import Controller
 
     connection = mqtt.connection()
@@ -117,6 +195,7 @@ def reconcile(
         signer = make_signer(signing_key)
     except SigningKeyError as exc:
         raise CliError(str(exc)) from None
+    webhook = webhook_options(webhook_at, webhook_secret_file)
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
     controller = Controller(
@@ -127,6 +206,10 @@ def reconcile(
         signer=signer,
         on_step=telemetry.on_step if telemetry is not None else None,
     )
+    receiver = None
+    if webhook is not None:
+        metrics = telemetry.metrics if telemetry is not None else None
+        receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
     on_stop_signals(callback=controller.stop)
     logging.getLogger("robotconf.reconciler").info(
         "reconciling %s (branch %s) to %s, prefix %s",
@@ -140,6 +223,8 @@ def reconcile(
     try:
         controller.run()
     finally:
+        if receiver is not None:
+            receiver.close()
         if telemetry is not None:
             telemetry.stop()
     return ExitCode.OK

@@ -45,6 +45,7 @@ class Mosquitto:
         persistence: bool = False,
         listener_options: Sequence[str] = (),
         allow_anonymous: bool = True,
+        extra_config: Sequence[str] = (),
     ) -> None:
         found = binary or find_mosquitto()
         if found is None:
@@ -56,6 +57,7 @@ class Mosquitto:
         self.persistence = persistence
         self.listener_options = list(listener_options)  # e.g. certfile, password_file lines
         self.allow_anonymous = allow_anonymous
+        self.extra_config = list(extra_config)  # after everything else, e.g. a bridge section
         self.host = "127.0.0.1"
         self.port = 0
         self.proc: subprocess.Popen[bytes] | None = None
@@ -88,6 +90,8 @@ class Mosquitto:
             # As root Mosquitto would switch to the `mosquitto` user, who cannot read or write
             # the test's private temporary folders.
             lines.append("user root")
+        # Last: a bridge's `connection` line starts a section that runs to the end of the file.
+        lines += self.extra_config
         conf.write_text("\n".join(lines) + "\n", encoding="utf-8")
         return conf
 

@@ -8,7 +8,7 @@ import pytest
 
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
 from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, transitions
-from reconciler.metrics import parse_address
+from reconciler.lifecycle import parse_address
 from reconciler.notify import parse_receiver
 from reconciler.telemetry import verdict_counts
 from reconciler.verdicts import DesiredRobot, Verdict
@@ -251,13 +251,15 @@ def test_a_receiver_name_hides_credentials_and_path() -> None:
     ],
 )
 def test_metrics_addresses(text: str, expected: tuple[str, int]) -> None:
-    assert parse_address(text) == expected
+    assert parse_address(text, "--metrics", "127.0.0.1:9108") == expected
 
 
-@pytest.mark.parametrize("text", ["9108", "host:", "host:http", "host:0", "host:70000", ""])
+@pytest.mark.parametrize(
+    "text", ["9108", "host:", "host:http", "host:0", "host:70000", "", "host:\u00b2"]
+)
 def test_bad_metrics_addresses(text: str) -> None:
-    with pytest.raises(ValueError, match="HOST:PORT"):
-        parse_address(text)
+    with pytest.raises(ValueError, match=r"^--webhook .* must be HOST:PORT, e\.g\. :9292$"):
+        parse_address(text, "--webhook", ":9292")
 
 
 def test_verdict_counts_judge_robots_from_their_statuses() -> None:
