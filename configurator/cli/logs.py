@@ -12,11 +12,12 @@ import time
 import click
 
 from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.desk import online_robot
 from configurator.cli.errors import CliError, ExitCode
 from configurator.textsafe import printable
 from configurator.types import is_robot_id
 from configurator.wire import LOG_FOLLOW_TTL, MAX_TAIL_LINES, AgentState, LogsChunk, LogsRequest
-from reconciler.desk import RobotDesk, offline
+from reconciler.desk import RobotDesk
 from reconciler.lifecycle import on_stop_signals
 
 # A follower asks again this often, so that the agent (which stops LOG_FOLLOW_TTL after the
@@ -100,24 +101,11 @@ def logs(robot_id: str, mqtt: BrokerOptions, lines: int, follow: bool, wait: flo
     if not is_robot_id(robot_id):
         raise CliError(f"{robot_id!r} is not a robot id", ExitCode.FINDINGS)
     connection = mqtt.connection()
-    url = connection.address.url
     stop = threading.Event()
     if follow:
         on_stop_signals(stop)
     with RobotDesk(connection, mqtt.prefix, robot_id, logs=True) as desk:
-        if not desk.wait_synced(wait):
-            raise CliError(
-                f"no answer from the broker at {url} within {wait:g} s "
-                f"({desk.view.last_error or 'no answer'}); is it running? (--broker URL)"
-            )
-        robot = desk.robot()
-        if robot is None:
-            raise CliError(desk.unknown(wait).message(url), ExitCode.FINDINGS)
-        if offline(robot):
-            raise CliError(
-                f"{robot_id} is offline: its agent cannot answer (robotconf status {robot_id})",
-                ExitCode.FINDINGS,
-            )
+        online_robot(desk, wait, "its agent cannot answer")
         session = _ask(desk, lines, follow, wait)
         tail_done = False
         deadline = time.monotonic() + wait

@@ -11,11 +11,12 @@ from pathlib import Path
 import click
 
 from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.desk import online_robot
 from configurator.cli.errors import CliError, ExitCode
 from configurator.launch import REQUESTER_PATTERN, RestartRequest
 from configurator.types import is_robot_id
 from configurator.wire import AgentState, AgentStatus
-from reconciler.desk import RobotDesk, offline
+from reconciler.desk import RobotDesk
 
 _REQUESTER = re.compile(REQUESTER_PATTERN)
 
@@ -97,21 +98,8 @@ def restart(
         except SigningKeyError as exc:
             raise CliError(str(exc), ExitCode.TOOL) from None
     connection = mqtt.connection()
-    url = connection.address.url
     with RobotDesk(connection, mqtt.prefix, robot_id, logs=False) as desk:
-        if not desk.wait_synced(min(wait, 10.0)):
-            raise CliError(
-                f"no answer from the broker at {url} "
-                f"({desk.view.last_error or 'no answer'}); is it running? (--broker URL)"
-            )
-        robot = desk.robot()
-        if robot is None:
-            raise CliError(desk.unknown(min(wait, 10.0)).message(url), ExitCode.FINDINGS)
-        if offline(robot):
-            raise CliError(
-                f"{robot_id} is offline: a restart would be lost (robotconf status {robot_id})",
-                ExitCode.FINDINGS,
-            )
+        robot = online_robot(desk, min(wait, 10.0), "a restart would be lost")
         status = robot.status
         if status is None or status.state is AgentState.IDLE:
             raise CliError(

@@ -19,7 +19,13 @@ from agent.logs import BURST, RATE
 from configurator.launch import RestartRequest
 from configurator.mqtt import Connection, make_client
 from configurator.signing import generate_keys, load_private_key, sign
-from configurator.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, AgentState, Topics
+from configurator.wire import (
+    LOG_FOLLOW_TTL,
+    MAX_LOG_MESSAGE_BYTES,
+    AgentState,
+    AgentStatus,
+    Topics,
+)
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, TIMEOUT, make_request, publish
 from tests.support.lab import ROBOTCONF
@@ -324,6 +330,18 @@ def test_restart_starts_a_failed_brain_again_and_status_says_who(
     assert f"restart: {ROBOT} by alice at " in text
 
 
+def new_brain(watch: FleetWatch, agent: Any, before: int | None) -> AgentStatus:
+    """The robot's status once it runs a brain other than `before`."""
+    status = watch.wait_for(
+        ROBOT,
+        lambda s: s.state is AgentState.RUNNING and s.pid not in (None, before),
+        f"running a brain other than pid {before}",
+        agent=agent,
+    )
+    agent.note_brain(status.pid)
+    return status
+
+
 def test_restart_replaces_a_running_brain(
     mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
@@ -332,13 +350,7 @@ def test_restart_replaces_a_running_brain(
     agent.note_brain(first.pid)
     done = robotconf("restart", ROBOT, broker=mosquitto)
     assert done.returncode == 0, done.stderr
-    again = watch.wait_for(
-        ROBOT,
-        lambda s: s.state is AgentState.RUNNING and s.pid not in (None, first.pid),
-        "running with a new pid",
-        agent=agent,
-    )
-    agent.note_brain(again.pid)
+    again = new_brain(watch, agent, first.pid)
     assert again.digest == request.digest and again.restart_requested_by is not None
 
 
@@ -382,13 +394,7 @@ def test_a_verifying_agent_restarts_only_for_a_fresh_signed_request(
             "restart", ROBOT, "--signing-key", str(keys.private), "--as", "ops", broker=mosquitto
         )
         assert signed.returncode == 0, signed.stderr
-        second = watch.wait_for(
-            ROBOT,
-            lambda s: s.state is AgentState.RUNNING and s.pid not in (None, first.pid),
-            "running again after the signed restart",
-            agent=agent,
-        )
-        agent.note_brain(second.pid)
+        second = new_brain(watch, agent, first.pid)
         assert second.restart_requested_by == "ops"
         # The signed restart, replayed as it was captured, and forged: nothing happens.
         captured = restarts.taken()[-1][1]

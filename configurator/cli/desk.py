@@ -1,0 +1,28 @@
+"""What `robotconf logs` and `robotconf restart` share: the robot found online on the broker,
+or one line saying why it cannot be asked."""
+
+from __future__ import annotations
+
+from configurator.cli.errors import CliError, ExitCode
+from reconciler.desk import RobotDesk, offline
+from reconciler.observed import RobotSeen
+
+
+def online_robot(desk: RobotDesk, wait: float, why_online: str) -> RobotSeen:
+    """The robot as the broker knows it, once its retained topics are read; raises CliError
+    when the broker does not answer, knows nothing of the robot, or has it offline."""
+    url = desk.connection.address.url
+    if not desk.wait_synced(wait):
+        raise CliError(
+            f"no answer from the broker at {url} within {wait:g} s "
+            f"({desk.view.last_error or 'no answer'}); is it running? (--broker URL)"
+        )
+    robot = desk.robot()
+    if robot is None:
+        raise CliError(desk.unknown(wait).message(url), ExitCode.FINDINGS)
+    if offline(robot):
+        raise CliError(
+            f"{desk.robot_id} is offline: {why_online} (robotconf status {desk.robot_id})",
+            ExitCode.FINDINGS,
+        )
+    return robot
