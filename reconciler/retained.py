@@ -330,7 +330,11 @@ class RetainedView:
         with self._lock:
             self._arrivals[message.topic] = self._arrivals.get(message.topic, 0) + 1
             if payload:
-                self._topics[message.topic] = bytes(payload)
+                # The echo of what was just published equals the copy kept at its PUBACK,
+                # which is the desired payload itself: keeping that one object, not a second
+                # copy, halves what 10,000 requests cost in memory.
+                current = self._topics.get(message.topic)
+                self._topics[message.topic] = current if current == payload else bytes(payload)
             else:
                 self._topics.pop(message.topic, None)
         if self._on_topic is not None:
