@@ -114,53 +114,78 @@ def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
         found = classify(path)
         if found is not None:
             repo.broken.setdefault(found[0].name, set()).add(_qualified(found[1]))
+    to_read: list[tuple[str, Kind, tuple[str, ...]]] = []
     for path in source.files():
-        platform_dir = _PLATFORM_DIR.match(path)
-        if platform_dir:
-            repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
-        suffix = _YAML_SUFFIX.search(path)
-        if suffix is None:
-            continue  # READMEs and the like may sit beside the YAML files
-        if suffix.group() != ".yaml":
-            diagnostics.append(
-                _error(
-                    path,
-                    "RC105",
-                    f"YAML files here end in .yaml; rename this {suffix.group()} file "
-                    "(it is not read)",
-                )
-            )
-            continue
-        found = classify(path)
-        if found is None:
-            diagnostics.append(
-                _error(path, "RC105", f"not a known place for a YAML file; expected {_PLACES}")
-            )
-            continue
-        kind, groups = found
-        name = groups[-1]
+        found = place(path, repo, diagnostics)
+        if found is not None:
+            to_read.append((path, *found))
+    # One pass over every file: a commit is read by one git process, not one per file.
+    contents = source.read_each([path for path, _, _ in to_read])
+    for (path, kind, groups), (_, raw) in zip(to_read, contents, strict=True):
         repo.files_read += 1
-        doc, model = _load_one(source, path, kind, diagnostics)
-        if model is None or doc is None:
-            repo.broken.setdefault(kind.name, set()).add(_qualified(groups))
-            continue
-        declared = getattr(model, "name", None)
-        if kind.name != "fleet" and declared is not None and declared != name:
-            line, col = doc.locate(["name"])
-            diagnostics.append(
-                _error(
-                    path,
-                    "RC104",
-                    f"name '{declared}' differs from the file name '{name}'; "
-                    f"a {kind.title}'s name is its file name (rename one, or drop 'name:')",
-                    line,
-                    col,
-                )
-            )
-        _add(repo, kind.name, groups, Entry(name, model, doc))
+        doc, model = load_one(path, raw, kind, diagnostics)
+        add_loaded(repo, path, kind, groups, doc, model, diagnostics)
     if repo.fleet is None and "fleet" not in repo.broken:
         diagnostics.append(_missing_fleet(source))
     return repo, diagnostics
+
+
+def place(
+    path: str, repo: Repository, diagnostics: list[Diagnostic]
+) -> tuple[Kind, tuple[str, ...]] | None:
+    """The kind of file a path holds, or None when it is not read (a README, a YAML file in
+    the wrong place: reported). A platform's folder makes the platform, whatever it holds."""
+    platform_dir = _PLATFORM_DIR.match(path)
+    if platform_dir:
+        repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
+    suffix = _YAML_SUFFIX.search(path)
+    if suffix is None:
+        return None  # READMEs and the like may sit beside the YAML files
+    if suffix.group() != ".yaml":
+        diagnostics.append(
+            _error(
+                path,
+                "RC105",
+                f"YAML files here end in .yaml; rename this {suffix.group()} file (it is not read)",
+            )
+        )
+        return None
+    found = classify(path)
+    if found is None:
+        diagnostics.append(
+            _error(path, "RC105", f"not a known place for a YAML file; expected {_PLACES}")
+        )
+    return found
+
+
+def add_loaded(
+    repo: Repository,
+    path: str,
+    kind: Kind,
+    groups: tuple[str, ...],
+    doc: YamlDocument | None,
+    model: Any,
+    diagnostics: list[Diagnostic],
+) -> None:
+    """One file's result into the repository: an entry, or a name remembered as broken."""
+    name = groups[-1]
+    if model is None or doc is None:
+        repo.broken.setdefault(kind.name, set()).add(_qualified(groups))
+        return
+    declared = getattr(model, "name", None)
+    if kind.name != "fleet" and declared is not None and declared != name:
+        line, col = doc.locate(["name"])
+        diagnostics.append(
+            _error(
+                path,
+                "RC104",
+                f"name '{declared}' differs from the file name '{name}'; "
+                f"a {kind.title}'s name is its file name (rename one, or drop 'name:')",
+                line,
+                col,
+            )
+        )
+    _add(repo, kind.name, groups, Entry(name, model, doc))
 
 
 def _missing_fleet(source: Source) -> Diagnostic:
@@ -180,16 +205,16 @@ def _qualified(groups: tuple[str, ...]) -> str:
     return "/".join(groups)
 
 
-def _load_one(
-    source: Source, path: str, kind: Kind, diagnostics: list[Diagnostic]
+def load_one(
+    path: str, raw: bytes | OSError, kind: Kind, diagnostics: list[Diagnostic]
 ) -> tuple[YamlDocument | None, Any]:
-    try:
-        raw = source.read(path)
-    except FileTooLarge as exc:
-        diagnostics.append(_error(path, "RC008", str(exc)))
+    """One file's bytes (or why they could not be read) parsed and typed: the document and
+    its model, the document alone when it is not of its kind, neither when unreadable."""
+    if isinstance(raw, FileTooLarge):
+        diagnostics.append(_error(path, "RC008", str(raw)))
         return None, None
-    except OSError as exc:
-        diagnostics.append(_error(path, "RC008", f"cannot read the file: {exc.strerror or exc}"))
+    if isinstance(raw, OSError):
+        diagnostics.append(_error(path, "RC008", f"cannot read the file: {raw.strerror or raw}"))
         return None, None
     try:
         doc = parse_document(path, raw)
