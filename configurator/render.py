@@ -6,6 +6,7 @@ Pure: the caller has validated the repository; a request is never rendered from 
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -89,9 +90,13 @@ def for_robot(scenario: LaunchScenario, robot_id: str, namespace: str | None) ->
     )
 
 
-def _request(
-    repo: Repository, robot_id: str, assignment: RobotAssignment, scenario: LaunchScenario
+def request_for(
+    repo: Repository,
+    robot_id: str,
+    assignment: RobotAssignment,
+    scenario: LaunchScenario,
 ) -> LaunchRequest:
+    """The robot's request from its scenario's shared content."""
     namespace = assignment.namespace
     return make_launch_request(
         robot_id,
@@ -156,7 +161,15 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
     )
 
 
-def render_fleet(repo: Repository) -> FleetRender:
+ScenarioOf = Callable[[str], LaunchScenario]
+RequestOf = Callable[[str, RobotAssignment, LaunchScenario], LaunchRequest]
+
+
+def render_fleet(
+    repo: Repository, scenario_of: ScenarioOf | None = None, request_of: RequestOf | None = None
+) -> FleetRender:
+    """Every robot's request. `scenario_of` and `request_of` may serve what an earlier build
+    rendered (configurator/incremental.py); by default each scenario is rendered once here."""
     if repo.fleet is None:
         raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
     fleet = repo.fleet.model
@@ -164,11 +177,21 @@ def render_fleet(repo: Repository) -> FleetRender:
         revision=repo.revision, allow_empty=fleet.allow_empty, rollout=fleet.rollout
     )
     scenarios: dict[str, LaunchScenario] = {}
-    for robot_id, assignment in fleet.robots.items():
-        scenario = scenarios.get(assignment.scenario)
+
+    def each_once(name: str) -> LaunchScenario:
+        scenario = scenarios.get(name)
         if scenario is None:
-            scenario = scenarios[assignment.scenario] = render_scenario(repo, assignment.scenario)
-        result.requests[robot_id] = _request(repo, robot_id, assignment, scenario)
+            scenario = scenarios[name] = render_scenario(repo, name)
+        return scenario
+
+    def fresh(robot_id: str, assignment: RobotAssignment, s: LaunchScenario) -> LaunchRequest:
+        return request_for(repo, robot_id, assignment, s)
+
+    scenario_for = scenario_of or each_once
+    request = request_of or fresh
+    for robot_id, assignment in fleet.robots.items():
+        scenario = scenario_for(assignment.scenario)
+        result.requests[robot_id] = request(robot_id, assignment, scenario)
         result.scenario_of[robot_id] = assignment.scenario
         result.labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
@@ -185,4 +208,4 @@ def render_robot(repo: Repository, robot_id: str) -> LaunchRequest:
             f"robot '{robot_id}' is not in configs/fleet.yaml"
             f"{did_you_mean(robot_id, repo.fleet.model.robots)}"
         )
-    return _request(repo, robot_id, assignment, render_scenario(repo, assignment.scenario))
+    return request_for(repo, robot_id, assignment, render_scenario(repo, assignment.scenario))

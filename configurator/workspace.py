@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,11 +35,14 @@ def check_source(source: Source) -> Checked:
     return Checked(repo, sorted(diagnostics))
 
 
-def check(root: Path, rev: str | None = None) -> Checked:
-    """Raises SourceError when the folder or revision cannot be read at all."""
+def check(
+    root: Path, rev: str | None = None, build: Callable[[Source], Checked] | None = None
+) -> Checked:
+    """Raises SourceError when the folder or revision cannot be read at all. `build` checks
+    the source instead of `check_source` (an incremental build's `BuildCache.check`)."""
     source = open_source(root, rev)
     try:
-        return check_source(source)
+        return (build or check_source)(source)
     finally:
         close = getattr(source, "close", None)
         if close is not None:

@@ -10,7 +10,7 @@ import codecs
 import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from itertools import islice
 from typing import Any
@@ -124,14 +124,44 @@ class YamlReadError(Exception):
         self.problems = problems
 
 
-@dataclass
 class YamlDocument:
-    """A parsed file: its data and the node tree that locates every key and value in it."""
+    """A parsed file: its data and the node tree that locates every key and value in it.
 
-    path: str
-    data: dict[str, Any]
-    root: MappingNode
-    _index: dict[int, dict[str, tuple[Node, Node]]] = field(default_factory=dict, repr=False)
+    A long-lived holder (the reconciler's build cache) may `release` the tree and the data once
+    the file is typed: a tree takes some hundred times the file's size. Both come back from the
+    file's bytes, parsed again the same way, when a position is asked for."""
+
+    __slots__ = ("_data", "_index", "_root", "path", "raw")
+
+    def __init__(self, path: str, data: dict[str, Any], root: MappingNode, raw: bytes) -> None:
+        self.path = path
+        self.raw = raw
+        self._data: dict[str, Any] | None = data
+        self._root: MappingNode | None = root
+        self._index: dict[int, dict[str, tuple[Node, Node]]] = {}
+
+    @property
+    def data(self) -> dict[str, Any]:
+        if self._data is None:
+            self._restore()
+        assert self._data is not None
+        return self._data
+
+    @property
+    def root(self) -> MappingNode:
+        if self._root is None:
+            self._restore()
+        assert self._root is not None
+        return self._root
+
+    def release(self) -> None:
+        """Drops the node tree and the data until they are asked for again."""
+        self._data = self._root = None
+        self._index = {}
+
+    def _restore(self) -> None:
+        again = parse_document(self.path, self.raw)  # parsed once already: it parses again
+        self._data, self._root = again._data, again._root
 
     def _pairs(self, node: MappingNode) -> dict[str, tuple[Node, Node]]:
         pairs = self._index.get(id(node))
@@ -655,4 +685,4 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
     data = builder.build(root)
     if builder.problems:
         raise YamlReadError(_capped(builder.problems))
-    return YamlDocument(path=path, data=data, root=root)
+    return YamlDocument(path, data, root, raw)
