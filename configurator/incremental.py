@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from configurator.diagnostics import Diagnostic
-from configurator.launch import LaunchRequest, LaunchScenario
+from configurator.gcpause import collector_paused
+from configurator.launch import LaunchRequest, LaunchScenario, ScenarioDigests
 from configurator.loader import LoadedFile, load_repository
 from configurator.render import FleetRender, render_fleet, render_scenario, request_for
 from configurator.repository import Entry, Platform, Repository
@@ -310,7 +311,8 @@ class BuildCache:
     def check(self, source: Source) -> Checked:
         """The source validated as `workspace.check_source` would, reusing what is unchanged."""
         try:
-            return self._check(source)
+            with collector_paused():
+                return self._check(source)
         except BaseException:
             self.clear()  # half an update is never trusted
             raise
@@ -404,7 +406,8 @@ class BuildCache:
         if checked.repo is not self._checked:
             raise ValueError("render the build this cache checked last")
         try:
-            return self._render(self._checked)
+            with collector_paused():
+                return self._render(self._checked)
         except BaseException:
             self.clear()
             raise
@@ -435,10 +438,11 @@ class BuildCache:
             robot_id: str,
             assignment: RobotAssignment,
             scenario: LaunchScenario,
+            digests: ScenarioDigests,
         ) -> LaunchRequest:
             before = self._robots.get(robot_id)
             if before is None or before.scenario is not scenario or before.assignment != assignment:
-                request = request_for(repo, robot_id, assignment, scenario)
+                request = request_for(repo, robot_id, assignment, scenario, digests)
                 self.stats.robots_rendered += 1
             elif before.request.revision != revision:
                 request = before.request.model_copy(update={"revision": revision})

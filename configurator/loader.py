@@ -191,8 +191,7 @@ def place(
             _error(
                 path,
                 "RC105",
-                f"YAML files here end in .yaml; rename this {suffix.group()} file "
-                "(it is not read)",
+                f"YAML files here end in .yaml; rename this {suffix.group()} file (it is not read)",
             )
         )
         return None
@@ -204,9 +203,7 @@ def place(
     return found
 
 
-def load_file(
-    path: str, raw: bytes | OSError, kind: Kind, groups: tuple[str, ...]
-) -> LoadedFile:
+def load_file(path: str, raw: bytes | OSError, kind: Kind, groups: tuple[str, ...]) -> LoadedFile:
     """One file's bytes (or why they could not be read) parsed, typed and checked on its own."""
     diagnostics: list[Diagnostic] = []
     doc, model = _parse(path, raw, kind, diagnostics)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from configurator.diagnostics import Diagnostic
+from configurator.gcpause import collector_paused
 from configurator.loader import load_repository
 from configurator.repository import Repository
 from configurator.rules import check_repository
@@ -30,9 +31,10 @@ class Checked:
 
 
 def check_source(source: Source) -> Checked:
-    repo, diagnostics = load_repository(source)
-    diagnostics.extend(check_repository(repo))
-    return Checked(repo, sorted(diagnostics))
+    with collector_paused():
+        repo, diagnostics = load_repository(source)
+        diagnostics.extend(check_repository(repo))
+        return Checked(repo, sorted(diagnostics))
 
 
 def check(
