@@ -330,11 +330,11 @@ def _compose_within_bounds(text: str) -> Node | None:
     return _compose(text)
 
 
-def _scan_events(text: str) -> None:
+def _scan_events(text: str, loader_class: Any = _Loader) -> None:
     """RC009 for nesting deeper than MAX_DEPTH, located as the builder would, and RC008 for
     more than MAX_EVENTS, from libyaml's events (its parser keeps no C stack per level).
     Syntax errors are left to the composer, which locates them."""
-    loader = _Loader(text)
+    loader = loader_class(text)
     depth = events = 0
     try:
         while (event := loader.get_event()) is not None:
@@ -345,6 +345,14 @@ def _scan_events(text: str) -> None:
             if step > 0 and depth > MAX_DEPTH:
                 raise YamlReadError([_problem(event.start_mark, "RC009", _TOO_DEEP)])
             depth += step
+    except yaml.MarkedYAMLError as exc:
+        if loader_class is _Loader and _LIBYAML and "maximum nesting depth" in str(exc.problem):
+            # libyaml 0.2.6 refuses 1,000 levels of flow nesting while scanning ahead, before
+            # the events that reach MAX_DEPTH: the pure-Python parser (no such limit, no
+            # recursion) finds where they do, in the text up to libyaml's refusal.
+            end = exc.problem_mark.line if exc.problem_mark is not None else 0
+            _scan_events("\n".join(text.split("\n", end + 1)[: end + 1]), yaml.SafeLoader)
+        return
     except yaml.YAMLError:
         return
     finally:
