@@ -302,6 +302,10 @@ class BuildCache:
         return found
 
     def put(self, blob: str, loaded: LoadedFile) -> None:
+        if loaded.entry is not None:
+            # Typed and checked on its own: its node tree is not kept through the build (all
+            # trees at once were the build's peak), a rule reporting here parses it again.
+            loaded.entry.doc.release()
         self._files[(loaded.path, blob)] = loaded
         self._blobs[loaded.path] = blob
         self.stats.files_parsed += 1
