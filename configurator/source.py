@@ -317,19 +317,21 @@ class GitSource:
                     yield path, refused[path]
                     continue
                 _, object_id = next(answers)
-                yield path, self._answer(proc.stdout, path, object_id)
+                yield path, self._answer(proc.stdout, path, object_id, self._blobs[path][1])
         finally:
             proc.stdout.close()
             proc.kill()
             proc.wait()
 
-    def _answer(self, stream: IO[bytes], path: str, object_id: str) -> bytes:
+    def _answer(self, stream: IO[bytes], path: str, object_id: str, listed: int) -> bytes:
         header = stream.readline(_HEADER_LIMIT).decode("ascii", "replace").split()
         if header[:1] != [object_id] or len(header) < 2:
             raise SourceError(f"{self._revision}: git did not answer for {path}")
         if header[1] != "blob" or len(header) != 3:
             raise SourceError(_missing(self._revision, path, object_id))
-        size = int(header[2])
+        size = int(header[2]) if header[2].isdigit() else -1
+        if size != listed:  # never more than the listing said, which is within the limit
+            raise SourceError(f"{self._revision}: git's answer for {path} is not its listing's")
         data = stream.read(size)
         if len(data) != size or stream.read(1) != b"\n":
             raise SourceError(f"{self._revision}: git's answer for {path} was cut short")
