@@ -8,7 +8,9 @@ Everything generated is valid by construction, so that a benchmark measures a cl
 validation of the whole repository: every reference resolves, every selected logic's mappings
 are in the capability's robot template and bound by its mapping scheme, every `requires` is
 selected, every goal's task is achievable by the selected actions, goal locations are Location
-objects of the scenario's environment, and all settings are within their bounds.
+objects of the scenario's environment, all settings are within their bounds, and every
+robot has its own ROS 2 namespace (the schemes' names are relative), so no two robots of one
+world share a topic.
 
 The output is deterministic for a given seed and set of sizes. YAML is written as plain text
 (no YAML library needed), each file with the editor modeline pointing at `schemas/`.
@@ -256,8 +258,6 @@ class Generator:
                     camel = "".join(part.capitalize() for part in mapping.split("_"))
                     type_ = f"lab_msgs/{iface}/{camel}" if ros2 else f"lab_msgs/{camel}"
                     lines.append(
-                        # Relative: resolved in each robot's namespace, so that robots of
-                        # one world never share a topic (RC505).
                         f"  {mapping}: {{kind: {kind}, name: ns{j}/{mapping}, type: {type_}}}\n"
                     )
                 self.write(f"{base}/mapping-schemes/{scheme}.yaml", "".join(lines))

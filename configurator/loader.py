@@ -6,9 +6,10 @@ file is remembered as broken so that references to it are not reported twice.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from pydantic import BaseModel, ValidationError
 
@@ -105,8 +106,38 @@ def _error(path: str, code: str, message: str, line: int = 1, col: int = 1) -> D
     return Diagnostic(path, line, col, Severity.ERROR, code, message)
 
 
-def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
-    """Every file of the source, typed; diagnostics for everything that is not readable."""
+@dataclass(frozen=True)
+class LoadedFile:
+    """One file read, parsed and typed: its entry (None when unreadable, and its name is then
+    remembered as broken) and what is wrong with it on its own. It depends on the file's path
+    and bytes alone, so a cache may keep it by path and git blob id."""
+
+    path: str
+    kind: Kind
+    groups: tuple[str, ...]
+    entry: Entry[Any] | None
+    diagnostics: tuple[Diagnostic, ...]
+
+
+class FileCache(Protocol):
+    """Files loaded before, by path and blob id (configurator/incremental.py)."""
+
+    def get(self, path: str, blob: str) -> LoadedFile | None: ...
+
+    def put(self, blob: str, loaded: LoadedFile) -> None: ...
+
+
+def blob_id(data: bytes) -> str:
+    """The id git gives these bytes as a blob: a file of the work tree and the same file in a
+    commit share it."""
+    return hashlib.sha1(b"blob %d\0" % len(data) + data, usedforsecurity=False).hexdigest()
+
+
+def load_repository(
+    source: Source, files: FileCache | None = None
+) -> tuple[Repository, list[Diagnostic]]:
+    """Every file of the source, typed; diagnostics for everything that is not readable.
+    With `files`, a file whose bytes were loaded before is taken from there, not parsed again."""
     repo = Repository(revision_of=lambda: source.revision)
     diagnostics: list[Diagnostic] = []
     for path, why in source.refused().items():
@@ -114,53 +145,95 @@ def load_repository(source: Source) -> tuple[Repository, list[Diagnostic]]:
         found = classify(path)
         if found is not None:
             repo.broken.setdefault(found[0].name, set()).add(_qualified(found[1]))
+    placed: list[tuple[str, Kind, tuple[str, ...]]] = []
     for path in source.files():
-        platform_dir = _PLATFORM_DIR.match(path)
-        if platform_dir:
-            repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
-        suffix = _YAML_SUFFIX.search(path)
-        if suffix is None:
-            continue  # READMEs and the like may sit beside the YAML files
-        if suffix.group() != ".yaml":
-            diagnostics.append(
-                _error(
-                    path,
-                    "RC105",
-                    f"YAML files here end in .yaml; rename this {suffix.group()} file "
-                    "(it is not read)",
-                )
-            )
-            continue
-        found = classify(path)
-        if found is None:
-            diagnostics.append(
-                _error(path, "RC105", f"not a known place for a YAML file; expected {_PLACES}")
-            )
-            continue
-        kind, groups = found
-        name = groups[-1]
-        repo.files_read += 1
-        doc, model = _load_one(source, path, kind, diagnostics)
-        if model is None or doc is None:
-            repo.broken.setdefault(kind.name, set()).add(_qualified(groups))
-            continue
-        declared = getattr(model, "name", None)
-        if kind.name != "fleet" and declared is not None and declared != name:
-            line, col = doc.locate(["name"])
-            diagnostics.append(
-                _error(
-                    path,
-                    "RC104",
-                    f"name '{declared}' differs from the file name '{name}'; "
-                    f"a {kind.title}'s name is its file name (rename one, or drop 'name:')",
-                    line,
-                    col,
-                )
-            )
-        _add(repo, kind.name, groups, Entry(name, model, doc))
+        found = place(path, repo, diagnostics)
+        if found is not None:
+            placed.append((path, *found))
+    loaded: dict[str, LoadedFile] = {}
+    if files is not None:
+        for path, _, _ in placed:
+            blob = source.blob_id(path)
+            hit = files.get(path, blob) if blob is not None else None
+            if hit is not None:
+                loaded[path] = hit
+    # One pass over every other file: a commit is read by one git process, not one per file.
+    unread = [(path, kind, groups) for path, kind, groups in placed if path not in loaded]
+    contents = source.read_each([path for path, _, _ in unread])
+    for (path, kind, groups), (_, raw) in zip(unread, contents, strict=True):
+        blob = source.blob_id(path) or (blob_id(raw) if isinstance(raw, bytes) else None)
+        hit = files.get(path, blob) if files is not None and blob is not None else None
+        if hit is None:
+            hit = load_file(path, raw, kind, groups)
+            if files is not None and blob is not None:
+                files.put(blob, hit)
+        loaded[path] = hit
+    for path, _, _ in placed:
+        add_loaded(repo, loaded[path], diagnostics)
     if repo.fleet is None and "fleet" not in repo.broken:
         diagnostics.append(_missing_fleet(source))
     return repo, diagnostics
+
+
+def place(
+    path: str, repo: Repository, diagnostics: list[Diagnostic]
+) -> tuple[Kind, tuple[str, ...]] | None:
+    """The kind of file a path holds, or None when it is not read (a README, a YAML file in
+    the wrong place: reported). A platform's folder makes the platform, whatever it holds."""
+    platform_dir = _PLATFORM_DIR.match(path)
+    if platform_dir:
+        repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
+    suffix = _YAML_SUFFIX.search(path)
+    if suffix is None:
+        return None  # READMEs and the like may sit beside the YAML files
+    if suffix.group() != ".yaml":
+        diagnostics.append(
+            _error(
+                path,
+                "RC105",
+                f"YAML files here end in .yaml; rename this {suffix.group()} file (it is not read)",
+            )
+        )
+        return None
+    found = classify(path)
+    if found is None:
+        diagnostics.append(
+            _error(path, "RC105", f"not a known place for a YAML file; expected {_PLACES}")
+        )
+    return found
+
+
+def load_file(path: str, raw: bytes | OSError, kind: Kind, groups: tuple[str, ...]) -> LoadedFile:
+    """One file's bytes (or why they could not be read) parsed, typed and checked on its own."""
+    diagnostics: list[Diagnostic] = []
+    doc, model = _parse(path, raw, kind, diagnostics)
+    if model is None or doc is None:
+        return LoadedFile(path, kind, groups, None, tuple(diagnostics))
+    name = groups[-1]
+    declared = getattr(model, "name", None)
+    if kind.name != "fleet" and declared is not None and declared != name:
+        line, col = doc.locate(["name"])
+        diagnostics.append(
+            _error(
+                path,
+                "RC104",
+                f"name '{declared}' differs from the file name '{name}'; "
+                f"a {kind.title}'s name is its file name (rename one, or drop 'name:')",
+                line,
+                col,
+            )
+        )
+    return LoadedFile(path, kind, groups, Entry(name, model, doc), tuple(diagnostics))
+
+
+def add_loaded(repo: Repository, loaded: LoadedFile, diagnostics: list[Diagnostic]) -> None:
+    """One file's result into the repository: an entry, or a name remembered as broken."""
+    repo.files_read += 1
+    diagnostics.extend(loaded.diagnostics)
+    if loaded.entry is None:
+        repo.broken.setdefault(loaded.kind.name, set()).add(_qualified(loaded.groups))
+    else:
+        _add(repo, loaded.kind.name, loaded.groups, loaded.entry)
 
 
 def _missing_fleet(source: Source) -> Diagnostic:
@@ -180,16 +253,16 @@ def _qualified(groups: tuple[str, ...]) -> str:
     return "/".join(groups)
 
 
-def _load_one(
-    source: Source, path: str, kind: Kind, diagnostics: list[Diagnostic]
+def _parse(
+    path: str, raw: bytes | OSError, kind: Kind, diagnostics: list[Diagnostic]
 ) -> tuple[YamlDocument | None, Any]:
-    try:
-        raw = source.read(path)
-    except FileTooLarge as exc:
-        diagnostics.append(_error(path, "RC008", str(exc)))
+    """The document and its model; the document alone when it is not of its kind, neither
+    when unreadable."""
+    if isinstance(raw, FileTooLarge):
+        diagnostics.append(_error(path, "RC008", str(raw)))
         return None, None
-    except OSError as exc:
-        diagnostics.append(_error(path, "RC008", f"cannot read the file: {exc.strerror or exc}"))
+    if isinstance(raw, OSError):
+        diagnostics.append(_error(path, "RC008", f"cannot read the file: {raw.strerror or raw}"))
         return None, None
     try:
         doc = parse_document(path, raw)

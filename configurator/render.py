@@ -5,17 +5,19 @@ Pure: the caller has validated the repository; a request is never rendered from 
 
 from __future__ import annotations
 
-import copy
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from configurator.composition import achievable_tasks, find_location
 from configurator.diagnostics import did_you_mean
+from configurator.gcpause import collector_paused
 from configurator.launch import (
     LaunchCapability,
     LaunchGoal,
     LaunchRequest,
     LaunchScenario,
+    ScenarioDigests,
     make_launch_request,
 )
 from configurator.repository import Repository
@@ -49,13 +51,23 @@ class FleetRender:
 
 def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
     """`over` merged into a copy of `base`: mappings merge key by key, anything else replaces."""
-    merged = copy.deepcopy(base)
+    merged: JsonObject = _copy(base)
     for key, value in over.items():
         if isinstance(value, dict) and isinstance(merged.get(key), dict):
             merged[key] = deep_merge(merged[key], value)
         else:
-            merged[key] = copy.deepcopy(value)
+            merged[key] = _copy(value)
     return merged
+
+
+def _copy(value: Any) -> Any:
+    """A copy of JSON data (mappings, lists, scalars): copy.deepcopy without its bookkeeping
+    for shared and cyclic objects, which JSON data has none of."""
+    if isinstance(value, dict):
+        return {key: _copy(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_copy(item) for item in value]
+    return value
 
 
 def _settings(definitions: dict[str, SettingDefinition], chosen: dict[str, Any]) -> JsonObject:
@@ -89,9 +101,15 @@ def for_robot(scenario: LaunchScenario, robot_id: str, namespace: str | None) ->
     )
 
 
-def _request(
-    repo: Repository, robot_id: str, assignment: RobotAssignment, scenario: LaunchScenario
+def request_for(
+    repo: Repository,
+    robot_id: str,
+    assignment: RobotAssignment,
+    scenario: LaunchScenario,
+    digests: ScenarioDigests | None = None,
 ) -> LaunchRequest:
+    """The robot's request from its scenario's shared content (`digests`: made from that
+    scenario, for its robots' digests)."""
     namespace = assignment.namespace
     return make_launch_request(
         robot_id,
@@ -99,6 +117,7 @@ def _request(
         repo.revision,
         for_robot(scenario, robot_id, namespace),
         namespace=absolute_namespace(namespace) if namespace is not None else None,
+        digests=digests,
     )
 
 
@@ -156,7 +175,22 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
     )
 
 
-def render_fleet(repo: Repository) -> FleetRender:
+ScenarioOf = Callable[[str], LaunchScenario]
+RequestOf = Callable[[str, RobotAssignment, LaunchScenario, ScenarioDigests], LaunchRequest]
+
+
+def render_fleet(
+    repo: Repository, scenario_of: ScenarioOf | None = None, request_of: RequestOf | None = None
+) -> FleetRender:
+    """Every robot's request. `scenario_of` and `request_of` may serve what an earlier build
+    rendered (configurator/incremental.py); by default each scenario is rendered once here."""
+    with collector_paused():
+        return _render_fleet(repo, scenario_of, request_of)
+
+
+def _render_fleet(
+    repo: Repository, scenario_of: ScenarioOf | None, request_of: RequestOf | None
+) -> FleetRender:
     if repo.fleet is None:
         raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
     fleet = repo.fleet.model
@@ -164,11 +198,32 @@ def render_fleet(repo: Repository) -> FleetRender:
         revision=repo.revision, allow_empty=fleet.allow_empty, rollout=fleet.rollout
     )
     scenarios: dict[str, LaunchScenario] = {}
-    for robot_id, assignment in fleet.robots.items():
-        scenario = scenarios.get(assignment.scenario)
+    digests: dict[str, tuple[LaunchScenario, ScenarioDigests]] = {}
+
+    def each_once(name: str) -> LaunchScenario:
+        scenario = scenarios.get(name)
         if scenario is None:
-            scenario = scenarios[assignment.scenario] = render_scenario(repo, assignment.scenario)
-        result.requests[robot_id] = _request(repo, robot_id, assignment, scenario)
+            scenario = scenarios[name] = render_scenario(repo, name)
+        return scenario
+
+    def digests_of(name: str, scenario: LaunchScenario) -> ScenarioDigests:
+        found = digests.get(name)
+        if found is None or found[0] is not scenario:
+            found = digests[name] = (scenario, ScenarioDigests(scenario))
+        return found[1]
+
+    def fresh(
+        robot_id: str, assignment: RobotAssignment, s: LaunchScenario, d: ScenarioDigests
+    ) -> LaunchRequest:
+        return request_for(repo, robot_id, assignment, s, d)
+
+    scenario_for = scenario_of or each_once
+    request = request_of or fresh
+    for robot_id, assignment in fleet.robots.items():
+        scenario = scenario_for(assignment.scenario)
+        result.requests[robot_id] = request(
+            robot_id, assignment, scenario, digests_of(assignment.scenario, scenario)
+        )
         result.scenario_of[robot_id] = assignment.scenario
         result.labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
@@ -185,4 +240,4 @@ def render_robot(repo: Repository, robot_id: str) -> LaunchRequest:
             f"robot '{robot_id}' is not in configs/fleet.yaml"
             f"{did_you_mean(robot_id, repo.fleet.model.robots)}"
         )
-    return _request(repo, robot_id, assignment, render_scenario(repo, assignment.scenario))
+    return request_for(repo, robot_id, assignment, render_scenario(repo, assignment.scenario))

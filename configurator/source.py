@@ -6,10 +6,13 @@ The loader reads both the same way, so the reconciler validates exactly what a c
 from __future__ import annotations
 
 import os
+import re
 import stat
-from collections.abc import Iterator
+import subprocess
+import tempfile
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import IO, Protocol
 
 from configurator.files import NotRegularFile, file_kind, read_regular
 from configurator.yamlio import MAX_FILE_BYTES
@@ -38,6 +41,15 @@ class Source(Protocol):
 
     def read(self, path: str) -> bytes:
         """The file's bytes; OSError when it cannot be read, FileTooLarge over the limit."""
+        ...
+
+    def read_each(self, paths: Sequence[str]) -> Iterator[tuple[str, bytes | OSError]]:
+        """Each file's bytes, or the OSError `read` would raise, in the order given: many files
+        in one pass."""
+        ...
+
+    def blob_id(self, path: str) -> str | None:
+        """The file's git blob id when the source knows it without reading the file."""
         ...
 
     @property
@@ -152,6 +164,16 @@ class WorkTreeSource:
                 raise FileTooLarge(size) from None
             raise
 
+    def read_each(self, paths: Sequence[str]) -> Iterator[tuple[str, bytes | OSError]]:
+        for path in paths:
+            try:
+                yield path, self.read(path)
+            except OSError as exc:
+                yield path, exc
+
+    def blob_id(self, path: str) -> str | None:
+        return None
+
     @property
     def revision(self) -> str:
         if self._revision is None:
@@ -178,72 +200,68 @@ def _worktree_revision(root: Path) -> str:
     return f"{head}+dirty" if dirty else head
 
 
-_LINK_MODE = 0o120000
-_GITLINK_MODE = 0o160000
+_LINK_MODE = "120000"
+_GITLINK_MODE = "160000"
+_REGULAR_MODES = ("100644", "100755")
+_OBJECT_ID = re.compile(r"^[0-9a-f]{40}(?:[0-9a-f]{24})?$")  # SHA-1 or SHA-256 repositories
+_HEADER_LIMIT = 200  # `<id> blob <size>` or `<id> missing`
 
 
 class GitSource:
-    """Files as one commit holds them, read through GitPython without touching the work tree."""
+    """Files as one commit holds them, without touching the work tree: the listing from one
+    `git ls-tree -r`, the contents from one `git cat-file --batch` pass (never a process per
+    file, never a checkout)."""
 
     def __init__(self, root: Path, rev: str) -> None:
-        try:
-            import git
-        except ImportError as exc:  # pragma: no cover - the server extra installs it
-            raise SourceError(
-                "reading a commit needs GitPython: pip install 'robotconf[server]'"
-            ) from exc
         if not rev or rev.startswith("-") or any(c in rev for c in "\0\n\r"):
             raise SourceError(f"{rev!r} is not a revision (a commit, branch or tag name)")
-        try:
-            self._repo = git.Repo(root, search_parent_directories=True)
-        except (git.InvalidGitRepositoryError, git.NoSuchPathError):
-            raise SourceError(f"{root}: not a git repository") from None
-        try:
-            commit = self._repo.commit(rev)
-        except Exception:  # BadName, ValueError, GitCommandError, a tag of a tree, a bad object
-            self._repo.close()
-            raise SourceError(f"{rev!r}: no such revision in {root}") from None
-        self._revision = commit.hexsha
-        self._blobs: dict[str, Any] = {}
-        self._refused: dict[str, str] = {}
-        try:
-            self._index(root, rev, commit)
-        except SourceError:
-            self._repo.close()
-            raise
-        except Exception as exc:  # a corrupt or missing object (a shallow clone's edge)
-            self._repo.close()
-            raise SourceError(f"{rev!r} cannot be read in {root}: {exc}") from None
-
-    def _index(self, root: Path, rev: str, commit: Any) -> None:
+        self._root = root
+        if not root.is_dir():
+            raise SourceError(f"{root}: no such directory")
+        probe = _git(root, "rev-parse", "--show-prefix")
+        if probe.returncode != 0:
+            raise SourceError(f"{root}: not a git repository")
         # The repository may live in a subfolder of the git work tree.
-        prefix = Path(
-            os.path.relpath(root.resolve(), Path(self._repo.working_tree_dir or root).resolve())
-        )
-        base = commit.tree
-        if prefix.as_posix() != ".":
-            try:
-                base = base / prefix.as_posix()
-            except KeyError:
-                raise SourceError(f"{rev!r} has no folder {prefix.as_posix()}") from None
-        for top in ROOTS:
-            try:
-                tree = base / top
-            except KeyError:
+        prefix = probe.stdout.decode("utf-8", "surrogateescape").strip().rstrip("/")
+        found = _git(root, "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}")
+        commit = found.stdout.decode("ascii", "replace").strip()
+        if found.returncode != 0 or not _OBJECT_ID.match(commit):
+            raise SourceError(f"{rev!r}: no such revision in {root}")
+        self._revision = commit
+        self._blobs: dict[str, tuple[str, int]] = {}  # path -> (blob id, size)
+        self._refused: dict[str, str] = {}
+        tree = f"{commit}:{prefix}" if prefix else commit
+        # --full-tree: the paths given are in `tree`, whatever folder git runs in.
+        listing = _git(root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS)
+        if listing.returncode != 0:
+            if prefix:
+                raise SourceError(f"{rev!r} has no folder {prefix}")
+            detail = _first_line(listing.stderr)
+            raise SourceError(f"{rev!r} cannot be read in {root}: {detail}")
+        self._index(listing.stdout)
+
+    def _index(self, listing: bytes) -> None:
+        for record in listing.split(b"\0"):
+            if not record:
                 continue
-            if tree.type != "tree":
-                kind = SYMLINK if tree.mode == _LINK_MODE else SUBMODULE
-                if tree.type == "blob" and tree.mode != _LINK_MODE:
-                    kind = "a file"
-                self._refused[top] = refusal(kind) + f" ({top}/ must be a folder)"
-                continue
-            for item, rel in _entries(tree, top):
-                if Path(rel).name.startswith("."):
-                    continue
-                if item.type == "blob" and item.mode != _LINK_MODE:
-                    self._blobs[rel] = item
-                else:
-                    self._refused[rel] = refusal(SYMLINK if item.mode == _LINK_MODE else SUBMODULE)
+            meta, _, raw_path = record.partition(b"\t")
+            mode, kind, object_id, size = meta.decode("ascii", "replace").split()
+            path = raw_path.decode("utf-8", "surrogateescape")
+            parts = path.split("/")
+            if any(part.startswith(".") for part in parts[1:]):
+                continue  # hidden files and the contents of hidden folders, as in the work tree
+            shown = printable_path(path)
+            if shown != path:
+                self._refused[shown] = "has a name that is not UTF-8; rename it"
+            elif len(parts) == 1:  # configs or models itself is no folder
+                what = {_LINK_MODE: SYMLINK, _GITLINK_MODE: SUBMODULE}.get(mode, "a file")
+                self._refused[path] = refusal(what) + f" ({path}/ must be a folder)"
+            elif kind == "blob" and mode in _REGULAR_MODES:
+                if not size.isdigit():  # git lists a blob it does not have with size BAD
+                    raise SourceError(_missing(self._revision, path, object_id))
+                self._blobs[path] = (object_id, int(size))
+            else:
+                self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
 
     def files(self) -> list[str]:
         return sorted(self._blobs)
@@ -251,11 +269,72 @@ class GitSource:
     def refused(self) -> dict[str, str]:
         return self._refused
 
+    def blob_id(self, path: str) -> str | None:
+        return self._blobs[path][0]
+
     def read(self, path: str) -> bytes:
-        blob = self._blobs[path]
-        if blob.size > MAX_FILE_BYTES:
-            raise FileTooLarge(blob.size)
-        data: bytes = blob.data_stream.read()
+        for _, data in self.read_each([path]):
+            if isinstance(data, OSError):
+                raise data
+            return data
+        raise AssertionError("read_each yields once a path")  # pragma: no cover
+
+    def read_each(self, paths: Sequence[str]) -> Iterator[tuple[str, bytes | OSError]]:
+        """Each file's bytes (or why not) in the order given, from one `git cat-file --batch`
+        process. A file over the size limit is refused by the size in the listing, unread."""
+        wanted: list[tuple[str, str]] = []  # (path, blob id) that git is asked for
+        refused: dict[str, OSError] = {}
+        for path in paths:
+            object_id, size = self._blobs[path]
+            if size > MAX_FILE_BYTES:
+                refused[path] = FileTooLarge(size)
+            else:
+                wanted.append((path, object_id))
+        if not wanted:
+            yield from refused.items()
+            return
+        with tempfile.TemporaryFile() as ids:
+            # From a file, not a pipe: git answers as it reads, and a pipe both ways could fill
+            # up in both directions at once.
+            ids.write("".join(f"{object_id}\n" for _, object_id in wanted).encode("ascii"))
+            ids.seek(0)
+            try:
+                proc = subprocess.Popen(
+                    ["git", "cat-file", "--batch"],
+                    cwd=self._root,
+                    stdin=ids,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.DEVNULL,
+                    env=_GIT_ENV,
+                )
+            except OSError as exc:
+                raise SourceError(f"cannot run git: {exc.strerror or exc}") from None
+        assert proc.stdout is not None
+        try:
+            answers = iter(wanted)
+            for path in paths:
+                if path in refused:
+                    yield path, refused[path]
+                    continue
+                _, object_id = next(answers)
+                yield path, self._answer(proc.stdout, path, object_id, self._blobs[path][1])
+        finally:
+            proc.stdout.close()
+            proc.kill()
+            proc.wait()
+
+    def _answer(self, stream: IO[bytes], path: str, object_id: str, listed: int) -> bytes:
+        header = stream.readline(_HEADER_LIMIT).decode("ascii", "replace").split()
+        if header[:1] != [object_id] or len(header) < 2:
+            raise SourceError(f"{self._revision}: git did not answer for {path}")
+        if header[1] != "blob" or len(header) != 3:
+            raise SourceError(_missing(self._revision, path, object_id))
+        size = int(header[2]) if header[2].isdigit() else -1
+        if size != listed:  # never more than the listing said, which is within the limit
+            raise SourceError(f"{self._revision}: git's answer for {path} is not its listing's")
+        data = stream.read(size)
+        if len(data) != size or stream.read(1) != b"\n":
+            raise SourceError(f"{self._revision}: git's answer for {path} was cut short")
         return data
 
     @property
@@ -263,23 +342,40 @@ class GitSource:
         return self._revision
 
     def close(self) -> None:
-        self._repo.close()
+        return None
 
 
-def _entries(tree: Any, top: str) -> Iterator[tuple[Any, str]]:
-    """Every blob, link and submodule below `tree`, with its repository path; the contents of
-    hidden folders are skipped as the work tree's are, links and submodules not entered."""
-    pending = [(tree, top)]
-    while pending:  # a stack, not recursion: a hostile commit may nest thousands deep
-        current, where = pending.pop()
-        for item in current:
-            name = item.path.rsplit("/", 1)[-1]  # a submodule has no `name` until configured
-            rel = f"{where}/{name}"
-            if item.type == "tree":
-                if not name.startswith("."):
-                    pending.append((item, rel))
-            else:
-                yield item, rel
+# No pager, no prompt, no locks taken for reading; pathspecs taken literally.
+_GIT_ENV = {
+    **os.environ,
+    "GIT_PAGER": "cat",
+    "GIT_TERMINAL_PROMPT": "0",
+    "GIT_OPTIONAL_LOCKS": "0",
+    "GIT_LITERAL_PATHSPECS": "1",
+}
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess[bytes]:
+    try:
+        return subprocess.run(
+            ["git", *args], cwd=root, capture_output=True, env=_GIT_ENV, timeout=300
+        )
+    except OSError as exc:
+        raise SourceError(f"cannot run git: {exc.strerror or exc}") from None
+    except subprocess.TimeoutExpired:
+        raise SourceError(f"git {args[0]} took over 300 s in {root}") from None
+
+
+def _missing(revision: str, path: str, object_id: str) -> str:
+    return (
+        f"{revision}: {path} (object {object_id}) is missing from the repository "
+        "(a shallow or damaged clone?)"
+    )
+
+
+def _first_line(stderr: bytes) -> str:
+    lines = stderr.decode("utf-8", "replace").strip().splitlines()
+    return lines[0] if lines else "git failed"
 
 
 def open_source(root: Path, rev: str | None) -> Source:

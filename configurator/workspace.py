@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from configurator.diagnostics import Diagnostic
+from configurator.gcpause import collector_paused
 from configurator.loader import load_repository
 from configurator.repository import Repository
 from configurator.rules import check_repository
@@ -29,16 +31,20 @@ class Checked:
 
 
 def check_source(source: Source) -> Checked:
-    repo, diagnostics = load_repository(source)
-    diagnostics.extend(check_repository(repo))
-    return Checked(repo, sorted(diagnostics))
+    with collector_paused():
+        repo, diagnostics = load_repository(source)
+        diagnostics.extend(check_repository(repo))
+        return Checked(repo, sorted(diagnostics))
 
 
-def check(root: Path, rev: str | None = None) -> Checked:
-    """Raises SourceError when the folder or revision cannot be read at all."""
+def check(
+    root: Path, rev: str | None = None, build: Callable[[Source], Checked] | None = None
+) -> Checked:
+    """Raises SourceError when the folder or revision cannot be read at all. `build` checks
+    the source instead of `check_source` (an incremental build's `BuildCache.check`)."""
     source = open_source(root, rev)
     try:
-        return check_source(source)
+        return (build or check_source)(source)
     finally:
         close = getattr(source, "close", None)
         if close is not None:

@@ -7,11 +7,10 @@ indentation, several documents, non-UTF-8 bytes, odd line breaks, oversized or d
 from __future__ import annotations
 
 import codecs
-import contextlib
 import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from itertools import islice
 from typing import Any
@@ -125,14 +124,44 @@ class YamlReadError(Exception):
         self.problems = problems
 
 
-@dataclass
 class YamlDocument:
-    """A parsed file: its data and the node tree that locates every key and value in it."""
+    """A parsed file: its data and the node tree that locates every key and value in it.
 
-    path: str
-    data: dict[str, Any]
-    root: MappingNode
-    _index: dict[int, dict[str, tuple[Node, Node]]] = field(default_factory=dict, repr=False)
+    A long-lived holder (the reconciler's build cache) may `release` the tree and the data once
+    the file is typed: a tree takes some hundred times the file's size. Both come back from the
+    file's bytes, parsed again the same way, when a position is asked for."""
+
+    __slots__ = ("_data", "_index", "_root", "path", "raw")
+
+    def __init__(self, path: str, data: dict[str, Any], root: MappingNode, raw: bytes) -> None:
+        self.path = path
+        self.raw = raw
+        self._data: dict[str, Any] | None = data
+        self._root: MappingNode | None = root
+        self._index: dict[int, dict[str, tuple[Node, Node]]] = {}
+
+    @property
+    def data(self) -> dict[str, Any]:
+        if self._data is None:
+            self._restore()
+        assert self._data is not None
+        return self._data
+
+    @property
+    def root(self) -> MappingNode:
+        if self._root is None:
+            self._restore()
+        assert self._root is not None
+        return self._root
+
+    def release(self) -> None:
+        """Drops the node tree and the data until they are asked for again."""
+        self._data = self._root = None
+        self._index = {}
+
+    def _restore(self) -> None:
+        again = parse_document(self.path, self.raw)  # parsed once already: it parses again
+        self._data, self._root = again._data, again._root
 
     def _pairs(self, node: MappingNode) -> dict[str, tuple[Node, Node]]:
         pairs = self._index.get(id(node))
@@ -301,34 +330,33 @@ def _compose_within_bounds(text: str) -> Node | None:
     return _compose(text)
 
 
-def _scan_events(text: str) -> None:
+def _scan_events(text: str, loader_class: Any = _Loader) -> None:
     """RC009 for nesting deeper than MAX_DEPTH, located as the builder would, and RC008 for
     more than MAX_EVENTS, from libyaml's events (its parser keeps no C stack per level).
     Syntax errors are left to the composer, which locates them."""
-    loader = _Loader(text)
+    loader = loader_class(text)
+    depth = events = 0
     try:
-        _check_events(iter(loader.get_event, None))
-    except yaml.YAMLError as exc:
-        if _LIBYAML and "maximum nesting depth" in str(exc):
-            # Newer libyaml (PyYAML 6.0.4's wheels) stops at 1,000 flow levels while scanning
-            # ahead, before it gives an event of them; the Python parser looks ahead one simple
-            # key only, so it reaches the level the builder would refuse, and stops there.
-            with contextlib.suppress(yaml.YAMLError):
-                _check_events(yaml.parse(text, Loader=yaml.SafeLoader))
+        while (event := loader.get_event()) is not None:
+            events += 1
+            if events > MAX_EVENTS:
+                raise YamlReadError([_too_many_events()])
+            step = _DEPTH_STEP.get(type(event), 0)
+            if step > 0 and depth > MAX_DEPTH:
+                raise YamlReadError([_problem(event.start_mark, "RC009", _TOO_DEEP)])
+            depth += step
+    except yaml.MarkedYAMLError as exc:
+        if loader_class is _Loader and _LIBYAML and "maximum nesting depth" in str(exc.problem):
+            # libyaml 0.2.6 refuses 1,000 levels of flow nesting while scanning ahead, before
+            # the events that reach MAX_DEPTH: the pure-Python parser (no such limit, no
+            # recursion) finds where they do, in the text up to libyaml's refusal.
+            end = exc.problem_mark.line if exc.problem_mark is not None else 0
+            _scan_events("\n".join(text.split("\n", end + 1)[: end + 1]), yaml.SafeLoader)
+        return
+    except yaml.YAMLError:
         return
     finally:
         loader.dispose()
-
-
-def _check_events(stream: Iterable[yaml.Event]) -> None:
-    depth = 0
-    for events, event in enumerate(stream, 1):
-        if events > MAX_EVENTS:
-            raise YamlReadError([_too_many_events()])
-        step = _DEPTH_STEP.get(type(event), 0)
-        if step > 0 and depth > MAX_DEPTH:
-            raise YamlReadError([_problem(event.start_mark, "RC009", _TOO_DEEP)])
-        depth += step
 
 
 def _count_events(text: str) -> None:
@@ -665,4 +693,4 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
     data = builder.build(root)
     if builder.problems:
         raise YamlReadError(_capped(builder.problems))
-    return YamlDocument(path=path, data=data, root=root)
+    return YamlDocument(path, data, root, raw)

@@ -35,7 +35,7 @@ from configurator.wire import (
     short_rev,
 )
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
-from reconciler.desired import FLEET_FILE, Desired, load_desired
+from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
 from reconciler.observed import RECONCILER_STATUS, parse_retained
 from reconciler.report import Followed, StatusWriter, one_line, status_of
@@ -82,7 +82,8 @@ class Outcome(enum.Enum):
 class Controller:
     """Makes the retained launch topics equal to the branch's head commit, until stopped.
 
-    `builder` turns a commit into what it asks for (`load_desired`; a seam for tests)."""
+    `builder` turns a commit into what it asks for (by default a `DesiredBuilder`, whose
+    cache lives as long as the controller; a seam for tests)."""
 
     def __init__(
         self,
@@ -94,7 +95,7 @@ class Controller:
         publish_timeout: float = 60.0,
         on_reconciled: Callable[[ReconcilerStatus], None] | None = None,
         signer: Signer | None = None,
-        builder: Builder = load_desired,
+        builder: Builder | None = None,
         on_step: Callable[[Step], None] | None = None,
     ) -> None:
         self.source = source
@@ -103,7 +104,7 @@ class Controller:
         self.interval = interval
         self.publish_timeout = publish_timeout
         self._sign = signer
-        self._builder = builder
+        self._builder = builder if builder is not None else DesiredBuilder()
         self._on_step = on_step  # must return at once: it runs on the reconcile loop
         self._wake = threading.Event()
         self._resync_asked = threading.Event()  # a push announced (webhook): fetch now

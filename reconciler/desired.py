@@ -1,10 +1,12 @@
-"""Build step: one git commit -> the validated, rendered fleet, or why it cannot be applied."""
+"""Build step: one git commit -> the validated, rendered fleet, or why it cannot be applied;
+incrementally, from what the builds before proved."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from configurator.incremental import BuildCache
 from configurator.render import FleetRender, RenderError, render_fleet
 from configurator.source import SourceError
 from configurator.wire import ReconcilerReason, StatusDiagnostic
@@ -35,10 +37,11 @@ def build_failure(revision: str, message: str, *, path: str | None = None) -> De
     return Desired(revision, None, [problem])
 
 
-def load_desired(root: Path, revision: str) -> Desired:
-    """Reads the commit itself (never the work tree), validates it and renders every robot."""
+def load_desired(root: Path, revision: str, cache: BuildCache | None = None) -> Desired:
+    """Reads the commit itself (never the work tree), validates it and renders every robot;
+    with `cache`, only what differs from the builds before (the verdict is the same)."""
     try:
-        checked = check(root, revision)
+        checked = check(root, revision, cache.check if cache is not None else None)
     except SourceError as exc:
         return build_failure(revision, f"cannot read {revision}: {exc}")
     if not checked.ok:
@@ -46,7 +49,19 @@ def load_desired(root: Path, revision: str) -> Desired:
         problems = [StatusDiagnostic.of(d) for d in errors[:MAX_DIAGNOSTICS]]
         return Desired(revision, None, problems, max(0, len(errors) - MAX_DIAGNOSTICS))
     try:
-        fleet = render_fleet(checked.repo)
+        fleet = cache.render(checked) if cache is not None else render_fleet(checked.repo)
     except RenderError as exc:
         return build_failure(revision, str(exc), path=FLEET_FILE)
     return Desired(revision, fleet)
+
+
+class DesiredBuilder:
+    """The reconciler's build step: `load_desired` with one cache for the reconciler's
+    lifetime, so that a commit costs what it changes. The cache holds what the newest build
+    uses and nothing more."""
+
+    def __init__(self) -> None:
+        self.cache = BuildCache()
+
+    def __call__(self, root: Path, revision: str) -> Desired:
+        return load_desired(root, revision, self.cache)

@@ -15,8 +15,9 @@ from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.options import repo_option, rev_option
 from configurator.cli.terminal import safe, show
 from configurator.diagnostics import did_you_mean, format_text, summary_line
+from configurator.incremental import BuildCache
 from configurator.plan import format_plan_markdown, format_plan_text, make_plan, plan_as_json
-from configurator.render import FleetRender, RenderError, render_fleet, render_robot
+from configurator.render import FleetRender, RenderError, render_robot
 from configurator.textsafe import json_printable
 from configurator.tree import (
     CapabilityTree,
@@ -131,14 +132,16 @@ def render(repo: Path, rev: str | None, robot_id: str) -> ExitCode:
     return ExitCode.OK
 
 
-def _fleet_at(repo: Path, rev: str | None, label: str) -> tuple[FleetRender, RolloutPolicy | None]:
+def _fleet_at(
+    repo: Path, rev: str | None, label: str, cache: BuildCache
+) -> tuple[FleetRender, RolloutPolicy | None]:
     """The revision's rendered fleet and its rollout policy."""
-    checked = check(repo, rev)
+    checked = check(repo, rev, cache.check)
     if not checked.ok:
         sys.stderr.write(format_text(checked.errors))
         raise CliError(f"{label} revision {rev or '(work tree)'} is invalid")
     try:
-        rendered = render_fleet(checked.repo)
+        rendered = cache.render(checked)
     except RenderError as exc:
         raise CliError(f"{label}: {exc}") from None
     fleet = checked.repo.fleet
@@ -155,9 +158,10 @@ def plan(repo: Path, base: str, head: str | None, fmt: str) -> ExitCode:
     # Both revisions are checked before either is reported: each names its own problems.
     found: dict[str, tuple[FleetRender, RolloutPolicy | None]] = {}
     problems: list[str] = []
+    cache = BuildCache()  # the head is built from what the base proved: it costs its changes
     for label, rev in (("base", base), ("head", head)):
         try:
-            found[label] = _fleet_at(repo, rev, label)
+            found[label] = _fleet_at(repo, rev, label, cache)
         except CliError as exc:
             problems.append(exc.message)
     if problems:

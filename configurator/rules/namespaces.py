@@ -3,6 +3,7 @@ whose names clash."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from configurator.render import bound_mappings
@@ -17,7 +18,7 @@ from configurator.rosnames import (
     suggest_namespace,
 )
 from configurator.rules.report import Reporter
-from configurator.types import Fleet
+from configurator.types import Fleet, MappingBinding
 
 # A service is a server the robots call: one of the world (a door controller) is shared on
 # purpose, and two clients calling it do not drive each other. Topics and actions are a robot's
@@ -34,16 +35,20 @@ class _Robot:
     names: dict[str, tuple[str, str, bool]]  # mapping -> (kind, resolved name, written absolute)
 
 
-def _robot_names(
-    repo: Repository, fleet: Entry[Fleet], robot_id: str, report: Reporter
-) -> _Robot | None:
-    """One robot's mappings, resolved; None when there is nothing (valid) to resolve, or when
-    it is reported here (a namespace needed, a name too long)."""
-    assignment = fleet.model.robots[robot_id]
-    namespace = assignment.namespace
-    if namespace is not None and namespace_problem(namespace) is not None:
-        return None
-    scenario = repo.scenarios.get(assignment.scenario)
+@dataclass(frozen=True)
+class ScenarioNames:
+    """What a scenario gives each of its robots to name: the same for all of them until each
+    robot's namespace resolves the names."""
+
+    world: tuple[str, str]  # (environment, platform)
+    scheme: str  # platform/scheme, as messages name it
+    bindings: dict[str, MappingBinding]  # the valid names the selected logics need
+
+
+def scenario_names(repo: Repository, scenario_name: str) -> ScenarioNames | None:
+    """None when there is nothing (valid) to resolve: an unknown scenario, capability,
+    platform or scheme, reported by the other rules."""
+    scenario = repo.scenarios.get(scenario_name)
     if scenario is None:
         return None
     capability = repo.capabilities.get(scenario.model.capability)
@@ -52,12 +57,32 @@ def _robot_names(
     resolved = resolve_capability(repo, capability.model)
     if resolved.platform is None or resolved.scheme is None:
         return None
-    scheme = f"{resolved.platform.name}/{capability.model.mapping_scheme}"
     bindings = {
         key: b
         for key, b in bound_mappings(resolved).items()
         if mapping_name_problem(b.name) is None
     }
+    world = (scenario.model.environment or "", resolved.platform.name)
+    scheme = f"{resolved.platform.name}/{capability.model.mapping_scheme}"
+    return ScenarioNames(world, scheme, bindings)
+
+
+NamesOf = Callable[[str], "ScenarioNames | None"]
+
+
+def _robot_names(
+    fleet: Entry[Fleet], robot_id: str, names_of: NamesOf, report: Reporter
+) -> _Robot | None:
+    """One robot's mappings, resolved; None when there is nothing (valid) to resolve, or when
+    it is reported here (a namespace needed, a name too long)."""
+    assignment = fleet.model.robots[robot_id]
+    namespace = assignment.namespace
+    if namespace is not None and namespace_problem(namespace) is not None:
+        return None
+    found = names_of(assignment.scenario)
+    if found is None:
+        return None
+    bindings = found.bindings
     if namespace is None:
         needing = sorted(key for key, b in bindings.items() if needs_namespace(b.name))
         if needing:
@@ -66,7 +91,7 @@ def _robot_names(
                 fleet,
                 ["robots", robot_id],
                 "RC504",
-                f"robot '{robot_id}' has no namespace, and mapping scheme {scheme} names "
+                f"robot '{robot_id}' has no namespace, and mapping scheme {found.scheme} names "
                 f"{', '.join(needing)} in it ('{example}'): give the robot one, e.g. "
                 f"`namespace: {suggest_namespace(robot_id)}`",
                 key=True,
@@ -85,8 +110,7 @@ def _robot_names(
             )
             return None
         names[key] = (binding.kind, full, binding.name.startswith("/"))
-    world = (scenario.model.environment or "", resolved.platform.name)
-    return _Robot(robot_id, namespace, world, scheme, names)
+    return _Robot(robot_id, namespace, found.world, found.scheme, names)
 
 
 def _check_namespace(fleet: Entry[Fleet], robot_id: str, report: Reporter) -> None:
@@ -126,14 +150,28 @@ def _clash_message(first: _Robot, second: _Robot, shared: list[tuple[str, str, b
     )
 
 
-def check_namespaces(repo: Repository, report: Reporter) -> None:
+def _each_once(repo: Repository) -> NamesOf:
+    known: dict[str, ScenarioNames | None] = {}
+
+    def names_of(name: str) -> ScenarioNames | None:
+        if name not in known:
+            known[name] = scenario_names(repo, name)
+        return known[name]
+
+    return names_of
+
+
+def check_namespaces(repo: Repository, report: Reporter, names_of: NamesOf | None = None) -> None:
+    """`names_of` gives a scenario's names (`scenario_names`); by default each scenario's are
+    worked out once here."""
     fleet = repo.fleet
     if fleet is None:
         return
+    lookup = names_of or _each_once(repo)
     seen: dict[tuple[str, str, str, str], _Robot] = {}  # (world, kind, name) -> first robot
     for robot_id in fleet.model.robots:
         _check_namespace(fleet, robot_id, report)
-        robot = _robot_names(repo, fleet, robot_id, report)
+        robot = _robot_names(fleet, robot_id, lookup, report)
         if robot is None or robot.world[0] == "":
             continue  # no environment: the robot shares no world with another
         if fleet.model.robots[robot_id].suspended:

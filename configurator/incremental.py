@@ -1,0 +1,460 @@
+"""Incremental builds: a commit costs what it changes, with the verdicts of a full build.
+
+A `BuildCache` keeps, from one build to the next:
+- every file loaded (parsed, typed, checked on its own), by path and git blob id: a file whose
+  bytes did not change is never read or parsed again;
+- every rule unit's findings (configurator/rules: one rule on one subject) with what the unit
+  read of the repository, and the reverse index from what was read to the units that read it:
+  a build runs again only the units that read something that changed;
+- the values units share (a scenario's ROS names) with what they read, worked out again when
+  that changed, their dependents re-run only when the value itself differs (early cut-off);
+- each scenario's rendered content and each robot's request: a robot is rendered again only
+  when its assignment or its scenario's content changed (else only its revision is updated).
+
+What a unit reads is recorded, not declared: the repository a unit gets records every lookup
+(an entry by name, the names of a kind, whether a name exists), so a rule that starts reading
+something else is tracked without anyone updating a list. Whatever is not known to be
+unchanged is computed again. Memory is bounded by the newest build: what it no longer uses
+is dropped, and the YAML node trees of cached files are released (parsed again from their
+bytes when a position is asked for).
+
+Pure: the I/O happens in the source given to `check` (git or the work tree).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterator
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from configurator.diagnostics import Diagnostic
+from configurator.gcpause import collector_paused
+from configurator.launch import LaunchRequest, LaunchScenario, ScenarioDigests
+from configurator.loader import LoadedFile, load_repository
+from configurator.render import FleetRender, render_fleet, render_scenario, request_for
+from configurator.repository import Entry, Platform, Repository
+from configurator.rules import DERIVED, Unit, rule_units
+from configurator.rules.report import Reporter
+from configurator.source import Source
+from configurator.types import RobotAssignment
+from configurator.workspace import Checked
+
+V = TypeVar("V")
+
+# What a unit read: ("entry", container, name) an entry's content, ("has", container, name)
+# only whether it exists, ("keys", container) the names in order, ("all", container) every
+# entry, ("derived", name, argument) a shared value.
+Dep = tuple[str, ...]
+# A container's content at one build: name -> the blob id of its file (platforms: of their
+# platform.yaml; broken: the names of that kind that cannot be read).
+Snapshot = dict[str, dict[str, Hashable]]
+_MISSING = object()
+
+
+class _Recorder:
+    """Notes what the computation under way reads; nested for a value worked out inside one."""
+
+    def __init__(self) -> None:
+        self.stack: list[set[Dep]] = []
+
+    def note(self, dep: Dep) -> None:
+        if self.stack:
+            self.stack[-1].add(dep)
+
+    def recording(self) -> _Recording:
+        return _Recording(self)
+
+
+class _Recording:
+    def __init__(self, recorder: _Recorder) -> None:
+        self.recorder = recorder
+        self.deps: set[Dep] = set()
+
+    def __enter__(self) -> set[Dep]:
+        self.recorder.stack.append(self.deps)
+        return self.deps
+
+    def __exit__(self, *exc: object) -> None:
+        self.recorder.stack.pop()
+
+
+class _TrackedDict(dict[str, V]):
+    """One container of the repository, noting what is read of it."""
+
+    __slots__ = ("_container", "_recorder")
+
+    def __init__(self, container: str, recorder: _Recorder, items: dict[str, V]) -> None:
+        super().__init__(items)
+        self._container = container
+        self._recorder = recorder
+
+    def _entry(self, key: object) -> None:
+        self._recorder.note(("entry", self._container, str(key)))
+
+    def _keys(self) -> None:
+        self._recorder.note(("keys", self._container))
+
+    def _all(self) -> None:
+        self._recorder.note(("all", self._container))
+
+    def get(self, key: str, default: Any = None) -> Any:
+        self._entry(key)
+        return super().get(key, default)
+
+    def __getitem__(self, key: str) -> V:
+        self._entry(key)
+        return super().__getitem__(key)
+
+    def __contains__(self, key: object) -> bool:
+        self._recorder.note(("has", self._container, str(key)))
+        return super().__contains__(key)
+
+    def __iter__(self) -> Iterator[str]:
+        self._keys()
+        return super().__iter__()
+
+    def __reversed__(self) -> Iterator[str]:
+        self._keys()
+        return super().__reversed__()
+
+    def __len__(self) -> int:
+        self._keys()
+        return super().__len__()
+
+    def keys(self) -> Any:
+        self._keys()
+        return super().keys()
+
+    def values(self) -> Any:
+        self._all()
+        return super().values()
+
+    def items(self) -> Any:
+        self._all()
+        return super().items()
+
+    def copy(self) -> dict[str, V]:
+        self._all()
+        return dict(super().items())
+
+    def __eq__(self, other: object) -> bool:
+        self._all()
+        return super().__eq__(other)
+
+    __hash__ = None
+
+
+class _TrackedRepository(Repository):
+    """The repository as units see it: the fleet noted when read."""
+
+    def __getattribute__(self, name: str) -> Any:
+        if name == "fleet":
+            object.__getattribute__(self, "_recorder").note(("entry", "fleet", ""))
+        elif name == "revision":
+            object.__getattribute__(self, "_recorder").note(("revision",))
+        return object.__getattribute__(self, name)
+
+
+_KIND_CONTAINERS = {
+    "action": "actions",
+    "task": "tasks",
+    "environment": "environments",
+    "capability": "capabilities",
+    "scenario": "scenarios",
+}
+
+
+def _tracked(repo: Repository, recorder: _Recorder) -> _TrackedRepository:
+    platforms = {}
+    for name, found in repo.platforms.items():
+        platform = Platform(name, found.info)
+        platform.templates = _TrackedDict(f"robot-template@{name}", recorder, found.templates)
+        platform.schemes = _TrackedDict(f"mapping-scheme@{name}", recorder, found.schemes)
+        platforms[name] = platform
+    tracked = _TrackedRepository(
+        revision_of=repo.revision_of,
+        platforms=_TrackedDict("platforms", recorder, platforms),
+        **{
+            attribute: _TrackedDict(kind, recorder, getattr(repo, attribute))
+            for kind, attribute in _KIND_CONTAINERS.items()
+        },
+        fleet=repo.fleet,
+        broken=_TrackedDict("broken", recorder, repo.broken),
+        files_read=repo.files_read,
+    )
+    object.__setattr__(tracked, "_recorder", recorder)
+    return tracked
+
+
+def _snapshot(repo: Repository, blobs: dict[str, str]) -> Snapshot:
+    def token(entry: Entry[Any] | None) -> Hashable:
+        return "" if entry is None else blobs[entry.path]
+
+    snapshot: Snapshot = {
+        "platforms": {name: token(p.info) for name, p in dict.items(repo.platforms)},
+        "broken": {kind: frozenset(names) for kind, names in dict.items(repo.broken)},
+        "fleet": {} if repo.fleet is None else {"": token(repo.fleet)},
+    }
+    for name, p in dict.items(repo.platforms):
+        snapshot[f"robot-template@{name}"] = {t: token(e) for t, e in dict.items(p.templates)}
+        snapshot[f"mapping-scheme@{name}"] = {s: token(e) for s, e in dict.items(p.schemes)}
+    for kind, attribute in _KIND_CONTAINERS.items():
+        entries: dict[str, Entry[Any]] = getattr(repo, attribute)
+        snapshot[kind] = {name: token(e) for name, e in dict.items(entries)}
+    return snapshot
+
+
+def changes(before: Snapshot, after: Snapshot) -> set[Dep]:
+    """Everything a unit may have read that differs between two builds."""
+    changed: set[Dep] = {("revision",)}  # a commit is a new revision: never assumed equal
+    for container in before.keys() | after.keys():
+        old, new = before.get(container, {}), after.get(container, {})
+        if old == new:
+            continue
+        changed.add(("all", container))
+        if list(old) != list(new):
+            changed.add(("keys", container))
+        for name in old.keys() | new.keys():
+            was, now = old.get(name, _MISSING), new.get(name, _MISSING)
+            if was != now:
+                changed.add(("entry", container, name))
+            if (was is _MISSING) != (now is _MISSING):
+                changed.add(("has", container, name))
+    return changed
+
+
+@dataclass
+class _Done:
+    """A unit's findings and what it read to find them."""
+
+    deps: frozenset[Dep]
+    diagnostics: tuple[Diagnostic, ...]
+
+
+@dataclass
+class _Value:
+    """A derived value (or a scenario's rendered content) and what it was worked out from."""
+
+    deps: frozenset[Dep]
+    value: Any
+
+
+@dataclass
+class _Rendered:
+    assignment: RobotAssignment
+    scenario: LaunchScenario
+    request: LaunchRequest
+
+
+@dataclass
+class BuildStats:
+    """What the last build did, not reused: for tests and benchmarks."""
+
+    files_parsed: int = 0
+    units_run: list[tuple[str, ...]] = field(default_factory=list)
+    derived: list[tuple[str, str]] = field(default_factory=list)
+    scenarios_rendered: list[str] = field(default_factory=list)
+    robots_rendered: int = 0
+
+
+class BuildCache:
+    """What earlier builds proved, reused by the next: see the module's docstring. One cache
+    serves one repository; `check` a source, then `render` its result if it is valid."""
+
+    def __init__(self) -> None:
+        self._reset()
+
+    def clear(self) -> None:
+        """Forgets everything: the next build is a full one."""
+        self._reset()
+
+    def _reset(self) -> None:
+        self._files: dict[tuple[str, str], LoadedFile] = {}
+        self._blobs: dict[str, str] = {}  # path -> blob id, in the build under way
+        self._snapshot: Snapshot = {}
+        self._units: dict[tuple[str, ...], _Done] = {}
+        self._derived: dict[tuple[str, str], _Value] = {}
+        self._dependents: dict[Dep, set[tuple[str, ...]]] = {}
+        self._checked: _TrackedRepository | None = None
+        self._rendered_snapshot: Snapshot = {}
+        self._scenarios: dict[str, _Value] = {}
+        self._robots: dict[str, _Rendered] = {}
+        self._recorder = _Recorder()
+        self.stats = BuildStats()
+
+    def sizes(self) -> dict[str, int]:
+        """How much is kept, part by part: what the newest build uses, no more."""
+        return {
+            "files": len(self._files),
+            "units": len(self._units),
+            "derived": len(self._derived),
+            "index": sum(len(users) for users in self._dependents.values()),
+            "scenarios": len(self._scenarios),
+            "robots": len(self._robots),
+        }
+
+    # ------------------------------------------------------------ the file cache (loader)
+
+    def get(self, path: str, blob: str) -> LoadedFile | None:
+        found = self._files.get((path, blob))
+        if found is not None:
+            self._blobs[path] = blob
+        return found
+
+    def put(self, blob: str, loaded: LoadedFile) -> None:
+        if loaded.entry is not None:
+            # Typed and checked on its own: its node tree is not kept through the build (all
+            # trees at once were the build's peak), a rule reporting here parses it again.
+            loaded.entry.doc.release()
+        self._files[(loaded.path, blob)] = loaded
+        self._blobs[loaded.path] = blob
+        self.stats.files_parsed += 1
+
+    # ------------------------------------------------------------ check
+
+    def check(self, source: Source) -> Checked:
+        """The source validated as `workspace.check_source` would, reusing what is unchanged."""
+        try:
+            with collector_paused():
+                return self._check(source)
+        except BaseException:
+            self.clear()  # half an update is never trusted
+            raise
+
+    def _check(self, source: Source) -> Checked:
+        self.stats = BuildStats()
+        self._blobs = {}
+        loaded, diagnostics = load_repository(source, files=self)
+        self._files = {
+            key: f for key, f in self._files.items() if self._blobs.get(key[0]) == key[1]
+        }
+        repo = _tracked(loaded, self._recorder)
+        snapshot = _snapshot(repo, self._blobs)
+        changed = changes(self._snapshot, snapshot)
+        self._snapshot = snapshot
+        self._refresh_derived(repo, changed)
+        dirty = {unit for dep in changed for unit in self._dependents.get(dep, ())}
+        units = rule_units(repo)
+        live = {unit.key for unit in units}
+        for key in [key for key in self._units if key not in live]:
+            self._forget_unit(key)
+        for unit in units:
+            done = self._units.get(unit.key)
+            if done is None or unit.key in dirty:
+                done = self._run(repo, unit)
+            diagnostics.extend(done.diagnostics)
+        used = {
+            dep[1:] for done in self._units.values() for dep in done.deps if dep[0] == "derived"
+        }
+        self._derived = {key: v for key, v in self._derived.items() if key in used}
+        for found in self._files.values():
+            if found.entry is not None:
+                found.entry.doc.release()
+        self._checked = repo
+        return Checked(repo, sorted(diagnostics))
+
+    def _refresh_derived(self, repo: _TrackedRepository, changed: set[Dep]) -> None:
+        """Works out again each derived value that read something changed; one whose value
+        differs is a change itself (its dependents run again), one that came out equal is not."""
+        for key, old in list(self._derived.items()):
+            if old.deps.isdisjoint(changed):
+                continue
+            value = self._derive(repo, key)
+            if value != old.value:
+                changed.add(("derived", *key))
+
+    def _derive(self, repo: _TrackedRepository, key: tuple[str, str]) -> Any:
+        with self._recorder.recording() as deps:
+            value = DERIVED[key[0]](repo, key[1])
+        self._derived[key] = _Value(frozenset(deps), value)
+        self.stats.derived.append(key)
+        return value
+
+    def _run(self, repo: _TrackedRepository, unit: Unit) -> _Done:
+        self._forget_unit(unit.key)
+        report = Reporter()
+
+        def derive(name: str, argument: str) -> Any:
+            key = (name, argument)
+            self._recorder.note(("derived", name, argument))
+            found = self._derived.get(key)
+            if found is not None:
+                return found.value
+            return self._derive(repo, key)
+
+        with self._recorder.recording() as deps:
+            unit.run(repo, report, derive)
+        done = _Done(frozenset(deps), tuple(report.found))
+        self._units[unit.key] = done
+        for dep in done.deps:
+            self._dependents.setdefault(dep, set()).add(unit.key)
+        self.stats.units_run.append(unit.key)
+        return done
+
+    def _forget_unit(self, key: tuple[str, ...]) -> None:
+        done = self._units.pop(key, None)
+        if done is None:
+            return
+        for dep in done.deps:
+            users = self._dependents.get(dep)
+            if users is not None:
+                users.discard(key)
+                if not users:
+                    del self._dependents[dep]
+
+    # ------------------------------------------------------------ render
+
+    def render(self, checked: Checked) -> FleetRender:
+        """The fleet of the build just checked (which must be valid), as `render_fleet` would
+        render it; raises RenderError as it would."""
+        if checked.repo is not self._checked:
+            raise ValueError("render the build this cache checked last")
+        try:
+            with collector_paused():
+                return self._render(self._checked)
+        except BaseException:
+            self.clear()
+            raise
+
+    def _render(self, repo: _TrackedRepository) -> FleetRender:
+        changed = changes(self._rendered_snapshot, self._snapshot)
+        self._rendered_snapshot = self._snapshot
+        scenarios: dict[str, _Value] = {}
+        robots: dict[str, _Rendered] = {}
+        revision = repo.revision
+
+        def scenario_of(name: str) -> LaunchScenario:
+            found = scenarios.get(name)
+            if found is None:
+                found = self._scenarios.get(name)
+                if found is None or not found.deps.isdisjoint(changed):
+                    with self._recorder.recording() as deps:
+                        value = render_scenario(repo, name)
+                    if found is not None and found.value == value:
+                        value = found.value  # the same content: its robots need nothing new
+                    found = _Value(frozenset(deps), value)
+                    self.stats.scenarios_rendered.append(name)
+                scenarios[name] = found
+            rendered: LaunchScenario = found.value
+            return rendered
+
+        def request_of(
+            robot_id: str,
+            assignment: RobotAssignment,
+            scenario: LaunchScenario,
+            digests: ScenarioDigests,
+        ) -> LaunchRequest:
+            before = self._robots.get(robot_id)
+            if before is None or before.scenario is not scenario or before.assignment != assignment:
+                request = request_for(repo, robot_id, assignment, scenario, digests)
+                self.stats.robots_rendered += 1
+            elif before.request.revision != revision:
+                request = before.request.model_copy(update={"revision": revision})
+            else:
+                request = before.request
+            robots[robot_id] = _Rendered(assignment, scenario, request)
+            return request
+
+        fleet = render_fleet(repo, scenario_of, request_of)
+        self._scenarios, self._robots = scenarios, robots
+        return fleet
