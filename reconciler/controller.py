@@ -13,7 +13,7 @@ import logging
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -37,7 +37,7 @@ from configurator.wire import (
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
-from reconciler.observed import RECONCILER_STATUS, parse_retained
+from reconciler.observed import RECONCILER_STATUS, ReadMemo, parse_retained
 from reconciler.report import Followed, StatusWriter, one_line, status_of
 from reconciler.retained import Ignored, Presence, RetainedView, read_object, take_snapshot
 from reconciler.source import BranchSource
@@ -132,6 +132,11 @@ class Controller:
         self._recheck_at: float | None = None  # unix time a rollout's health judgment changes
         self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
+        # What each retained payload was read as, while it stays the same: a step parses
+        # only the launch requests and statuses that changed since the step before.
+        self._launch_memo = ReadMemo()
+        self._sizes = RequestSizes()
+        self._health_memo = ReadMemo()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
         self.serving: Desired | None = None  # the last good revision, applied or being applied
         self._head: str | None = None
@@ -305,7 +310,11 @@ class Controller:
         self._waiting_logged = False
         self._recover_serving(head)
         retained = parse_retained(
-            self.view.snapshot(), self.topics, requests=False, ignored=self.ignored
+            self.view.snapshot(),
+            self.topics,
+            requests=False,
+            ignored=self.ignored,
+            memo=self._launch_memo,
         )
         now = time.time()
         rollout = build.fleet is not None and build.fleet.rollout is not None
@@ -343,7 +352,9 @@ class Controller:
             self._running_since.clear()
         if self.health is None or not self.health.synced:
             return None
-        seen = parse_retained(self.health.snapshot(), self.topics, ignored=self.ignored)
+        seen = parse_retained(
+            self.health.snapshot(), self.topics, ignored=self.ignored, memo=self._health_memo
+        )
         statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
         for robot, status in statuses.items():
             if status.state is AgentState.RUNNING and status.digest:
@@ -438,8 +449,9 @@ class Controller:
                 "knowledge smaller",
             )
             for robot_id, request in sorted(built.fleet.requests.items())
-            if (size := len(request.payload())) > MAX_REQUEST_BYTES
+            if (size := self._sizes.size(request)) > MAX_REQUEST_BYTES
         ]
+        self._sizes.keep_only(built.fleet.requests.values())
         return Desired(revision, None, problems) if problems else built
 
     def _sample_active(self, resync: bool) -> set[str]:
@@ -521,3 +533,27 @@ class Controller:
         if message != self._last_log:
             log.log(level, "%s", message)
             self._last_log = message
+
+
+class RequestSizes:
+    """The published size of each request, worked out once per content: requests with one
+    digest differ only in their revision (a commit id: letters and digits, written as they are
+    in JSON), so a commit that changes ten robots serialises ten requests to check their size,
+    not the whole fleet."""
+
+    def __init__(self) -> None:
+        self._without_revision: dict[str, int] = {}
+
+    def size(self, request: LaunchRequest) -> int:
+        revision = request.revision
+        if not (revision.isascii() and revision.isalnum()):
+            return len(request.payload())  # escapes would make its length another
+        base = self._without_revision.get(request.digest)
+        if base is None:
+            base = len(request.payload()) - len(revision)
+            self._without_revision[request.digest] = base
+        return base + len(revision)
+
+    def keep_only(self, requests: Iterable[LaunchRequest]) -> None:
+        digests = {r.digest for r in requests}
+        self._without_revision = {d: n for d, n in self._without_revision.items() if d in digests}

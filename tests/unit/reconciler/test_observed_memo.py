@@ -1,0 +1,47 @@
+"""Reading retained payloads with a memo: the same verdicts as without, read once per payload."""
+
+from __future__ import annotations
+
+from configurator.wire import AgentState, AgentStatus, Topics
+from reconciler.observed import ReadMemo, parse_retained
+from tests.support.agents import make_request
+
+T = Topics()
+
+
+def status(robot: str, state: AgentState) -> bytes:
+    return AgentStatus(robot_id=robot, state=state).model_dump_json().encode()
+
+
+def test_a_memo_reads_each_payload_once_and_gives_what_a_fresh_read_gives() -> None:
+    messages = {
+        T.launch("tb3-01"): make_request("tb3-01").payload(),
+        T.launch("tb3-02"): b"{not json",
+        T.status("tb3-01"): status("tb3-01", AgentState.RUNNING),
+    }
+    memo = ReadMemo()
+    first = parse_retained(messages, T, requests=False, memo=memo)
+    again = parse_retained(dict(messages), T, requests=False, memo=memo)
+    fresh = parse_retained(messages, T, requests=False)
+    for seen in (first, again):
+        assert seen.launch_digests() == fresh.launch_digests()
+        assert seen.ignored == fresh.ignored == {"launch": 1}
+        assert seen.robots["tb3-02"].launch_retained
+    # Read once: the second call reuses the model the first one built.
+    assert again.robots["tb3-01"].status is first.robots["tb3-01"].status
+    # A changed payload is read again; a topic gone is forgotten.
+    messages[T.status("tb3-01")] = status("tb3-01", AgentState.FAILED)
+    del messages[T.launch("tb3-02")]
+    third = parse_retained(messages, T, requests=False, memo=memo)
+    status_seen = third.robots["tb3-01"].status
+    assert status_seen is not None and status_seen.state is AgentState.FAILED
+    assert "tb3-02" not in third.robots and third.ignored == {}
+    assert len(memo._readings) == 2
+
+
+def test_an_invalid_request_with_a_digest_keeps_its_digest_in_a_full_read() -> None:
+    payload = make_request("tb3-01").payload().replace(b'"robot_name"', b'"robot_nom"')
+    seen = parse_retained({T.launch("tb3-01"): payload}, T, memo=ReadMemo())
+    robot = seen.robots["tb3-01"]
+    assert robot.launch is None and robot.launch_digest is not None and robot.launch_retained
+    assert seen.ignored == {"launch": 1}
