@@ -422,7 +422,9 @@ class Controller:
             built = self._build_safely(revision)
             log.info("built %s in %.3f s", short_rev(revision), time.monotonic() - started)
             self._built[revision] = built
-            while len(self._built) > 4:
+            # The head and the revision served (a rollout's stable one): each kept build holds
+            # a fleet's requests, and an incremental build of any other is cheap.
+            while len(self._built) > 2:
                 self._built.popitem(last=False)
         return built
 

@@ -18,6 +18,7 @@ from typing import Any, ParamSpec
 
 import paho.mqtt.client as paho
 
+from configurator.gcpause import collector_paused
 from configurator.mqtt import Connection, make_client
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
 
@@ -217,10 +218,13 @@ class RetainedView:
             return False
         with self._lock:
             before = {topic: self._arrivals.get(topic, 0) for topic, _ in items}
-        infos = [
-            (topic, payload, self._client.publish(topic, payload, qos=1, retain=True))
-            for topic, payload in items
-        ]
+        # 10,000 publishes allocate enough to set off collections that walk every object
+        # the reconciler holds (its whole rendered fleet); none of them is a cycle.
+        with collector_paused():
+            infos = [
+                (topic, payload, self._client.publish(topic, payload, qos=1, retain=True))
+                for topic, payload in items
+            ]
         deadline = time.monotonic() + timeout
         ok = True
         for topic, payload, info in infos:
