@@ -47,7 +47,7 @@ import generate  # noqa: E402
 import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
-from rollout import Broker  # noqa: E402
+from rollout import Broker, connect  # noqa: E402
 
 TIMEOUT = float(os.environ.get("SCALE_TIMEOUT", "300"))
 CHANGE_TARGET = 0.3
@@ -105,13 +105,8 @@ class Launches:
 def floor(port: int, payloads: dict[str, bytes]) -> float:
     """One client publishes every payload retained at QoS 1; until the last PUBACK."""
     pub = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"scale-floor-{os.getpid()}")
-    pub.max_inflight_messages_set(0)
-    connected = threading.Event()
-    pub.on_connect = lambda *a: connected.set()
-    pub.connect("127.0.0.1", port)
-    pub.loop_start()
-    if not connected.wait(10):
-        raise RuntimeError("floor: cannot connect")
+    pub.max_inflight_messages_set(0)  # as the reconciler publishes
+    connect(pub, port)
     started = time.perf_counter()
     infos = [pub.publish(topic, payload, qos=1, retain=True) for topic, payload in payloads.items()]
     for info in infos:
