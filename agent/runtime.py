@@ -405,11 +405,16 @@ class Agent:
             self.brain_log.note(said)
 
     def _send_logs(self, now: float) -> None:
+        """The log answers due now; a bug here stops the stream, never the agent."""
         if not self.connected:
             return
-        self.logs.poll(now)
-        for chunk in self.logs.take(now):
-            self.link.publish_logs(chunk.model_dump_json().encode("utf-8"))
+        try:
+            self.logs.poll(now)
+            for chunk in self.logs.take(now):
+                self.link.publish_logs(chunk.model_dump_json().encode("utf-8"))
+        except Exception:
+            log.exception("internal error while sending the brain's log; the stream stops")
+            self.logs.stop()
 
     def _on_brain_exit(self, event: BrainExited, now: float) -> None:
         if self.brain is not None and self.brain.pid == event.pid:

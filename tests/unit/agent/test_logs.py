@@ -202,3 +202,26 @@ def test_a_lost_connection_drops_what_waits(tmp_path: Path) -> None:
     logs.ask(ask(lines=500, follow=True), 0.0)
     logs.stop()
     assert logs.take(5.0) == [] and not logs.following
+
+
+def test_a_bug_while_sending_the_log_stops_the_stream_not_the_agent(tmp_path: Path) -> None:
+    from agent.config import parse_config
+    from agent.runtime import Agent
+
+    text = (
+        "broker: mqtt://127.0.0.1:1\n"
+        "description: {id: tb3-01}\n"
+        "command: [brain, '{launch_request}']\n"
+        f"workdir: {tmp_path / 'work'}\n"
+    )
+    agent = Agent(parse_config(text, "agent.yaml"))
+    write(tmp_path / "work" / "brain.log", "a line")
+    agent.logs.ask(ask(lines=1, follow=True), 0.0)
+    agent.connected = True
+
+    def broken(now: float) -> list[LogsChunk]:
+        raise RuntimeError("injected")
+
+    agent.logs.take = broken  # type: ignore[method-assign]
+    agent._send_logs(1.0)  # logged, not raised
+    assert not agent.logs.following
