@@ -83,7 +83,8 @@ class Controller:
     """Makes the retained launch topics equal to the branch's head commit, until stopped.
 
     `builder` turns a commit into what it asks for (by default a `DesiredBuilder`, whose
-    cache lives as long as the controller; a seam for tests)."""
+    cache lives as long as the controller; a seam for tests). `no_local` (for a broker that
+    speaks MQTT 5) spares the reconciler the echo of every request it publishes."""
 
     def __init__(
         self,
@@ -97,6 +98,7 @@ class Controller:
         signer: Signer | None = None,
         builder: Builder | None = None,
         on_step: Callable[[Step], None] | None = None,
+        no_local: bool = False,
     ) -> None:
         self.source = source
         self.connection = connection
@@ -119,6 +121,7 @@ class Controller:
             role="reconciler",
             on_synced=self._wake.set,
             on_topic=self._on_topic,
+            no_local=no_local,
         )
         # The Last Will (state Offline) lives on a connection of its own: a will is fixed at
         # connect time, and this one must name the revision applied last.

@@ -5,6 +5,8 @@ Shared by the reconciler (launch topics) and `robotconf status` (every robot top
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import functools
 import hashlib
 import itertools
@@ -17,6 +19,8 @@ from collections.abc import Callable, Sequence
 from typing import Any, ParamSpec
 
 import paho.mqtt.client as paho
+from paho.mqtt.enums import MQTTProtocolVersion
+from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from configurator.gcpause import collector_paused
 from configurator.mqtt import Connection, make_client
@@ -124,6 +128,7 @@ class RetainedView:
         on_payload: Callable[[str, bytes], None] | None = None,
         max_inflight: int = 0,
         max_payload: int = MAX_PAYLOAD_BYTES,
+        no_local: bool = False,
     ) -> None:
         self.connection = connection
         self.filters = list(filters)
@@ -145,6 +150,12 @@ class RetainedView:
         self._connected = False
         self.last_error: str | None = None
         self.connections = 0
+        # MQTT 5's No Local: what this client publishes on `filters` is not sent back to it
+        # (its copy is updated at the PUBACK instead); retained messages still come at each
+        # subscription, so a reconnect still reads back what is published.
+        self.no_local = no_local
+        if no_local:
+            connection = dataclasses.replace(connection, protocol=MQTTProtocolVersion.MQTTv5)
         self._client = make_client(connection, self.client_id)
         self._client.suppress_exceptions = True  # and every handler is guarded besides
         # Many retained QoS 1 publishes in flight at once: waiting for each PUBACK in turn
@@ -279,7 +290,13 @@ class RetainedView:
         # QoS 0: a snapshot is taken anew at every connection, so redelivery buys nothing,
         # while a broker may drop queued QoS 1 messages beyond its per-client queue limit
         # (Mosquitto: max_queued_messages 1000) and a large fleet's snapshot would be lossy.
-        topics = [(f, 0) for f in self.filters] + [(self.marker_topic, 0)]
+        if self.no_local:
+            local = SubscribeOptions(qos=0, noLocal=True)
+            # The marker must come back: it is how a snapshot is known complete.
+            topics: list[tuple[str, Any]] = [(f, local) for f in self.filters]
+            topics.append((self.marker_topic, SubscribeOptions(qos=0)))
+        else:
+            topics = [(f, 0) for f in self.filters] + [(self.marker_topic, 0)]
         _, mid = client.subscribe(topics)
         self._subscribe_mid = mid
 
@@ -408,6 +425,35 @@ def _leave(client: paho.Client) -> None:
     try:
         client.disconnect()
     finally:
+        client.loop_stop()
+
+
+def speaks_mqtt5(connection: Connection, timeout: float = 3.0) -> bool:
+    """Whether the broker takes an MQTT 5 connection now (for No Local); False when it refuses,
+    does not answer in time, or cannot be reached."""
+    v5 = dataclasses.replace(connection, protocol=MQTTProtocolVersion.MQTTv5)
+    client = make_client(v5, client_id("probe"))
+    client.suppress_exceptions = True
+    answered = threading.Event()
+    accepted: list[bool] = []
+
+    def on_connect(c: paho.Client, u: Any, flags: Any, reason: Any, properties: Any) -> None:
+        accepted.append(not getattr(reason, "is_failure", True))
+        answered.set()
+
+    client.on_connect = on_connect
+    address = connection.address
+    try:
+        client.connect(address.host, address.port, keepalive=10)
+    except Exception:  # refused, unreachable, TLS: not known to speak MQTT 5
+        return False
+    client.loop_start()
+    try:
+        answered.wait(timeout)
+        return accepted == [True]
+    finally:
+        with contextlib.suppress(Exception):
+            client.disconnect()
         client.loop_stop()
 
 

@@ -186,6 +186,7 @@ def reconcile(
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds, and at once when --webhook receives a push; runs until signalled."""
     from reconciler.controller import Controller
+    from reconciler.retained import speaks_mqtt5
 
     connection = mqtt.connection()
     if interval <= 0:
@@ -198,6 +199,9 @@ def reconcile(
     webhook = webhook_options(webhook_at, webhook_secret_file)
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
+    # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
+    # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.
+    no_local = speaks_mqtt5(connection)
     controller = Controller(
         source,
         connection,
@@ -205,6 +209,7 @@ def reconcile(
         interval,
         signer=signer,
         on_step=telemetry.on_step if telemetry is not None else None,
+        no_local=no_local,
     )
     receiver = None
     if webhook is not None:
@@ -212,11 +217,12 @@ def reconcile(
         receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
     on_stop_signals(callback=controller.stop)
     logging.getLogger("robotconf.reconciler").info(
-        "reconciling %s (branch %s) to %s, prefix %s",
+        "reconciling %s (branch %s) to %s, prefix %s (MQTT %s)",
         source.description,
         branch,
         connection.address.url,
         mqtt.prefix,
+        "5, No Local" if no_local else "3.1.1",
     )
     if telemetry is not None:
         telemetry.start()

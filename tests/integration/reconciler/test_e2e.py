@@ -149,6 +149,8 @@ def test_restarted_reconciler_publishes_nothing(fleet: Fleet) -> None:
         lambda: f"in sync with {head[:12]}" in restarted.output(), "the new reconciler in sync"
     )
     assert fleet.watch.live_launches == []
+    # Mosquitto speaks MQTT 5: the reconciler reads the launch topics without echoes.
+    assert "(MQTT 5, No Local)" in restarted.output()
     now = fleet.watch.wait_running(fleet.requests())
     assert {r: s.pid for r, s in now.items()} == {r: s.pid for r, s in fleet.converged.items()}
 

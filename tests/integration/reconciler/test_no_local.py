@@ -1,0 +1,56 @@
+"""MQTT 5's No Local on the reconciler's view: no echo of what it publishes, the same truth."""
+
+from __future__ import annotations
+
+from configurator.mqtt import Connection
+from reconciler.retained import RetainedView, speaks_mqtt5
+from tests.support.agents import publish
+from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.watch import wait_for
+
+FILTER = "robotconf/robots/+/launch"
+
+
+def view(broker: Mosquitto, *, no_local: bool) -> RetainedView:
+    made = RetainedView(
+        Connection(broker.url), [FILTER], "robotconf/sync", role="test", no_local=no_local
+    )
+    made.start()
+    assert made.wait_synced(10)
+    return made
+
+
+def test_the_broker_is_asked_whether_it_speaks_mqtt5(mosquitto: Mosquitto) -> None:
+    assert speaks_mqtt5(Connection(mosquitto.url))
+    assert not speaks_mqtt5(Connection(f"mqtt://127.0.0.1:{free_port()}"), timeout=1.0)
+
+
+def test_no_local_sends_no_echo_yet_reads_back_what_is_retained(mosquitto: Mosquitto) -> None:
+    items = [(f"robotconf/robots/r{i}/launch", f"request {i}".encode()) for i in range(50)]
+    quiet = view(mosquitto, no_local=True)
+    try:
+        assert quiet.publish_retained(items, 10)
+        # Its copy is the truth at once (updated at each PUBACK), without a message back.
+        assert quiet.snapshot() == dict(items)
+        other = "robotconf/robots/r0/launch"
+        publish(mosquitto.url, other, b"from someone else")  # another writer is still seen
+        wait_for(lambda: quiet.get(other) == b"from someone else", "the other writer's request")
+        assert sum(quiet._arrivals.values()) == 1  # that one, and no echo of its own 50
+    finally:
+        quiet.stop()
+    # A new connection reads every retained request back, its own included.
+    again = view(mosquitto, no_local=True)
+    try:
+        expected = dict(items)
+        expected["robotconf/robots/r0/launch"] = b"from someone else"
+        assert again.snapshot() == expected
+    finally:
+        again.stop()
+    # Without No Local, every request published comes back (the MQTT 3.1.1 behaviour).
+    echoing = view(mosquitto, no_local=False)
+    try:
+        before = sum(echoing._arrivals.values())
+        assert echoing.publish_retained([(t, p + b"!") for t, p in items], 10)
+        wait_for(lambda: sum(echoing._arrivals.values()) >= before + len(items), "the echoes")
+    finally:
+        echoing.stop()
