@@ -43,6 +43,10 @@ def bridge_to(central: Mosquitto, name: str = "site-b") -> list[str]:
         f"topic {PREFIX}/reconciler/status in 1",
         f"topic {PREFIX}/robots/+/status out 1",
         f"topic {PREFIX}/robots/+/description out 1",
+        # From the desk (robotconf logs, robotconf restart): asks in, the log out.
+        f"topic {PREFIX}/robots/+/restart in 1",
+        f"topic {PREFIX}/robots/+/logs/request in 1",
+        f"topic {PREFIX}/robots/+/logs out 1",
     ]
 
 
@@ -93,6 +97,25 @@ def test_the_fleet_runs_through_two_bridged_brokers(
         assert code == 0, report
         verdicts = {r["robot_id"]: r["verdict"] for r in report["robots"]}
         assert verdicts == {robot: "InSync" for robot in requests}
+
+        # From the desk on the central broker: a robot's log, and a restart, cross the bridge.
+        logs = subprocess.run(
+            robotconf_argv("logs", "tb3-01", "--broker", central.url, "-n", "100"),
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert logs.returncode == 0 and "--- robotconf agent" in logs.stdout, logs.stderr
+        restart = subprocess.run(
+            robotconf_argv("restart", "tb3-01", "--broker", central.url, "--as", "ops"),
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert restart.returncode == 0, restart.stderr
+        restarted = at_center.wait_for(
+            "tb3-01",
+            lambda s: s.state is AgentState.RUNNING and s.pid != converged["tb3-01"].pid,
+            "tb3-01 running again after the restart",
+        )
+        assert restarted.restart_requested_by == "ops"
+        converged["tb3-01"] = restarted
 
         # A commit reaches exactly its robots through the bridge.
         lab.replace(
