@@ -91,13 +91,23 @@ def for_robot(scenario: LaunchScenario, robot_id: str, namespace: str | None) ->
     capability = scenario.capability
     try:
         mappings = {
-            key: binding.model_copy(update={"name": resolve_name(binding.name, namespace)})
+            key: _renamed(binding, resolve_name(binding.name, namespace))
             for key, binding in capability.mappings.items()
         }
     except UnresolvableName as e:
         raise RenderError(f"robot '{robot_id}': {e}") from None
     return scenario.model_copy(
         update={"capability": capability.model_copy(update={"mappings": mappings})}
+    )
+
+
+def _renamed(binding: MappingBinding, name: str) -> MappingBinding:
+    """`binding` under `name`: itself when the name is the same (an absolute name), else a
+    copy that shares its set of fields (10,000 robots hold one binding per mapping each)."""
+    if name == binding.name:
+        return binding
+    return MappingBinding.model_construct(
+        binding.model_fields_set, kind=binding.kind, name=name, type=binding.type
     )
 
 
