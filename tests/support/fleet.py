@@ -25,6 +25,20 @@ from tests.support.lab import Lab
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
 
 
+def refused_reconcile(lab: GitLab, url: str, options: list[str]) -> str:
+    """`robotconf reconcile` with options it must refuse: its one-line stderr (exit 2, no
+    traceback)."""
+    done = subprocess.run(
+        robotconf_argv(
+            "reconcile", "--repo", str(lab.root), "--branch", "main", "--broker", url, *options
+        ),
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    return done.stderr
+
+
 def robotconf_argv(*args: str) -> list[str]:
     if ROBOTCONF.exists():
         return [str(ROBOTCONF), *args]
