@@ -419,3 +419,37 @@ def test_restart_refuses_a_requester_name_that_cannot_be_recorded(
 ) -> None:
     done = robotconf("restart", ROBOT, "--as", name, broker=mosquitto)
     assert done.returncode == 2 and "cannot name who asks" in done.stderr
+
+
+def test_garbage_restart_requests_restart_nothing(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    topic = TOPICS.restart(ROBOT)
+    # Retained before the agent connects: it comes with the retain flag, and is refused (a
+    # live subscriber gets a new message without the flag, as MQTT delivers it).
+    stale = RestartRequest(robot_id=ROBOT, requested_by="ops", issued_at=round(time.time(), 6))
+    publish(mosquitto.url, topic, stale.payload(), retain=True)
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": "x"})
+    first = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(first.pid)
+    wait_for(lambda: "it came retained" in agent.log_tail(200), "the retained one refused")
+    publish(mosquitto.url, topic, b"", retain=True)
+    for payload in (
+        b"[" * 100_000,
+        b"\xff\xfe\x00",
+        b"x" * 2_000_000,
+        RestartRequest(robot_id="tb3-02", requested_by="ops", issued_at=time.time()).payload(),
+        RestartRequest(robot_id=ROBOT, requested_by="ops", issued_at=time.time() - 3600).payload(),
+        b'{"apiVersion": "robotconf/v1", "kind": "Restart", "robot_id": "tb3-01"}',
+    ):
+        publish(mosquitto.url, topic, payload, retain=False)
+    # Refusals are logged a few per 10 s (anyone who may publish here could fill the disk).
+    wait_for(lambda: agent.log_tail(200).count("restart refused") >= 4, "the refusals")
+    latest = watch.latest(ROBOT)
+    assert latest is not None and latest.pid == first.pid and latest.restart_requested_by is None
+    assert agent.proc is not None and agent.proc.poll() is None
+    assert "Traceback" not in agent.log_tail(400)
+    # Still served: a good one afterwards restarts the brain.
+    done = robotconf("restart", ROBOT, "--as", "ops", broker=mosquitto)
+    assert done.returncode == 0, done.stderr
+    new_brain(watch, agent, first.pid)
