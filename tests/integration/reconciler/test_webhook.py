@@ -8,7 +8,6 @@ import hmac
 import json
 import signal
 import socket
-import subprocess
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -17,7 +16,7 @@ import pytest
 
 from reconciler.webhook import MAX_BODY
 from tests.integration.reconciler.test_alerts import scrape, value
-from tests.support.fleet import GitLab, Proc, refused_reconcile, robotconf_argv, start_reconciler
+from tests.support.fleet import GitLab, Proc, refused_reconcile, start_reconciler
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.watch import FleetWatch, wait_for
 
@@ -215,16 +214,12 @@ def test_a_webhook_port_in_use_is_a_one_line_error(
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        done = subprocess.run(
-            robotconf_argv(
-                "reconcile", "--repo", str(lab.root), "--branch", "main",
-                "--broker", mosquitto.url, "--webhook", f"127.0.0.1:{port}",
-                "--webhook-secret-file", str(secret),
-            ),
-            capture_output=True, text=True, timeout=60,
-        )  # fmt: skip
-    assert done.returncode == 2 and "cannot listen" in done.stderr, done.stderr
-    assert len(done.stderr.strip().splitlines()) == 1
+        said = refused_reconcile(
+            lab,
+            mosquitto.url,
+            ["--webhook", f"127.0.0.1:{port}", "--webhook-secret-file", str(secret)],
+        )
+    assert "cannot listen" in said
 
 
 def test_a_local_branch_with_a_webhook_stops_cleanly(
