@@ -23,7 +23,7 @@ from configurator.launch import (
 )
 from configurator.safejson import PayloadError, parse_object
 from configurator.typing_errors import error_line
-from configurator.wire import RobotDescription
+from configurator.wire import LogsRequest, RobotDescription
 
 
 @dataclass(frozen=True)
@@ -224,3 +224,14 @@ def interpret_restart(
             f"({_iso(newest_issued_at)}): a duplicate or a replay"
         )
     return Restart(request.requested_by, issued)
+
+
+def interpret_logs_request(payload: bytes) -> LogsRequest | Reject:
+    """The admission of one logs-request payload: bounded parse, then the strict model (it
+    changes nothing on the robot, and what it asks for leaves redacted: no signature)."""
+    try:
+        return LogsRequest.model_validate(parse_object(payload, max_bytes=MAX_COMMAND_BYTES))
+    except PayloadError as exc:
+        return Reject(f"malformed logs request: {exc}")
+    except ValidationError as exc:
+        return Reject(f"not a valid logs request: {_validation_summary(exc)}")

@@ -14,7 +14,6 @@ import os
 import selectors
 import signal
 import time
-from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from contextvars import ContextVar
 from types import FrameType
@@ -62,8 +61,8 @@ from agent.workdir import (
 )
 from configurator.launch import LaunchRequest
 from configurator.safejson import PayloadError, parse_object
-from configurator.typing_errors import error_line
-from configurator.wire import AgentState, AgentStatus, LogsRequest
+from configurator.throttle import Throttle
+from configurator.wire import AgentState, AgentStatus
 from configurator.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
@@ -101,7 +100,7 @@ class Agent:
         self.seq = SeqStore(self.workdir / SEQ_FILE)
         self.issued = IssuedStore(self.workdir / ISSUED_FILE)
         self.restart_issued = IssuedStore(self.workdir / RESTART_ISSUED_FILE)
-        self.refusals = Throttle(REFUSAL_LOG_EVERY)
+        self.refusals = Throttle(REFUSAL_LOG_EVERY, limit=5)
         self.supervisor = Supervisor(config.robot_id, policy_of(config))
         self.brain_log = process.BrainLog(
             self.workdir / LOG_FILE, config.log.max_bytes, config.log.backups
@@ -379,16 +378,9 @@ class Agent:
         self._apply(effects)
 
     def _on_logs(self, payload: bytes, now: float) -> None:
-        try:
-            request = LogsRequest.model_validate(
-                parse_object(payload, max_bytes=admission.MAX_COMMAND_BYTES)
-            )
-        except PayloadError as exc:
-            self._refused(f"logs request refused: {exc}")
-            return
-        except ValidationError as exc:
-            first = error_line(exc.errors(include_url=False)[0])
-            self._refused(f"logs request refused: {first[:200]}")
+        request = admission.interpret_logs_request(payload)
+        if isinstance(request, admission.Reject):
+            self._refused(f"logs request refused: {request.reason}")
             return
         if not self.logs.following and request.follow:
             log.info("streaming the brain's log to the desk while asked")
@@ -572,27 +564,6 @@ def redactor_of(config: AgentConfig) -> Redactor:
     if password:
         secrets.append(password)
     return Redactor(secrets, config.env.keys())
-
-
-class Throttle:
-    """At most `limit` lines per `every` seconds; the next one admitted says how many were
-    not. A few refusals in a row are all said (an operator's second try is not hidden)."""
-
-    def __init__(self, every: float, limit: int = 5) -> None:
-        self.every = every
-        self.limit = limit
-        self._said: deque[float] = deque()
-        self._quiet = 0
-
-    def admit(self, line: str, now: float) -> str | None:
-        while self._said and now - self._said[0] >= self.every:
-            self._said.popleft()
-        if len(self._said) >= self.limit:
-            self._quiet += 1
-            return None
-        self._said.append(now)
-        quiet, self._quiet = self._quiet, 0
-        return line + (f" (and {quiet} more not logged)" if quiet else "")
 
 
 def _os_error(exc: OSError) -> str:

@@ -14,7 +14,7 @@ from pydantic import ValidationError
 
 from configurator.mqtt import Connection
 from configurator.safejson import PayloadError
-from configurator.wire import MAX_LOG_MESSAGE_BYTES, AgentState, AgentStatus, LogsChunk, Topics
+from configurator.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
 from reconciler.observed import RobotSeen, parse_retained
 from reconciler.retained import RetainedView, read_object, take_snapshot
 
@@ -117,7 +117,3 @@ class RobotDesk:
 def _put(target: queue.Queue[T], item: T) -> None:
     with contextlib.suppress(queue.Full):  # a flood: what does not fit is not shown
         target.put_nowait(item)
-
-
-def offline(robot: RobotSeen) -> bool:
-    return robot.status is None or robot.status.state is AgentState.OFFLINE

@@ -16,6 +16,7 @@ from configurator.launch import LaunchRequest, StopRequest
 from configurator.safejson import PayloadError
 from configurator.wire import (
     ACTIVE_STATES,
+    AgentState,
     AgentStatus,
     ReconcilerStatus,
     RobotDescription,
@@ -37,6 +38,11 @@ class RobotSeen:
     stopped: bool = False  # the launch topic holds a Stop for this robot: nothing assigned
     status: AgentStatus | None = None
     description: RobotDescription | None = None
+
+    @property
+    def online(self) -> bool:
+        """Its agent has reported, and its last status is not `offline` (its Last Will)."""
+        return self.status is not None and self.status.state is not AgentState.OFFLINE
 
     @property
     def brain_active(self) -> bool:

@@ -25,6 +25,7 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 from configurator.gcpause import collector_paused
 from configurator.mqtt import Connection, make_client
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
+from configurator.throttle import Throttle
 
 log = logging.getLogger("robotconf.mqtt")
 
@@ -61,9 +62,7 @@ class Ignored:
         self._seen: dict[str, bytes] = {}  # topic -> fingerprint of the payload last counted
         self._counts: dict[str, int] = {}
         self._log = logger
-        self._every = every
-        self._logged_at: float | None = None
-        self._unlogged = 0
+        self._throttle = Throttle(every)
 
     def note(self, kind: str, topic: str, payload: bytes, reason: str) -> None:
         fingerprint = hashlib.sha256(payload).digest()
@@ -74,13 +73,11 @@ class Ignored:
                 self._seen.clear()
             self._seen[topic] = fingerprint
             self._counts[kind] = self._counts.get(kind, 0) + 1
-            now = time.monotonic()
-            if self._logged_at is not None and now - self._logged_at < self._every:
-                self._unlogged += 1
-                return
-            self._logged_at, skipped, self._unlogged = now, self._unlogged, 0
-        more = f" (and {skipped} more since the last such line)" if skipped else ""
-        self._log.warning("ignored the %s payload on %r: %s%s", kind, topic, reason, more)
+            line = self._throttle.admit(
+                f"ignored the {kind} payload on {topic!r}: {reason}", time.monotonic()
+            )
+        if line is not None:
+            self._log.warning("%s", line)
 
     def counts(self) -> dict[str, int]:
         with self._lock:

@@ -190,7 +190,7 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 robot_id=robot_id,
                 verdict=found,
                 reason=reason,
-                online=status is not None and status.state is not AgentState.OFFLINE,
+                online=robot.online,
                 scenario=want.scenario if want else None,
                 desired=want.digest if want and not want.suspended else None,
                 published=robot.launch_digest,

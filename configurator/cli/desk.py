@@ -4,7 +4,7 @@ or one line saying why it cannot be asked."""
 from __future__ import annotations
 
 from configurator.cli.errors import CliError, ExitCode
-from reconciler.desk import RobotDesk, offline
+from reconciler.desk import RobotDesk
 from reconciler.observed import RobotSeen
 
 
@@ -20,7 +20,7 @@ def online_robot(desk: RobotDesk, wait: float, why_online: str) -> RobotSeen:
     robot = desk.robot()
     if robot is None:
         raise CliError(desk.unknown(wait).message(url), ExitCode.FINDINGS)
-    if offline(robot):
+    if not robot.online:
         raise CliError(
             f"{desk.robot_id} is offline: {why_online} (robotconf status {desk.robot_id})",
             ExitCode.FINDINGS,

@@ -106,13 +106,13 @@ def restart(
                 f"nothing to restart: {robot_id} has no launch request (it is idle)",
                 ExitCode.FINDINGS,
             )
-        request = RestartRequest(robot_id=robot_id, requested_by=by, issued_at=time.time())
+        # Microseconds, as `sign` stamps them: the status that confirms it names the same time.
+        issued_at = round(time.time(), 6)
+        request = RestartRequest(robot_id=robot_id, requested_by=by, issued_at=issued_at)
         if key is not None:
             from configurator.signing import sign
 
-            request = sign(request, key, request.issued_at)
-        else:
-            request = request.model_copy(update={"issued_at": round(request.issued_at, 6)})
+            request = sign(request, key, issued_at)
         if not desk.send(desk.topics.restart(robot_id), request.payload(), min(wait, 10.0)):
             raise CliError(
                 f"the broker did not take the restart request "

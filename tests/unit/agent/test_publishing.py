@@ -28,7 +28,7 @@ def test_every_other_state_goes_at_once() -> None:
 
 
 def test_refusals_are_logged_a_few_at_a_time_with_a_count_of_the_rest() -> None:
-    from agent.runtime import Throttle
+    from configurator.throttle import Throttle
 
     throttle = Throttle(10.0, limit=2)
     assert throttle.admit("a", 0.0) == "a"

@@ -118,3 +118,20 @@ def test_a_signed_launch_request_is_not_a_restart(keyed: tuple[Any, Verifier]) -
     private, check = keyed
     launch = sign(make_request(), private, NOW)
     assert "not a restart request" in reason(launch.payload(), check)
+
+
+def test_log_requests_are_bounded_and_strict() -> None:
+    from agent.admission import interpret_logs_request
+    from configurator.wire import LogsRequest
+
+    good = LogsRequest(session="s1", lines=5, follow=True)
+    assert interpret_logs_request(good.model_dump_json().encode()) == good
+    for payload, said in [
+        (b"[" * 100_000, "malformed logs request"),
+        (b"x" * (MAX_COMMAND_BYTES + 1), "malformed logs request"),
+        (b'{"session": "s", "lines": 100000000}', "lines"),
+        (b'{"session": "../#"}', "session"),
+        (b'{"session": "s", "extra": 1}', "extra"),
+    ]:
+        found = interpret_logs_request(payload)
+        assert isinstance(found, Reject) and said in found.reason, (payload[:20], found)
