@@ -39,6 +39,7 @@ import contextlib
 import itertools
 import json
 import os
+import re
 import resource
 import shutil
 import signal
@@ -206,7 +207,12 @@ def write_fleet(root: Path, size: int, generation: int, mode: str = "restart") -
     for index, robot in enumerate(robot_ids(size)):
         scenario = SCENARIOS[index % len(SCENARIOS)]
         labels = ", labels: {ring: canary}" if mode == "waves" and index % 100 == 0 else ""
-        lines.append(f"  {robot}: {{scenario: {scenario}, name: {robot} v{named}{labels}}}")
+        # Each robot in a namespace of its own: robots of one world must not share a topic
+        # (RC505).
+        lines.append(
+            f"  {robot}: {{scenario: {scenario}, name: {robot} v{named}, "
+            f"namespace: {robot}{labels}}}"
+        )
     policy = WAVES_POLICY if mode == "waves" else ""
     (root / "configs" / "fleet.yaml").write_text("\n".join(lines) + "\n" + policy, "utf-8")
     if mode in ("knowledge", "reload"):
@@ -231,6 +237,11 @@ def make_lab(folder: Path, size: int, mode: str = "restart") -> Path:
     root.mkdir()
     for part in ("models", "configs"):
         shutil.copytree(ROOT / part, root / part)
+    # Hundreds of robots share each world here: every mapping name relative, resolved in each
+    # robot's namespace (the example's absolute names would have them drive each other, RC505).
+    for scheme in root.glob("models/platforms/*/mapping-schemes/*.yaml"):
+        text = scheme.read_text(encoding="utf-8")
+        scheme.write_text(re.sub(r"name: /", "name: ", text), encoding="utf-8")
     write_fleet(root, size, 0, mode)
     git(root, "init", "-q", "-b", "main")
     git(root, "config", "user.email", "bench@example.org")
@@ -467,6 +478,16 @@ class Result:
     gap_p50: float | None = None
 
 
+def start_reconciler(lab: Path, url: str, interval: float, log: Path) -> subprocess.Popen[bytes]:
+    """`robotconf reconcile` watching `lab`'s main branch, its output in `log`."""
+    with log.open("wb") as out:
+        return subprocess.Popen(
+            [*ROBOTCONF, "reconcile", "--repo", str(lab), "--branch", "main",
+             "--broker", url, "--interval", f"{interval:g}"],
+            cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
+
+
 def prioritise(pids: Sequence[int]) -> bool:
     """Linux autogroup nice -10 for the server side; False when not allowed (not root)."""
     try:
@@ -510,12 +531,7 @@ def measure(size: int, options: Options) -> Result:
             converged.expect(digests)
             started = time.perf_counter()
             fleet = start_agents(folder, size, broker.url, options)
-            with (folder / "reconciler.log").open("wb") as log:
-                reconciler = subprocess.Popen(
-                    [*ROBOTCONF, "reconcile", "--repo", str(lab), "--branch", "main",
-                     "--broker", broker.url, "--interval", "60"],
-                    cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                )  # fmt: skip
+            reconciler = start_reconciler(lab, broker.url, 60, folder / "reconciler.log")
             if options.server_priority and not prioritise(
                 [broker.proc.pid, reconciler.pid, os.getpid()]
             ):

@@ -48,17 +48,12 @@ import generate  # noqa: E402
 import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
-from rollout import Broker, connect  # noqa: E402
+from rollout import Broker, connect, start_reconciler  # noqa: E402
 
 TIMEOUT = float(os.environ.get("SCALE_TIMEOUT", "300"))
 CHANGE_TARGET = 0.3
 PUBLISH_TARGET = 1.5
 RSS_TARGET_MB = 150.0
-ROBOTCONF = [
-    sys.executable,
-    "-c",
-    "import sys; from configurator.cli import main; sys.exit(main())",
-]
 
 
 class Launches:
@@ -191,12 +186,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
     try:
         print("starting the reconciler ...", flush=True)
         started = time.perf_counter()
-        with (folder / "reconciler.log").open("wb") as log:
-            reconciler = subprocess.Popen(
-                [*ROBOTCONF, "reconcile", "--repo", str(lab), "--branch", "main",
-                 "--broker", broker.url, "--interval", "3600"],
-                cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-            )  # fmt: skip
+        reconciler = start_reconciler(lab, broker.url, 3600, folder / "reconciler.log")
         seen = launches.wait(lambda s: len(s) >= assigned, TIMEOUT)
         times = sorted(t for t, _ in seen.values())
         first, delivered = times[-1] - started, times[-1] - times[0]
