@@ -206,7 +206,7 @@ def interpret_restart(
             return Reject("a signed restart must be in canonical JSON form, as signed")
         problem = verify(data)
         if problem is not None:
-            return Reject(problem.replace("request", "restart", 1))
+            return Reject(problem)
     try:
         request = RestartRequest.model_validate(data)
     except ValidationError as exc:

@@ -125,14 +125,16 @@ _MAX_SIGNATURE_CHARS = 128
 
 
 def verify_object(data: dict[str, Any], key: Ed25519PublicKey) -> str | None:
-    """None when the reconciler's key signed exactly this parsed request (a launch or a stop),
-    else why not. Works on the plain JSON object, so nothing else of it is trusted, or even
-    built, before its signature is known to be good."""
+    """None when the fleet's key signed exactly this parsed request (a launch, a stop or a
+    restart), else why not. Works on the plain JSON object, so nothing else of it is trusted,
+    or even built, before its signature is known to be good."""
     from cryptography.exceptions import InvalidSignature
 
+    # Only the wording of the answer: whatever `kind` says is not trusted for anything else.
+    what = "restart" if data.get("kind") == "Restart" else "request"
     signature, issued_at = data.get("signature"), data.get("issued_at")
     if signature is None or issued_at is None:
-        return "request is not signed, and this agent requires signed requests"
+        return f"{what} is not signed, and this agent requires signed requests"
     if not isinstance(signature, str) or len(signature) > _MAX_SIGNATURE_CHARS:
         return "signature is not a base64 Ed25519 signature"
     if isinstance(issued_at, bool) or not isinstance(issued_at, (int, float)):
@@ -145,5 +147,5 @@ def verify_object(data: dict[str, Any], key: Ed25519PublicKey) -> str | None:
     try:
         key.verify(raw, canonical_json(unsigned))
     except (InvalidSignature, ValueError):
-        return "signature does not verify: the request was altered or signed by another key"
+        return f"signature does not verify: the {what} was altered or signed by another key"
     return None
