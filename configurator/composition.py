@@ -39,9 +39,9 @@ def missing_requires(action: Action, selected: Iterable[str]) -> list[str]:
 
 def implementation_for(task: Task, selected: Iterable[str]) -> list[str] | None:
     """The first of the task's alternative action lists that the selection covers."""
-    chosen = set(selected)
+    chosen = selected if isinstance(selected, set | frozenset) else set(selected)
     for implementation in task.implementations:
-        if set(implementation) <= chosen:
+        if chosen.issuperset(implementation):
             return implementation
     return None
 

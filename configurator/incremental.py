@@ -29,9 +29,9 @@ from typing import Any, TypeVar
 
 from configurator.diagnostics import Diagnostic
 from configurator.gcpause import collector_paused
-from configurator.launch import LaunchRequest, LaunchScenario, ScenarioDigests
 from configurator.loader import LoadedFile, load_repository
 from configurator.render import FleetRender, render_fleet, render_scenario, request_for
+from configurator.rendered import RenderedRequest, ScenarioRequests
 from configurator.repository import Entry, Platform, Repository
 from configurator.rules import DERIVED, Unit, rule_units
 from configurator.rules.report import Reporter
@@ -239,11 +239,10 @@ class _Value:
     value: Any
 
 
-@dataclass
+@dataclass(slots=True)
 class _Rendered:
     assignment: RobotAssignment
-    scenario: LaunchScenario
-    request: LaunchRequest
+    request: RenderedRequest  # of the assignment, from its scenario's ScenarioRequests
 
 
 @dataclass
@@ -423,36 +422,39 @@ class BuildCache:
         robots: dict[str, _Rendered] = {}
         revision = repo.revision
 
-        def scenario_of(name: str) -> LaunchScenario:
+        def scenario_of(name: str) -> ScenarioRequests:
             found = scenarios.get(name)
             if found is None:
                 found = self._scenarios.get(name)
                 if found is None or not found.deps.isdisjoint(changed):
                     with self._recorder.recording() as deps:
                         value = render_scenario(repo, name)
-                    if found is not None and found.value == value:
-                        value = found.value  # the same content: its robots need nothing new
-                    found = _Value(frozenset(deps), value)
+                    if found is not None and found.value.scenario == value:
+                        made = found.value  # the same content: its robots need nothing new
+                    else:
+                        made = ScenarioRequests(value)
+                    found = _Value(frozenset(deps), made)
                     self.stats.scenarios_rendered.append(name)
                 scenarios[name] = found
-            rendered: LaunchScenario = found.value
+            rendered: ScenarioRequests = found.value
             return rendered
 
         def request_of(
-            robot_id: str,
-            assignment: RobotAssignment,
-            scenario: LaunchScenario,
-            digests: ScenarioDigests,
-        ) -> LaunchRequest:
+            robot_id: str, assignment: RobotAssignment, scenario: ScenarioRequests
+        ) -> RenderedRequest:
             before = self._robots.get(robot_id)
-            if before is None or before.scenario is not scenario or before.assignment != assignment:
-                request = request_for(repo, robot_id, assignment, scenario, digests)
+            if (
+                before is None
+                or before.request.scenario_requests is not scenario
+                or before.assignment != assignment
+            ):
+                request = request_for(repo, robot_id, assignment, scenario)
                 self.stats.robots_rendered += 1
             elif before.request.revision != revision:
-                request = before.request.model_copy(update={"revision": revision})
+                request = before.request.with_revision(revision)
             else:
                 request = before.request
-            robots[robot_id] = _Rendered(assignment, scenario, request)
+            robots[robot_id] = _Rendered(assignment, request)
             return request
 
         fleet = render_fleet(repo, scenario_of, request_of)

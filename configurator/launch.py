@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from json.encoder import encode_basestring
+from collections.abc import Set
 from typing import Any, Literal, TypeVar
 
 from pydantic import Field
@@ -66,14 +66,15 @@ class _Published(StrictModel):
     issued_at: float | None = Field(None, description="unix time the request was signed")
     signature: str | None = Field(None, description="base64 Ed25519 over the signed fields")
 
-    def wire(self, *, signature: bool = True) -> dict[str, Any]:
-        """The JSON object published (signing fields and `restart_digest` only when set)."""
+    def wire(self, *, signature: bool = True, without: Set[str] = frozenset()) -> dict[str, Any]:
+        """The JSON object published (signing fields and `restart_digest` only when set);
+        `without`: fields left out (a caller that writes those itself)."""
         # A Stop has no `restart_digest`: only fields this model has and that are None.
         optional = ("issued_at", "signature", "restart_digest", *CONTENT_WHEN_SET)
         unset = {k for k in optional if k in type(self).model_fields and getattr(self, k) is None}
         if not signature:
             unset.add("signature")
-        return self.model_dump(mode="json", exclude=unset)
+        return self.model_dump(mode="json", exclude=unset | without)
 
     def payload(self) -> bytes:
         """The canonical bytes published on the launch topic."""
@@ -154,23 +155,30 @@ def content_digest(content: Any) -> str:
     return "sha256:" + hashlib.sha256(canonical_json(content)).hexdigest()
 
 
-def digest_content(request: LaunchRequest) -> dict[str, Any]:
+def digest_content(request: LaunchRequest, without: Set[str] = frozenset()) -> dict[str, Any]:
     """The one definition of what a request's digest covers: every field of the model (of a
-    subclass too) but DIGEST_EXCLUDED. Rendering and the agent's check both come here."""
+    subclass too) but DIGEST_EXCLUDED. Rendering and the agent's check both come here.
+    `without`: fields left out (a caller that writes those itself)."""
     unset = {name for name in CONTENT_WHEN_SET if getattr(request, name) is None}
-    return request.model_dump(mode="json", exclude=set(DIGEST_EXCLUDED) | unset)
+    return request.model_dump(mode="json", exclude=set(DIGEST_EXCLUDED) | unset | without)
 
 
-def restart_content(request: LaunchRequest) -> dict[str, Any]:
+def restart_content(request: LaunchRequest) -> Any:
+    """What only a restart applies, of this request (see `restart_content_of`)."""
+    return restart_content_of(
+        request.scenario.capability.model_dump(mode="json"), request.namespace
+    )
+
+
+def restart_content_of(capability: Any, namespace: str | None) -> Any:
     """The one definition of what only a restart applies: the capability (platform, mapping
-    scheme, template, actions, logics, mappings). The rest (goals, knowledge, settings, the
-    robot's name) a brain that supports it may reload in place. A namespace is restart
-    content too: a brain's nodes cannot move into another one in place."""
-    capability = request.scenario.capability.model_dump(mode="json")
-    if request.namespace is None:
+    scheme, template, actions, logics, mappings), as JSON. The rest (goals, knowledge,
+    settings, the robot's name) a brain that supports it may reload in place. A namespace is
+    restart content too: a brain's nodes cannot move into another one in place."""
+    if namespace is None:
         # Without one, the content it always had: such a robot's restart digest is unchanged.
         return capability
-    return {"capability": capability, "namespace": request.namespace}
+    return {"capability": capability, "namespace": namespace}
 
 
 def restart_digest_of(request: LaunchRequest) -> str:
@@ -196,133 +204,20 @@ def make_launch_request(
     revision: str,
     scenario: LaunchScenario,
     namespace: str | None = None,
-    digests: ScenarioDigests | None = None,
 ) -> LaunchRequest:
     """Build a request whose digest covers everything but the revision, and whose
-    restart_digest covers its capability (and namespace). `digests`, made from the scenario
-    this one resolves for the robot, works the digests out without serialising it whole."""
-    draft = LaunchRequest(
-        robot_id=robot_id,
-        robot_name=robot_name,
-        revision=revision,
-        digest=_PENDING_DIGEST,
-        namespace=namespace,
-        scenario=scenario,
-    )
-    found = digests.of(draft) if digests is not None else None
-    if found is None:
-        return with_digest(draft)
-    return draft.model_copy(update={"digest": found[0], "restart_digest": found[1]})
-
-
-# Where a robot's own values go in the canonical JSON of a scenario's requests: text no
-# YAML file can hold by mistake (a NUL), and checked to occur once.
-_SLOTS = {name: f"\x00robotconf:{name}\x00" for name in ("robot_id", "robot_name", "namespace")}
-_MAPPINGS_SLOT = "\x00robotconf:mappings\x00"
-_Template = tuple[list[bytes], list[str]]  # the bytes between the slots, the slots in order
-
-
-class ScenarioDigests:
-    """The digests of the requests of one scenario's robots, from its canonical JSON worked
-    out once with each robot's own values left as slots (its id, name, namespace and resolved
-    mapping names): a robot's digests hash those few values between the scenario's bytes, the
-    same bytes as its whole request serialised (`with_digest`) and at a fraction of the cost.
-
-    `of` is only for requests whose scenario is this one with its mappings resolved for the
-    robot (render.for_robot); anything it cannot place gives None: digest the whole request."""
-
-    def __init__(self, scenario: LaunchScenario) -> None:
-        self._scenario = scenario
-        self._templates: dict[bool, tuple[_Template, _Template] | None] = {}
-
-    def of(self, request: LaunchRequest) -> tuple[str, str] | None:
-        """(digest, restart_digest) of the request."""
-        with_namespace = request.namespace is not None
-        if with_namespace not in self._templates:
-            self._templates[with_namespace] = self._make(with_namespace)
-        templates = self._templates[with_namespace]
-        if templates is None:
-            return None
-        values = {
-            "robot_id": _string(request.robot_id),
-            "robot_name": _string(request.robot_name),
-            "namespace": b"null" if request.namespace is None else _string(request.namespace),
-            "mappings": canonical_json(
-                {
-                    k: b.model_dump(mode="json")
-                    for k, b in request.scenario.capability.mappings.items()
-                }
-            ),
-        }
-        content, restart = templates
-        return _hash(content, values), _hash(restart, values)
-
-    def _make(self, with_namespace: bool) -> tuple[_Template, _Template] | None:
-        capability = self._scenario.capability
-        if not capability.mappings:
-            return None  # no names to resolve: rare enough to digest whole
-        # The mappings as one binding under a key of their own: their place in the bytes is
-        # where that binding's canonical JSON is, whatever the structure around them.
-        sample = {_MAPPINGS_SLOT: next(iter(capability.mappings.values()))}
-        opened = canonical_json({k: b.model_dump(mode="json") for k, b in sample.items()})
-        scenario = self._scenario.model_copy(
-            update={"capability": capability.model_copy(update={"mappings": sample})}
-        )
-        probe = LaunchRequest.model_construct(
-            robot_id=_SLOTS["robot_id"],
-            robot_name=_SLOTS["robot_name"],
-            revision="",
+    restart_digest covers its capability (and namespace). Rendering a fleet makes the same
+    bytes without a model per robot (configurator/rendered.py)."""
+    return with_digest(
+        LaunchRequest(
+            robot_id=robot_id,
+            robot_name=robot_name,
+            revision=revision,
             digest=_PENDING_DIGEST,
-            namespace=_SLOTS["namespace"] if with_namespace else None,
+            namespace=namespace,
             scenario=scenario,
         )
-        namespace = {"namespace"} if with_namespace else set()
-        content = _template(
-            canonical_json(digest_content(probe)),
-            opened,
-            {"robot_id", "robot_name", "mappings", *namespace},
-        )
-        restart = _template(
-            canonical_json(restart_content(probe)), opened, {"mappings", *namespace}
-        )
-        return None if content is None or restart is None else (content, restart)
-
-
-def _string(text: str) -> bytes:
-    """canonical_json of a string (json.dumps encodes a string alone with this very function)."""
-    return encode_basestring(text).encode("utf-8")
-
-
-def _template(serialised: bytes, opened: bytes, expected: set[str]) -> _Template | None:
-    """The bytes between the slots; None unless each `expected` slot is one whole value,
-    found once, and no other slot occurs."""
-    slots = {name: canonical_json(slot) for name, slot in _SLOTS.items()}
-    slots["mappings"] = opened
-    at = []
-    for name, encoded in slots.items():
-        marker = canonical_json(_MAPPINGS_SLOT if name == "mappings" else _SLOTS[name])[1:-1]
-        wanted = 1 if name in expected else 0
-        if serialised.count(encoded) != wanted or serialised.count(marker) != wanted:
-            return None  # missing, twice, or inside other text: not a value of its own
-        if wanted:
-            at.append((serialised.index(encoded), len(encoded), name))
-    at.sort()
-    parts, names, start = [], [], 0
-    for position, length, name in at:
-        parts.append(serialised[start:position])
-        names.append(name)
-        start = position + length
-    parts.append(serialised[start:])
-    return parts, names
-
-
-def _hash(template: _Template, values: dict[str, bytes]) -> str:
-    parts, names = template
-    digest = hashlib.sha256(parts[0])
-    for name, part in zip(names, parts[1:], strict=True):
-        digest.update(values[name])
-        digest.update(part)
-    return "sha256:" + digest.hexdigest()
+    )
 
 
 def template_mismatch(template: str | None, recommended: str | None) -> str | None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from configurator.launch import LaunchRequest
 from configurator.render import FleetRender
+from configurator.rendered import RenderedRequest
 from configurator.textsafe import markdown_code, markdown_text, printable_lines
 from configurator.types import RolloutPolicy
 from configurator.waves import assign_waves
@@ -18,7 +18,7 @@ ChangeKind = Literal["added", "removed", "changed", "held"]
 Action = Literal["start", "stop", "restart", "reload", "none"]
 
 
-def action_of(old: LaunchRequest, new: LaunchRequest) -> Action:
+def action_of(old: RenderedRequest, new: RenderedRequest) -> Action:
     """Restart, unless only what a running brain can reload changed (same restart_digest)."""
     same = old.restart_digest is not None and old.restart_digest == new.restart_digest
     return "reload" if same else "restart"

@@ -12,17 +12,11 @@ from typing import Any
 from configurator.composition import achievable_tasks, find_location
 from configurator.diagnostics import did_you_mean
 from configurator.gcpause import collector_paused
-from configurator.launch import (
-    LaunchCapability,
-    LaunchGoal,
-    LaunchRequest,
-    LaunchScenario,
-    ScenarioDigests,
-    make_launch_request,
-)
+from configurator.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
+from configurator.rendered import RenderedRequest, ScenarioRequests, UnresolvedMapping
 from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
-from configurator.rosnames import UnresolvableName, absolute_namespace, resolve_name
+from configurator.rosnames import absolute_namespace
 from configurator.types import (
     JsonObject,
     MappingBinding,
@@ -41,7 +35,7 @@ class FleetRender:
     """Every assigned robot's request; suspended robots are rendered but flagged."""
 
     revision: str
-    requests: dict[str, LaunchRequest] = field(default_factory=dict)
+    requests: dict[str, RenderedRequest] = field(default_factory=dict)
     suspended: set[str] = field(default_factory=set)
     scenario_of: dict[str, str] = field(default_factory=dict)
     labels: dict[str, dict[str, str]] = field(default_factory=dict)  # every robot's, maybe {}
@@ -50,24 +44,17 @@ class FleetRender:
 
 
 def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
-    """`over` merged into a copy of `base`: mappings merge key by key, anything else replaces."""
-    merged: JsonObject = _copy(base)
+    """`over` merged into `base`: mappings merge key by key, anything else replaces. Neither
+    is changed; the result shares what it does not merge with them (rendered content is
+    never changed in place, and 10,000 robots' knowledge need not be 10,000 copies)."""
+    merged: JsonObject = dict(base)
     for key, value in over.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = deep_merge(merged[key], value)
+        current = merged.get(key)
+        if isinstance(value, dict) and isinstance(current, dict):
+            merged[key] = deep_merge(current, value)
         else:
-            merged[key] = _copy(value)
+            merged[key] = value
     return merged
-
-
-def _copy(value: Any) -> Any:
-    """A copy of JSON data (mappings, lists, scalars): copy.deepcopy without its bookkeeping
-    for shared and cyclic objects, which JSON data has none of."""
-    if isinstance(value, dict):
-        return {key: _copy(item) for key, item in value.items()}
-    if isinstance(value, list):
-        return [_copy(item) for item in value]
-    return value
 
 
 def _settings(definitions: dict[str, SettingDefinition], chosen: dict[str, Any]) -> JsonObject:
@@ -86,49 +73,26 @@ def bound_mappings(resolved: ResolvedCapability) -> dict[str, MappingBinding]:
     return {m: bindings[m] for m in needed if m in bindings}
 
 
-def for_robot(scenario: LaunchScenario, robot_id: str, namespace: str | None) -> LaunchScenario:
-    """The scenario with its mapping names resolved for one robot (fully qualified)."""
-    capability = scenario.capability
-    try:
-        mappings = {
-            key: _renamed(binding, resolve_name(binding.name, namespace))
-            for key, binding in capability.mappings.items()
-        }
-    except UnresolvableName as e:
-        raise RenderError(f"robot '{robot_id}': {e}") from None
-    return scenario.model_copy(
-        update={"capability": capability.model_copy(update={"mappings": mappings})}
-    )
-
-
-def _renamed(binding: MappingBinding, name: str) -> MappingBinding:
-    """`binding` under `name`: itself when the name is the same (an absolute name), else a
-    copy that shares its set of fields (10,000 robots hold one binding per mapping each)."""
-    if name == binding.name:
-        return binding
-    return MappingBinding.model_construct(
-        binding.model_fields_set, kind=binding.kind, name=name, type=binding.type
-    )
-
-
 def request_for(
     repo: Repository,
     robot_id: str,
     assignment: RobotAssignment,
-    scenario: LaunchScenario,
-    digests: ScenarioDigests | None = None,
-) -> LaunchRequest:
-    """The robot's request from its scenario's shared content (`digests`: made from that
-    scenario, for its robots' digests)."""
+    scenario: ScenarioRequests | None = None,
+) -> RenderedRequest:
+    """The robot's request from its scenario's shared content (`scenario`: that of the
+    robot's scenario, rendered once for all its robots; by default rendered here)."""
+    if scenario is None:
+        scenario = ScenarioRequests(render_scenario(repo, assignment.scenario))
     namespace = assignment.namespace
-    return make_launch_request(
-        robot_id,
-        assignment.name or robot_id,
-        repo.revision,
-        for_robot(scenario, robot_id, namespace),
-        namespace=absolute_namespace(namespace) if namespace is not None else None,
-        digests=digests,
-    )
+    try:
+        return scenario.request(
+            robot_id,
+            assignment.name or robot_id,
+            repo.revision,
+            absolute_namespace(namespace) if namespace is not None else None,
+        )
+    except UnresolvedMapping as e:
+        raise RenderError(f"robot '{robot_id}': {e}") from None
 
 
 def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
@@ -185,8 +149,8 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
     )
 
 
-ScenarioOf = Callable[[str], LaunchScenario]
-RequestOf = Callable[[str, RobotAssignment, LaunchScenario, ScenarioDigests], LaunchRequest]
+ScenarioOf = Callable[[str], ScenarioRequests]
+RequestOf = Callable[[str, RobotAssignment, ScenarioRequests], RenderedRequest]
 
 
 def render_fleet(
@@ -207,33 +171,21 @@ def _render_fleet(
     result = FleetRender(
         revision=repo.revision, allow_empty=fleet.allow_empty, rollout=fleet.rollout
     )
-    scenarios: dict[str, LaunchScenario] = {}
-    digests: dict[str, tuple[LaunchScenario, ScenarioDigests]] = {}
+    scenarios: dict[str, ScenarioRequests] = {}
 
-    def each_once(name: str) -> LaunchScenario:
+    def each_once(name: str) -> ScenarioRequests:
         scenario = scenarios.get(name)
         if scenario is None:
-            scenario = scenarios[name] = render_scenario(repo, name)
+            scenario = scenarios[name] = ScenarioRequests(render_scenario(repo, name))
         return scenario
 
-    def digests_of(name: str, scenario: LaunchScenario) -> ScenarioDigests:
-        found = digests.get(name)
-        if found is None or found[0] is not scenario:
-            found = digests[name] = (scenario, ScenarioDigests(scenario))
-        return found[1]
-
-    def fresh(
-        robot_id: str, assignment: RobotAssignment, s: LaunchScenario, d: ScenarioDigests
-    ) -> LaunchRequest:
-        return request_for(repo, robot_id, assignment, s, d)
+    def fresh(robot_id: str, assignment: RobotAssignment, s: ScenarioRequests) -> RenderedRequest:
+        return request_for(repo, robot_id, assignment, s)
 
     scenario_for = scenario_of or each_once
     request = request_of or fresh
     for robot_id, assignment in fleet.robots.items():
-        scenario = scenario_for(assignment.scenario)
-        result.requests[robot_id] = request(
-            robot_id, assignment, scenario, digests_of(assignment.scenario, scenario)
-        )
+        result.requests[robot_id] = request(robot_id, assignment, scenario_for(assignment.scenario))
         result.scenario_of[robot_id] = assignment.scenario
         result.labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
@@ -250,4 +202,4 @@ def render_robot(repo: Repository, robot_id: str) -> LaunchRequest:
             f"robot '{robot_id}' is not in configs/fleet.yaml"
             f"{did_you_mean(robot_id, repo.fleet.model.robots)}"
         )
-    return request_for(repo, robot_id, assignment, render_scenario(repo, assignment.scenario))
+    return request_for(repo, robot_id, assignment).model()

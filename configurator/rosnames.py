@@ -130,12 +130,17 @@ def resolve_name(name: str, namespace: str | None) -> str:
     `{namespace}` becomes the namespace, and without one raises UnresolvableName: a scheme
     writes it to say its names are per robot, and putting them at the root would make every
     robot without a namespace share them."""
+    return resolve_in(name, None if namespace is None else absolute_namespace(namespace))
+
+
+def resolve_in(name: str, absolute: str | None) -> str:
+    """`resolve_name` in a namespace written absolute already (or None)."""
     if needs_namespace(name):
-        if namespace is None:
+        if absolute is None:
             raise UnresolvableName(f"'{name}' needs the robot's namespace, and it has none")
-        return absolute_namespace(namespace) + name[len(NAMESPACE_SUBSTITUTION) :]
+        return absolute + name[len(NAMESPACE_SUBSTITUTION) :]
     if name.startswith("/"):
         return name
-    if namespace is None:
+    if absolute is None:
         return "/" + name
-    return absolute_namespace(namespace) + "/" + name
+    return absolute + "/" + name

@@ -23,6 +23,7 @@ from pydantic import ValidationError
 from configurator.backoff import Backoff
 from configurator.launch import LaunchRequest, StopRequest
 from configurator.mqtt import Connection
+from configurator.rendered import RenderedRequest
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.signing import Signed
 from configurator.source import SourceError
@@ -229,7 +230,7 @@ class Controller:
         return outcome
 
     def _tell_step(
-        self, condition: Condition, actions: Actions[LaunchRequest] | None, seconds: float
+        self, condition: Condition, actions: Actions[RenderedRequest] | None, seconds: float
     ) -> None:
         """The `on_step` observer learns what the step did; its failure is only logged."""
         if self._on_step is None:
@@ -270,7 +271,7 @@ class Controller:
 
     def reconcile_once(
         self, *, fetch: bool = False
-    ) -> tuple[Outcome, Condition | None, Actions[LaunchRequest] | None]:
+    ) -> tuple[Outcome, Condition | None, Actions[RenderedRequest] | None]:
         """Observe (source, broker) -> decide (pure) -> apply, once: what happened and the
         condition to report (none while the broker's retained messages are not known)."""
         seen = self._observe(fetch)
@@ -384,7 +385,7 @@ class Controller:
         # Signed at publish time: issued_at is when the robot was told, not when it was built.
         sign = self._sign
         items = [
-            (self.topics.launch(r), (sign(req) if sign else req).payload())
+            (self.topics.launch(r), sign(req.model()).payload() if sign else req.payload())
             for r, req in actions.publish.items()
         ]
         items += [
@@ -518,7 +519,7 @@ class Controller:
     def _report(
         self,
         condition: Condition,
-        actions: Actions[LaunchRequest] | None,
+        actions: Actions[RenderedRequest] | None,
         *,
         heartbeat: bool = False,
     ) -> None:
@@ -553,7 +554,7 @@ class RequestSizes:
     def __init__(self) -> None:
         self._without_revision: dict[str, int] = {}
 
-    def size(self, request: LaunchRequest) -> int:
+    def size(self, request: RenderedRequest | LaunchRequest) -> int:
         revision = request.revision
         if not (revision.isascii() and revision.isalnum()):
             return len(request.payload())  # escapes would make its length another
@@ -563,6 +564,6 @@ class RequestSizes:
             self._without_revision[request.digest] = base
         return base + len(revision)
 
-    def keep_only(self, requests: Iterable[LaunchRequest]) -> None:
+    def keep_only(self, requests: Iterable[RenderedRequest | LaunchRequest]) -> None:
         digests = {r.digest for r in requests}
         self._without_revision = {d: n for d, n in self._without_revision.items() if d in digests}

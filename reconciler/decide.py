@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Set
 from dataclasses import dataclass, field, replace
 
-from configurator.launch import LaunchRequest
+from configurator.rendered import RenderedRequest
 from configurator.wire import (
     AgentStatus,
     ReconcilerReason,
@@ -78,7 +78,7 @@ class Decision:
     """What to make the broker hold (`target`, through `actions`) and what to report."""
 
     target: Desired | None
-    actions: Actions[LaunchRequest] | None
+    actions: Actions[RenderedRequest] | None
     condition: Condition
     stable: Desired | None = None  # the last revision fully applied, once this step is
     recheck_at: float | None = None  # unix time to look again though nothing arrives
@@ -115,7 +115,7 @@ def decide(seen: Observation) -> Decision:
         return _decide_rollout(seen, build)
     problems = list(build.problems)
     reason = _failure(seen)
-    actions: Actions[LaunchRequest] | None = None
+    actions: Actions[RenderedRequest] | None = None
     if build.fleet is not None:
         fleet = build.fleet
         actions = diff(

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from pydantic import ValidationError
 
-from configurator.launch import LaunchRequest
+from configurator.rendered import RenderedRequest
 from configurator.safejson import PayloadError
 from configurator.wire import ReconcilerStatus, Topics, now
 from reconciler.decide import Condition, Reason
@@ -41,7 +41,7 @@ class Followed:
 
 def status_of(
     condition: Condition,
-    actions: Actions[LaunchRequest] | None,
+    actions: Actions[RenderedRequest] | None,
     *,
     serving: Desired | None,
     head: str | None,

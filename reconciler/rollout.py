@@ -11,8 +11,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 
-from configurator.launch import LaunchRequest
 from configurator.render import FleetRender
+from configurator.rendered import RenderedRequest
 from configurator.types import RolloutPolicy
 from configurator.waves import assign_waves, failure_budget
 from configurator.wire import (
@@ -54,7 +54,7 @@ class RolloutInput:
 class RolloutStep:
     """What the broker should hold now, and where the rollout stands."""
 
-    requests: dict[str, LaunchRequest] = field(default_factory=dict)  # to hold (publish if not)
+    requests: dict[str, RenderedRequest] = field(default_factory=dict)  # to hold (publish if not)
     keep: set[str] = field(default_factory=set)  # left exactly as they are
     status: RolloutStatus | None = None
     recheck_at: float | None = None  # unix time a health judgment changes with no new message
@@ -112,7 +112,7 @@ class _Rollout:
         policy: RolloutPolicy,
         waves: dict[str, int],
         changed: set[str],
-        stable_requests: Mapping[str, LaunchRequest],
+        stable_requests: Mapping[str, RenderedRequest],
     ) -> None:
         self.seen = seen
         self.policy = policy

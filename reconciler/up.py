@@ -124,7 +124,7 @@ def agent_yaml(
 ) -> dict[str, Any]:
     """The agent.yaml of one robot: it recommends the template it is assigned (no warning)."""
     request = fleet.requests[robot_id]
-    capability = request.scenario.capability
+    capability = request.scenario_requests.scenario.capability  # what every robot of it shares
     description: dict[str, Any] = {"id": robot_id, "name": request.robot_name}
     if capability.robot_template:
         description["recommended_template"] = capability.robot_template

@@ -61,7 +61,7 @@ def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
             fleet.scenario_of.get(robot_id),
             request.digest,
             robot_id in fleet.suspended,
-            request.scenario.capability.robot_template,
+            request.robot_template,
             fleet.labels.get(robot_id, {}),
             waves.get(robot_id),
         )

@@ -37,8 +37,6 @@ def agent_argv() -> list[str]:
     return [sys.executable, "-m", "agent.cli"]
 
 
-
-
 def make_request(
     robot_id: str = "tb3-01",
     variant: int = 0,
@@ -128,8 +126,6 @@ def read_retained(broker: Broker, topic: str) -> bytes:
         client.disconnect()
         client.loop_stop()
     return got[0]
-
-
 
 
 class AgentProc:

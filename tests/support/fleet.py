@@ -15,8 +15,8 @@ from typing import Any
 
 import yaml
 
-from configurator.launch import LaunchRequest
 from configurator.mqtt import Connection
+from configurator.rendered import RenderedRequest
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
 from reconciler.source import BranchSource
@@ -50,8 +50,6 @@ def robotconf_argv(*args: str) -> list[str]:
     ]
 
 
-
-
 class GitLab(Lab):
     """The example lab in a fresh git repository (branch main), committed."""
 
@@ -72,7 +70,7 @@ class GitLab(Lab):
     def head(self) -> str:
         return self.git("rev-parse", "HEAD")
 
-    def requests(self, revision: str | None = None) -> dict[str, LaunchRequest]:
+    def requests(self, revision: str | None = None) -> dict[str, RenderedRequest]:
         desired = load_desired(self.root, revision or self.head())
         assert desired.fleet is not None, desired.problems
         return desired.fleet.requests
@@ -148,8 +146,6 @@ def start_reconciler(lab: GitLab, url: str, log: Path, *extra: str) -> Proc:
         ),
         log,
     )
-
-
 
 
 def pid_alive(pid: int) -> bool:

@@ -128,8 +128,9 @@ class Mosquitto:
         while time.monotonic() < deadline:
             if not self.running:
                 return False
-            with contextlib.suppress(OSError), socket.create_connection(
-                (self.host, self.port), timeout=0.5
+            with (
+                contextlib.suppress(OSError),
+                socket.create_connection((self.host, self.port), timeout=0.5),
             ):
                 return True
             time.sleep(0.05)

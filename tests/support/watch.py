@@ -14,8 +14,8 @@ from typing import Any, Protocol, TypeVar
 import paho.mqtt.client as paho
 from pydantic import ValidationError
 
-from configurator.launch import LaunchRequest
 from configurator.mqtt import Connection
+from configurator.rendered import RenderedRequest
 from configurator.safejson import PayloadError
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
 from reconciler.observed import parse_retained
@@ -244,7 +244,7 @@ class FleetWatch:
         described = ", ".join(f"{k}={v}" for k, v in fields.items())
         return self.wait_for(robot_id, matches, f"state {state.value} {described}", agent=agent)
 
-    def running(self, requests: Mapping[str, LaunchRequest]) -> dict[str, AgentStatus] | None:
+    def running(self, requests: Mapping[str, RenderedRequest]) -> dict[str, AgentStatus] | None:
         """Every robot's status when each one runs its request's digest, else None."""
         found = {}
         for robot_id, request in requests.items():
@@ -256,7 +256,7 @@ class FleetWatch:
             found[robot_id] = status
         return found
 
-    def wait_running(self, requests: Mapping[str, LaunchRequest]) -> dict[str, AgentStatus]:
+    def wait_running(self, requests: Mapping[str, RenderedRequest]) -> dict[str, AgentStatus]:
         return self.wait(lambda: self.running(requests), f"{sorted(requests)} running")
 
     def wait_reconciler(

@@ -12,11 +12,10 @@ from tests.support.lab import Lab
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
 
 
-
 def test_digest_covers_content_not_revision(lab: Lab) -> None:
     first = lab.commit("lab")
     before = render_fleet(lab.check(first).repo)
-    assert all(r.revision == first and r.digest_matches() for r in before.requests.values())
+    assert all(r.revision == first and r.model().digest_matches() for r in before.requests.values())
     # An unrelated commit: a description and a new, unused scenario.
     lab.replace("models/actions/OpenDoor.yaml", "platforms:", "name: OpenDoor\nplatforms:")
     lab.write("configs/scenarios/spare.yaml", "capability: turtlebot3-guide\n")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from configurator.launch import LaunchRequest
+from configurator.rendered import RenderedRequest
 from configurator.wire import AgentStatus
 from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start_reconciler
 from tests.support.mosquitto import Mosquitto
@@ -42,7 +42,7 @@ class Fleet:
         )
         return self.reconciler
 
-    def requests(self, revision: str | None = None) -> dict[str, LaunchRequest]:
+    def requests(self, revision: str | None = None) -> dict[str, RenderedRequest]:
         return self.lab.requests(revision)
 
     def status_cli(self, *extra: str) -> subprocess.CompletedProcess[str]:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from configurator.launch import LaunchRequest, StopRequest, with_digest
+from configurator.launch import LaunchRequest, StopRequest
 from configurator.mqtt import Connection
 from configurator.signing import Signed, generate_keys, load_public_key, verify
 from configurator.wire import ReconcilerStatus, Topics
@@ -33,8 +33,6 @@ NOT_UTF8 = b'{"robot_id": "tb3-01", "state": "running\xff"}'
 DUPLICATE = b'{"robot_id": "tb3-01", "state": "running", "state": "idle"}'
 FAKE_PLACEHOLDER = b"\x00oversized x"  # what the reconciler keeps for a dropped payload, nearly
 HOSTILE = [DEEP, BIG, NOT_UTF8, DUPLICATE, FAKE_PLACEHOLDER]
-
-
 
 
 def publish(url: str, items: list[tuple[str, bytes]]) -> None:
@@ -145,9 +143,9 @@ def test_a_request_too_large_for_an_agent_is_a_build_error(
         desired = load_desired(root, revision)
         if revision != lab.first and desired.fleet is not None:
             request = desired.fleet.requests["tb3-03"]
-            # Sealed as rendering seals a request: its digest covers the long name.
-            desired.fleet.requests["tb3-03"] = with_digest(
-                request.model_copy(update={"robot_name": "x" * MAX_REQUEST_BYTES})
+            # Rendered as any request is: its digest covers the long name.
+            desired.fleet.requests["tb3-03"] = request.scenario_requests.request(
+                "tb3-03", "x" * MAX_REQUEST_BYTES, request.revision, request.namespace
             )
         return desired
 

@@ -95,4 +95,4 @@ def test_plan_builds_its_head_from_its_base(lab: GitLab) -> None:
 
 def lab_scenarios(lab: GitLab) -> dict[str, str]:
     requests = lab.requests(lab.first)
-    return {robot_id: request.scenario.name for robot_id, request in requests.items()}
+    return {robot_id: request.scenario_name for robot_id, request in requests.items()}

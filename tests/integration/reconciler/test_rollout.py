@@ -9,7 +9,7 @@ import json
 
 import yaml
 
-from configurator.launch import LaunchRequest
+from configurator.rendered import RenderedRequest
 from configurator.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.watch import wait_for
@@ -57,7 +57,7 @@ def launched(fleet: Fleet, robot: str) -> list[float]:
     return [at for t, payload, at in fleet.watch.live_launches if t == topic and payload]
 
 
-def running_digest(fleet: Fleet, robot: str, request: LaunchRequest) -> bool:
+def running_digest(fleet: Fleet, robot: str, request: RenderedRequest) -> bool:
     status = fleet.watch.status(robot)
     return (
         status is not None
@@ -82,9 +82,7 @@ def test_a_crashing_canary_stops_the_rollout_and_is_rolled_back(fleet: Fleet) ->
         'knowledge: {TARGET: {GOAL_ID: "2"}, STANDIN_CRASH: 3}',
     )
     bad = fleet.lab.commit("a commit whose brain crashes")
-    status = fleet.watch.wait_reconciler(
-        lambda s: s.reason == "RolledBack", "the rollback"
-    )
+    status = fleet.watch.wait_reconciler(lambda s: s.reason == "RolledBack", "the rollback")
     assert status.state == "Stalled" and status.reason == "RolledBack"
     assert status.failed_revision == bad and status.last_applied_revision == stable
     assert status.rollout is not None and status.rollout.failed == [CANARY]

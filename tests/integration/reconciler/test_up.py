@@ -184,9 +184,7 @@ def test_the_generated_agent_yaml_is_valid_with_credentials_and_tls(
     settings = agent_yaml(render, "tb3-01", tmp_path / "work", connection, "robotconf")
     config = parse_config(yaml.safe_dump(settings), "agent.yaml", base=tmp_path)
     assert config.robot_id == "tb3-01"
-    assert config.description.recommended_template == (
-        fleet["tb3-01"].scenario.capability.robot_template
-    )
+    assert config.description.recommended_template == (fleet["tb3-01"].robot_template)
     assert config.connection().address.tls and config.username == "lab"
     assert config.tls is not None and config.tls.ca_file == secrets["ca.crt"]
 

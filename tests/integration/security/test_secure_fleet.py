@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from configurator.launch import LaunchRequest, canonical_json, content_digest
+from configurator.rendered import RenderedRequest
 from configurator.signing import generate_keys, load_private_key, sign
 from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.retained import RetainedView
@@ -41,7 +42,7 @@ class SecureFleet:
     def launch(self, robot_id: str) -> bytes:
         return self.view.retained().get(TOPICS.launch(robot_id), b"")
 
-    def wait_running(self, requests: dict[str, LaunchRequest]) -> dict[str, AgentStatus]:
+    def wait_running(self, requests: Mapping[str, RenderedRequest]) -> dict[str, AgentStatus]:
         return self.view.wait_running(requests)
 
     def send(self, robot_id: str, payload: bytes) -> None:

@@ -14,21 +14,16 @@ from configurator.launch import (
     CONTENT_WHEN_SET,
     DIGEST_EXCLUDED,
     LaunchRequest,
-    ScenarioDigests,
     content_digest,
     digest_content,
-    make_launch_request,
     restart_digest_of,
     template_mismatch,
     with_digest,
 )
-from configurator.render import FleetRender, for_robot, render_fleet
 from configurator.wire import AgentState, AgentStatus, RobotDescription
-from configurator.workspace import check
 from reconciler.observed import RobotSeen
 from reconciler.verdicts import DesiredRobot, template_warning
 from tests.support.agents import make_request
-from tests.support.lab import ROOT
 
 
 class AnnotatedRequest(LaunchRequest):
@@ -176,54 +171,3 @@ def test_a_namespace_is_content_and_restart_content_only_when_set() -> None:
     data = json.loads(placed.payload())
     data["namespace"] = "/tb3_09"
     assert not LaunchRequest.model_validate(data).digest_matches()
-
-
-# ---------------------------------------------------------------- digests by scenario
-
-
-def _example_fleet() -> FleetRender:
-    checked = check(ROOT)
-    assert checked.ok, checked.errors
-    return render_fleet(checked.repo)
-
-
-def test_a_scenarios_digests_are_those_of_the_whole_request() -> None:
-    """Rendering digests each robot from its scenario's bytes and its own values: the very
-    digests of the request serialised whole, with a namespace and without."""
-    rendered = _example_fleet()
-    assert {r.namespace is None for r in rendered.requests.values()} == {True, False}
-    for request in rendered.requests.values():
-        assert request == with_digest(request) and request.digest_matches()
-
-
-@pytest.mark.parametrize(
-    ("robot_name", "namespace", "knowledge"),
-    [
-        ('quotes " \\ and é 漢字 \u2028', None, {}),
-        ("tab\tnewline\n", "/lab/bots", {"text": "\x00robotconf:robot_id\x00"}),
-        ("\x00robotconf:robot_name\x00", "/x", {"a": ["\x00robotconf:mappings\x00"]}),
-        ("plain", "/ns", {"k": '"\\u0000robotconf:robot_id\\u0000"'}),
-        ("plain", None, {"\x00robotconf:namespace\x00": 1}),
-    ],
-)
-def test_scenario_digests_with_odd_values(
-    robot_name: str, namespace: str | None, knowledge: dict[str, Any]
-) -> None:
-    """Values that look like the slots, or need escaping, give the whole request's digests
-    (or the whole request is digested)."""
-    request = next(iter(_example_fleet().requests.values()))
-    shared = request.scenario.model_copy(update={"environment_knowledge": knowledge})
-    scenario = for_robot(shared, request.robot_id, "tb3_09")
-    made = make_launch_request(
-        request.robot_id, robot_name, "r", scenario, namespace, ScenarioDigests(shared)
-    )
-    assert made == with_digest(made) and made.digest_matches()
-
-
-def test_a_scenario_without_mappings_is_digested_whole() -> None:
-    request = next(iter(_example_fleet().requests.values()))
-    capability = request.scenario.capability.model_copy(update={"mappings": {}})
-    shared = request.scenario.model_copy(update={"capability": capability})
-    assert ScenarioDigests(shared).of(request.model_copy(update={"scenario": shared})) is None
-    made = make_launch_request("tb3-09", "x", "r", shared, None, ScenarioDigests(shared))
-    assert made == with_digest(made)

@@ -8,6 +8,7 @@ import pytest
 
 from configurator.launch import LaunchRequest
 from configurator.render import RenderError, deep_merge, render_fleet, render_robot
+from configurator.rendered import RenderedRequest
 from tests.support.lab import Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
@@ -86,8 +87,9 @@ GAZEBO = "models/platforms/ROS2/mapping-schemes/gazebo.yaml"
 FLEET = "configs/fleet.yaml"
 
 
-def names(request: LaunchRequest) -> dict[str, str]:
-    return {key: b.name for key, b in request.scenario.capability.mappings.items()}
+def names(request: RenderedRequest | LaunchRequest) -> dict[str, str]:
+    model = request.model() if isinstance(request, RenderedRequest) else request
+    return {key: b.name for key, b in model.scenario.capability.mappings.items()}
 
 
 def test_each_robot_gets_its_fully_qualified_names_and_namespace(lab: Lab) -> None:
@@ -100,7 +102,7 @@ def test_each_robot_gets_its_fully_qualified_names_and_namespace(lab: Lab) -> No
         "door_opener": "/sim/door_controller/open",  # absolute: the world's, shared
     }
     assert names(delivery)["odometry"] == "/tb3_01/odom"
-    assert render_robot(lab.check().repo, "tb3-02") == guide  # one robot as in the fleet
+    assert render_robot(lab.check().repo, "tb3-02") == guide.model()  # as in the fleet
     # A robot of another scenario keeps its absolute names, and has no namespace.
     assert rendered["tb3-04"].namespace is None
     assert names(rendered["tb3-04"])["odometry"] == "/odom"

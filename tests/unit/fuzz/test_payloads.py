@@ -133,9 +133,5 @@ def test_a_mutated_request_never_passes_as_another(payload: bytes) -> None:
     message = parse_message(LaunchRequest, payload)
     if isinstance(message, LaunchRequest) and message.digest_matches():
         assert canonical_json(message.content()) == canonical_json(
-            {
-                k: v
-                for k, v in parse_object(payload).items()
-                if k not in DIGEST_EXCLUDED
-            }
+            {k: v for k, v in parse_object(payload).items() if k not in DIGEST_EXCLUDED}
         )
