@@ -38,7 +38,13 @@ from configurator.wire import (
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
-from reconciler.observed import RECONCILER_STATUS, ReadMemo, parse_retained
+from reconciler.observed import (
+    RECONCILER_STATUS,
+    ReadMemo,
+    launch_summary,
+    parse_retained,
+    summarise_launches,
+)
 from reconciler.report import Followed, StatusWriter, one_line, status_of
 from reconciler.retained import Ignored, Presence, RetainedView, read_object, take_snapshot
 from reconciler.source import BranchSource
@@ -123,6 +129,7 @@ class Controller:
             on_synced=self._wake.set,
             on_topic=self._on_topic,
             no_local=no_local,
+            keep=summarise_launches(self.topics),
         )
         # The Last Will (state Offline) lives on a connection of its own: a will is fixed at
         # connect time, and this one must name the revision applied last.
@@ -388,11 +395,14 @@ class Controller:
             (self.topics.launch(r), sign(req.model()).payload() if sign else req.payload())
             for r, req in actions.publish.items()
         ]
-        items += [
+        kept = [launch_summary("LaunchRequest", req.digest) for req in actions.publish.values()]
+        stops = [
             (self.topics.launch(r), self._stop_payload(r, target.revision)) for r in actions.clear
         ]
+        items += stops
+        kept += [payload for _, payload in stops]  # a Stop is kept whole (summarise_launches)
         publishing = time.monotonic()
-        if not self.view.publish_retained(items, self.publish_timeout):
+        if not self.view.publish_retained(items, self.publish_timeout, kept):
             return decision.unacknowledged(self.view.last_error)
         done = time.monotonic()
         log.info(

@@ -6,13 +6,13 @@ only here. Unreadable payloads (size, depth, JSON, schema) are skipped and count
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from configurator.launch import LaunchRequest, StopRequest
+from configurator.launch import LaunchRequest, StopRequest, canonical_json
 from configurator.safejson import PayloadError
 from configurator.wire import (
     ACTIVE_STATES,
@@ -87,6 +87,31 @@ class LaunchHeader(BaseModel):
 
     kind: str | None = None
     digest: str | None = None
+
+
+def launch_summary(kind: str | None, digest: str | None) -> bytes:
+    """What the reconciler keeps of a launch request it holds or publishes: its kind and
+    digest, which `parse_retained(requests=False)` reads as it reads the whole request."""
+    return canonical_json({"digest": digest, "kind": kind})
+
+
+def summarise_launches(topics: Topics) -> Callable[[str, bytes], bytes]:
+    """For a RetainedView's `keep`: each launch payload as its `launch_summary`; a Stop, an
+    unreadable payload and any other topic's kept whole (they read the same only so)."""
+
+    def keep(topic: str, payload: bytes) -> bytes:
+        where = topics.robot_of(topic)
+        if where is None or where[1] != "launch":
+            return payload
+        try:
+            header = LaunchHeader.model_validate(read_object(payload))
+        except Exception:  # on the network thread: whatever it is, it is kept whole
+            return payload
+        if header.kind == "Stop":
+            return payload
+        return launch_summary(header.kind, header.digest)
+
+    return keep
 
 
 @dataclass(frozen=True)

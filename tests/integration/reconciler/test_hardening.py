@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import subprocess
 import time
 from collections.abc import Callable
@@ -288,7 +289,9 @@ def test_a_stale_or_missing_reconciler_fails_status(
     publish(mosquitto.url, [(TOPICS.reconciler_status, hung.model_dump_json().encode())])
     watch.wait_reconciler(lambda s: s.heartbeat == hung.heartbeat, "the hung status")
     done = status_cli(mosquitto.url, lab)
-    assert done.returncode == 1 and "STALE: its last heartbeat is 3600 s old" in done.stdout
+    # 3600 s when published; a loaded machine may take a second or two to run the CLI.
+    assert done.returncode == 1
+    assert re.search(r"STALE: its last heartbeat is 360[0-9] s old", done.stdout), done.stdout
     report = json.loads(status_cli(mosquitto.url, lab, "--json").stdout)
     assert report["reconciler_health"] == "stale"
 
