@@ -35,6 +35,7 @@ from configurator.wire import (
     Topics,
     short_rev,
 )
+from reconciler import heap
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
@@ -402,9 +403,12 @@ class Controller:
         items += stops
         kept += [payload for _, payload in stops]  # a Stop is kept whole (summarise_launches)
         publishing = time.monotonic()
-        if not self.view.publish_retained(items, self.publish_timeout, kept):
-            return decision.unacknowledged(self.view.last_error)
+        acknowledged = self.view.publish_retained(items, self.publish_timeout, kept)
         done = time.monotonic()
+        del items, kept, stops  # 10,000 payloads: freed, then given back to the system
+        heap.release()
+        if not acknowledged:
+            return decision.unacknowledged(self.view.last_error)
         log.info(
             "applied %s: %d published, %d cleared, %d unchanged%s (%.3f s; publishing, first "
             "message to last PUBACK, %.3f s)",
@@ -438,6 +442,7 @@ class Controller:
         if built is None:
             started = time.monotonic()
             built = self._build_safely(revision)
+            heap.release()  # what the build parsed and dropped
             log.info("built %s in %.3f s", short_rev(revision), time.monotonic() - started)
             self._built[revision] = built
             # The head and the revision served (a rollout's stable one): each kept build holds
