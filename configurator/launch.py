@@ -144,11 +144,15 @@ class RestartRequest(_Published):
     issued_at: float = Field(description="unix time the restart was asked for")
 
 
+# One encoder for every call: json.dumps makes a new one whenever an option is not its default.
+_CANONICAL = json.JSONEncoder(
+    sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False
+)
+
+
 def canonical_json(value: Any) -> bytes:
     """Sorted keys, no insignificant white space, UTF-8: equal content, equal bytes."""
-    return json.dumps(
-        value, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False
-    ).encode("utf-8")
+    return _CANONICAL.encode(value).encode("utf-8")
 
 
 def content_digest(content: Any) -> str:

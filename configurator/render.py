@@ -179,15 +179,17 @@ def _render_fleet(
             scenario = scenarios[name] = ScenarioRequests(render_scenario(repo, name))
         return scenario
 
-    def fresh(robot_id: str, assignment: RobotAssignment, s: ScenarioRequests) -> RenderedRequest:
-        return request_for(repo, robot_id, assignment, s)
-
     scenario_for = scenario_of or each_once
-    request = request_of or fresh
+    requests, scenario_names, labels = result.requests, result.scenario_of, result.labels
     for robot_id, assignment in fleet.robots.items():
-        result.requests[robot_id] = request(robot_id, assignment, scenario_for(assignment.scenario))
-        result.scenario_of[robot_id] = assignment.scenario
-        result.labels[robot_id] = dict(assignment.labels)
+        scenario = scenario_for(assignment.scenario)
+        requests[robot_id] = (
+            request_for(repo, robot_id, assignment, scenario)
+            if request_of is None
+            else request_of(robot_id, assignment, scenario)
+        )
+        scenario_names[robot_id] = assignment.scenario
+        labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
             result.suspended.add(robot_id)
     return result

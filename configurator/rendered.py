@@ -14,6 +14,7 @@ from json.encoder import encode_basestring
 from typing import Any
 
 from configurator.launch import (
+    LaunchCapability,
     LaunchRequest,
     LaunchScenario,
     canonical_json,
@@ -115,46 +116,64 @@ class ScenarioRequests:
         capability with its mappings as a slot, the mappings with their names resolved in
         the namespace's slot; the request around the scenario, the restart content around
         the capability (both the same for every scenario: `_around`)."""
+        capability = _capability_templates(self.scenario.capability, with_namespace, mark)
+        if capability is None:
+            return None
+        around_capability, restart = capability
         prefix = f"\x00robotconf{mark}:"
-        slot = {name: f"{prefix}{name}\x00" for name in (*_NESTED, "namespace")}
-        in_namespace = slot["namespace"] if with_namespace else None
-        capability = self.scenario.capability
-        try:
-            mappings = canonical_json(
-                {
-                    key: {
-                        **binding.model_dump(mode="json"),
-                        "name": resolve_in(binding.name, in_namespace),
-                    }
-                    for key, binding in capability.mappings.items()
-                }
-            )
-        except UnresolvableName as e:
-            raise UnresolvedMapping(str(e)) from None
-        outer = capability.model_dump(mode="json", exclude={_MAPPINGS})
-        outer[_MAPPINGS] = slot[_MAPPINGS]
-        around_capability = canonical_json(outer)
         body = self.scenario.model_dump(mode="json", exclude={_CAPABILITY})
-        body[_CAPABILITY] = slot[_CAPABILITY]
+        body[_CAPABILITY] = f"{prefix}{_CAPABILITY}\x00"
         around_scenario = canonical_json(body)
         marker = _inner(prefix)
-        if around_scenario.count(marker) != 1 or around_capability.count(marker) != 1:
+        if around_scenario.count(marker) != 1:
             return None
-        namespaced = sum(resolve_in(b.name, "") != b.name for b in capability.mappings.values())
-        if mappings.count(marker) != (namespaced if with_namespace else 0):
-            return None
-        capability_template = _nest(
-            _template(around_capability, marker), _MAPPINGS, _template(mappings, marker)
-        )
-        scenario_template = _nest(
-            _template(around_scenario, marker), _CAPABILITY, capability_template
-        )
-        content, restart, payload = _around(with_namespace, mark)
+        scenario = _nest(_template(around_scenario, marker), _CAPABILITY, around_capability)
+        content, _, payload = _around(with_namespace, mark)
         return _shared(
-            _nest(content, _SCENARIO, scenario_template),
-            _nest(restart, _CAPABILITY, capability_template),
-            _nest(payload, _SCENARIO, scenario_template),
+            _nest(content, _SCENARIO, scenario), restart, _nest(payload, _SCENARIO, scenario)
         )
+
+
+# Capability name -> its templates, shared by the scenarios of a capability while it stays the
+# same (many scenarios use one capability); bounded, and checked equal before each use.
+_CAPABILITIES: dict[tuple[str, bool, int], tuple[LaunchCapability, _Template, _Template]] = {}
+_MAX_CAPABILITIES = 4096
+
+
+def _capability_templates(
+    capability: LaunchCapability, with_namespace: bool, mark: int
+) -> tuple[_Template, _Template] | None:
+    """The capability with its mapping names resolved in the namespace's slot, and the
+    restart content around it; None when its text contains the mark."""
+    key = (capability.name, with_namespace, mark)
+    found = _CAPABILITIES.get(key)
+    if found is not None and found[0] == capability:
+        return found[1], found[2]
+    prefix = f"\x00robotconf{mark}:"
+    in_namespace = f"{prefix}namespace\x00" if with_namespace else None
+    outer = capability.model_dump(mode="json")
+    bindings = outer[_MAPPINGS]
+    try:
+        for binding in bindings.values():
+            binding["name"] = resolve_in(binding["name"], in_namespace)
+    except UnresolvableName as e:
+        raise UnresolvedMapping(str(e)) from None
+    mappings = canonical_json(bindings)
+    outer[_MAPPINGS] = f"{prefix}{_MAPPINGS}\x00"
+    around_mappings = canonical_json(outer)
+    marker = _inner(prefix)
+    names = [b.name for b in capability.mappings.values()]
+    namespaced = sum(resolve_in(name, "") != name for name in names)
+    if around_mappings.count(marker) != 1 or mappings.count(marker) != (
+        namespaced if with_namespace else 0
+    ):
+        return None
+    template = _nest(_template(around_mappings, marker), _MAPPINGS, _template(mappings, marker))
+    restart = _nest(_around(with_namespace, mark)[1], _CAPABILITY, template)
+    if len(_CAPABILITIES) >= _MAX_CAPABILITIES:
+        _CAPABILITIES.clear()
+    _CAPABILITIES[key] = (capability, template, restart)
+    return template, restart
 
 
 @functools.cache
@@ -265,24 +284,18 @@ class RenderedRequest:
         return f"RenderedRequest({self.robot_id!r}, {self.scenario_name!r}, {self.digest[:15]}…)"
 
 
-def _values(
-    robot_id: str,
-    robot_name: str,
-    namespace: str | None,
-    revision: str = "",
-    digest: str = "",
-    restart_digest: str = "",
-) -> list[bytes]:
-    """A robot's values as they are written inside JSON strings, in _SLOT_NAMES order (the
-    digests' templates hold none of the last three)."""
+def _values(robot_id: str, robot_name: str, namespace: str | None, *rest: str) -> list[bytes]:
+    """A robot's values as they are written inside JSON strings, in _SLOT_NAMES order; `rest`
+    the revision and digests (the digests' templates hold none of them)."""
     return [
         _inner(robot_id),
         _inner(robot_name),
         b"" if namespace is None else _inner(namespace),
-        _inner(revision),
-        _inner(digest),
-        _inner(restart_digest),
+        *(map(_inner, rest) if rest else _NOT_DIGESTED),
     ]
+
+
+_NOT_DIGESTED = (b"", b"", b"")
 
 
 def _renamed(binding: MappingBinding, name: str) -> MappingBinding:
@@ -349,8 +362,7 @@ def _shared(*templates: _Template) -> tuple[_Template, _Template, _Template]:
     the same scenario bytes): what 1,000 scenarios' templates hold, halved."""
     seen: dict[bytes, bytes] = {}
     content, restart, payload = (
-        (tuple(seen.setdefault(part, part) for part in parts), slots)
-        for parts, slots in templates
+        (tuple(seen.setdefault(part, part) for part in parts), slots) for parts, slots in templates
     )
     return content, restart, payload
 

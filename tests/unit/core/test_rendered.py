@@ -183,3 +183,16 @@ def test_any_text_gives_the_whole_requests_bytes(
 ) -> None:
     shared = _shared().model_copy(update={"environment_knowledge": knowledge})
     _assert_same(shared, ("tb3-09", robot_name, revision, namespace))
+
+
+def test_scenarios_of_one_capability_share_its_templates_only_while_it_is_the_same() -> None:
+    """A capability's bytes are made once for its scenarios; one of the same name whose
+    content differs (the next commit's) gets bytes of its own."""
+    first = _shared()
+    second = first.model_copy(update={"name": "other", "environment_knowledge": {"k": 1}})
+    changed = first.capability.model_copy(update={"platform": "elsewhere"})
+    third = first.model_copy(update={"capability": changed})
+    for scenario in (first, second, third, first):
+        _assert_same(scenario, ("tb3-01", "bot", "r", "/tb3_01"))
+    made = [ScenarioRequests(s).request("tb3-01", "b", "r", "/n") for s in (first, third)]
+    assert made[0].restart_digest != made[1].restart_digest
