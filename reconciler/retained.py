@@ -98,6 +98,18 @@ def _guarded(handler: Callable[P, None]) -> Callable[P, None]:
     return run
 
 
+# Messages in flight at once when publishing many: enough to keep a broker busy (a PUBACK
+# comes back within a millisecond on a LAN), few enough that what paho holds stays small.
+PUBLISH_WINDOW = 1000
+
+
+def _settled(info: paho.MQTTMessageInfo, deadline: float) -> None:
+    """Waits until `info` is acknowledged, failed or the deadline passed (the caller reads
+    which when it collects every outcome)."""
+    with contextlib.suppress(RuntimeError, ValueError):
+        info.wait_for_publish(max(0.0, deadline - time.monotonic()))
+
+
 def client_id(role: str) -> str:
     """Unique per process and instance: two clients with one id would kick each other off."""
     host = socket.gethostname().split(".")[0][:20] or "host"
@@ -241,12 +253,17 @@ class RetainedView:
             before = {topic: self._arrivals.get(topic, 0) for topic, _ in items}
         # 10,000 publishes allocate enough to set off collections that walk every object
         # the reconciler holds (its whole rendered fleet); none of them is a cycle.
-        with collector_paused():
-            infos = [
-                (topic, copy, self._client.publish(topic, payload, qos=1, retain=True))
-                for (topic, payload), copy in zip(items, kept, strict=True)
-            ]
         deadline = time.monotonic() + timeout
+        infos: list[tuple[str, bytes, paho.MQTTMessageInfo]] = []
+        with collector_paused():
+            for (topic, payload), copy in zip(items, kept, strict=True):
+                if len(infos) >= PUBLISH_WINDOW:
+                    # At most a window in flight: paho holds each message's packet until it
+                    # is written and its payload until the PUBACK, 60 MB for 10,000 at once.
+                    _settled(infos[-PUBLISH_WINDOW][2], deadline)
+                infos.append(
+                    (topic, copy, self._client.publish(topic, payload, qos=1, retain=True))
+                )
         ok = True
         for topic, copy, info in infos:
             try:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import pytest
+
 from configurator.mqtt import Connection
+from reconciler import retained
 from reconciler.retained import RetainedView, speaks_mqtt5
 from tests.support.agents import publish
 from tests.support.mosquitto import Mosquitto, free_port
@@ -54,3 +57,26 @@ def test_no_local_sends_no_echo_yet_reads_back_what_is_retained(mosquitto: Mosqu
         wait_for(lambda: sum(echoing._arrivals.values()) >= before + len(items), "the echoes")
     finally:
         echoing.stop()
+
+
+def test_publishing_more_than_a_window_sends_every_message_and_keeps_what_it_is_told(
+    mosquitto: Mosquitto, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """At most PUBLISH_WINDOW messages are in flight: the rest wait for earlier PUBACKs, and
+    every one is still published, acknowledged and kept (as `kept` says, not the payload)."""
+    monkeypatch.setattr(retained, "PUBLISH_WINDOW", 7)
+    items = [(f"robotconf/robots/w{i}/launch", f"request {i}".encode()) for i in range(60)]
+    kept = [f"kept {i}".encode() for i in range(60)]
+    quiet = view(mosquitto, no_local=True)
+    try:
+        assert quiet.publish_retained(items, 10, kept)
+        mine = {t: p for t, p in quiet.snapshot().items() if "/w" in t}
+        assert mine == {t: k for (t, _), k in zip(items, kept, strict=True)}
+    finally:
+        quiet.stop()
+    again = view(mosquitto, no_local=True)
+    try:
+        held = {t: p for t, p in again.snapshot().items() if "/w" in t}
+        assert held == dict(items)  # the broker holds the payloads themselves
+    finally:
+        again.stop()
