@@ -100,7 +100,7 @@ def _guarded(handler: Callable[P, None]) -> Callable[P, None]:
 
 # Messages in flight at once when publishing many: enough to keep a broker busy (a PUBACK
 # comes back within a millisecond on a LAN), few enough that what paho holds stays small.
-PUBLISH_WINDOW = 1000
+PUBLISH_WINDOW = 2000
 
 
 def _settled(info: paho.MQTTMessageInfo, deadline: float) -> None:
