@@ -11,7 +11,7 @@ own; wall times are medians, memory is the process's peak resident set (os.wait4
   rebuild       one process holding the reconciler's build cache (`DesiredBuilder`): a first
                 build, then N commits that each change one number in one scenario, each
                 built after its `git commit`; p50 of those builds, and the process's resident
-                memory after them (the cache and the last builds, as the controller keeps 4)
+                memory after them (the cache and the last 4 builds; the controller keeps 2)
 
 Run against an older checkout (PYTHONPATH=that checkout), the rebuild is a full build each
 time: the same script measures before and after.
