@@ -34,7 +34,7 @@ from configurator.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_ke
 from configurator.source import SourceError
 from configurator.wire import ReconcilerReason, ReconcilerStatus, Topics, redact_url, short_rev
 from reconciler.controller import Controller
-from reconciler.desired import load_desired
+from reconciler.desired import DesiredBuilder
 from reconciler.fleet_status import change_key, open_view
 from reconciler.lifecycle import log_to_file, on_stop_signals
 from reconciler.observed import parse_retained
@@ -68,6 +68,9 @@ class UpSetup:
     fleet: FleetRender
     workdir: Path
     notes: list[str] = field(default_factory=list)
+    # The build of `head` above, kept: the controller's first build of it reuses every file
+    # and robot instead of building the commit a second time.
+    builder: DesiredBuilder = field(default_factory=DesiredBuilder)
 
 
 def _git_repo(root: Path) -> Any:
@@ -103,7 +106,8 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> UpSetup:
         head = LocalBranch(root, branch).head()
     except SourceError as exc:
         raise CliError(str(exc)) from None
-    desired = load_desired(root, head)
+    builder = DesiredBuilder()
+    desired = builder(root, head)
     if desired.fleet is None:
         shown = "\n  ".join(str(p) for p in desired.problems[:20])
         raise CliError(
@@ -111,7 +115,7 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> UpSetup:
             "fix it (robotconf validate), commit, and run robotconf up again"
         )
     folder = Path(workdir).absolute() if workdir else root / ".robotconf" / "up"
-    return UpSetup(root, branch, head, desired.fleet, folder, notes)
+    return UpSetup(root, branch, head, desired.fleet, folder, notes, builder)
 
 
 def agent_yaml(
@@ -403,6 +407,7 @@ def _run_up(
         RESYNC_INTERVAL,
         on_reconciled=lambda status: changed.set(),
         signer=signer,
+        builder=setup.builder,
     )
     agents = Agents(setup.workdir, connection, prefix, public_key)
     view = open_view(connection, prefix, changed.set)

@@ -28,7 +28,7 @@ from agent.config import parse_config
 from configurator.mqtt import Connection
 from reconciler.broker import EmbeddedBroker, free_port
 from reconciler.desired import load_desired
-from reconciler.up import agent_yaml
+from reconciler.up import agent_yaml, prepare
 from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
@@ -434,3 +434,19 @@ def test_the_embedded_broker_takes_many_clients_at_once_without_an_error() -> No
         broker.stop()
         logging.getLogger().removeHandler(keep)
     assert [r.getMessage() for r in errors] == []
+
+
+def test_up_builds_its_head_once_and_hands_that_build_to_the_reconciler(lab: GitLab) -> None:
+    """`up` checks the head before starting anything; the controller's own first build of
+    it then reuses every file and every robot (no second full build at start)."""
+    setup = prepare(lab.root, "main", None)
+    assert setup.head == lab.first and setup.fleet.requests
+    first = setup.builder.cache.stats
+    assert first.files_parsed > 0 and first.robots_rendered == len(setup.fleet.requests)
+    again = setup.builder(lab.root, setup.head)
+    stats = setup.builder.cache.stats
+    assert stats.files_parsed == 0 and stats.robots_rendered == 0 and not stats.units_run
+    assert again.fleet is not None
+    assert {r: q.payload() for r, q in again.fleet.requests.items()} == {
+        r: q.payload() for r, q in setup.fleet.requests.items()
+    }
