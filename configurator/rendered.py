@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import secrets
 from json.encoder import encode_basestring
 from typing import Any
 
@@ -34,6 +35,14 @@ _CAPABILITY = "capability"
 _MAPPINGS = "mappings"
 # Slots a template is nested at (a whole JSON string replaced by an object), not values.
 _NESTED = {_SCENARIO: -1, _CAPABILITY: -2, _MAPPINGS: -3}
+# What every slot starts with: text of this process's own that a commit cannot know to
+# contain (a commit that held the marks one by one would make a scenario cost a build per
+# mark tried); should a scenario contain it anyway, the next mark is tried.
+_TOKEN = secrets.token_hex(8)
+
+
+def _prefix(mark: int) -> str:
+    return f"\x00robotconf{_TOKEN}.{mark}:"
 
 
 class UnresolvedMapping(Exception):
@@ -120,7 +129,7 @@ class ScenarioRequests:
         if capability is None:
             return None
         around_capability, restart = capability
-        prefix = f"\x00robotconf{mark}:"
+        prefix = _prefix(mark)
         body = self.scenario.model_dump(mode="json", exclude={_CAPABILITY})
         body[_CAPABILITY] = f"{prefix}{_CAPABILITY}\x00"
         around_scenario = canonical_json(body)
@@ -149,7 +158,7 @@ def _capability_templates(
     found = _CAPABILITIES.get(key)
     if found is not None and found[0] == capability:
         return found[1], found[2]
-    prefix = f"\x00robotconf{mark}:"
+    prefix = _prefix(mark)
     in_namespace = f"{prefix}namespace\x00" if with_namespace else None
     outer = capability.model_dump(mode="json")
     bindings = outer[_MAPPINGS]
@@ -180,7 +189,7 @@ def _capability_templates(
 def _around(with_namespace: bool, mark: int) -> tuple[_Template, _Template, _Template]:
     """The digest content, restart content and payload around the scenario (or capability):
     the same for every scenario, since what is not the robot's own there is constant."""
-    prefix = f"\x00robotconf{mark}:"
+    prefix = _prefix(mark)
     slot = {name: f"{prefix}{name}\x00" for name in (*_SLOT_NAMES, *_NESTED)}
     probe = LaunchRequest.model_construct(  # type: ignore[call-arg]  # no scenario: left out
         robot_id=slot["robot_id"],

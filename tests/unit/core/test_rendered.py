@@ -19,7 +19,7 @@ from configurator.launch import (
     with_digest,
 )
 from configurator.render import FleetRender, RenderError, render_fleet, request_for
-from configurator.rendered import _SLOT_NAMES, ScenarioRequests, UnresolvedMapping
+from configurator.rendered import _SLOT_NAMES, ScenarioRequests, UnresolvedMapping, _prefix
 from configurator.rosnames import resolve_name
 from configurator.types import MappingBinding
 from configurator.workspace import check
@@ -92,8 +92,42 @@ def test_values_that_look_like_slots_or_need_escaping(
 ) -> None:
     """Text of the scenario that holds a slot's mark moves the slots to another mark; text of
     the robot's goes in escaped as the whole request's serialisation escapes it."""
+    # Written with this process's own marks: "\x00robotconf0:" stands for the first one.
+    knowledge, robot_name = _marked(knowledge), _marked(robot_name)
     shared = _shared().model_copy(update={"environment_knowledge": knowledge})
     _assert_same(shared, ("tb3-09", robot_name, "r", namespace))
+
+
+def _marked(value: Any) -> Any:
+    if isinstance(value, str):
+        return value.replace("\x00robotconf0:", _prefix(0)).replace("\x00robotconf1:", _prefix(1))
+    if isinstance(value, dict):
+        return {_marked(k): _marked(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_marked(v) for v in value]
+    return value
+
+
+def test_marks_a_commit_can_write_cost_no_retries(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A commit cannot know the marks this process uses: text full of would-be marks is
+    serialised once, not once per mark it holds."""
+    base = _shared()
+    made: list[int] = []
+    real = ScenarioRequests._make
+
+    def counted(self: ScenarioRequests, with_namespace: bool, mark: int) -> Any:
+        made.append(mark)
+        return real(self, with_namespace, mark)
+
+    monkeypatch.setattr(ScenarioRequests, "_make", counted)
+    guesses = {f"\x00robotconf{i}:": f"\x00robotconf{i}:scenario\x00" for i in range(500)}
+    shared = base.model_copy(update={"environment_knowledge": guesses})
+    _assert_same(shared, ("tb3-09", "bot", "r", "/tb3_09"))
+    assert made == [0]
+    made.clear()
+    held = {_prefix(i): i for i in range(3)}  # this process's own: the next mark is tried
+    _assert_same(base.model_copy(update={"environment_knowledge": held}), ("a", "b", "r", None))
+    assert made == [0, 1, 2, 3]
 
 
 def test_a_scenario_without_mappings() -> None:
