@@ -14,7 +14,7 @@ from configurator.render import RenderError, render_fleet
 from configurator.source import SourceError
 from configurator.wire import ReconcilerStatus, Topics
 from configurator.workspace import check
-from reconciler.observed import parse_retained
+from reconciler.observed import ReadMemo, parse_retained
 from reconciler.retained import RetainedView
 from reconciler.verdicts import (
     DesiredRobot,
@@ -70,12 +70,21 @@ class DesiredCache:
         return None, "the retained launch topics (no valid repository to compare with)", notes
 
 
-def fleet_status(messages: dict[str, bytes], topics: Topics, desired: DesiredCache) -> FleetStatus:
+def fleet_status(
+    messages: dict[str, bytes],
+    topics: Topics,
+    desired: DesiredCache,
+    memos: dict[bool, ReadMemo] | None = None,
+) -> FleetStatus:
+    """`memos` (one per way of reading requests, in full or not): what was read of each
+    payload, kept for the next call (`--watch` reads only what changed)."""
     # With a repository to compare with, the requests' digests are all a row needs: 10,000
     # requests are validated in full only when they are the one account of what is desired.
     status = {t: m for t, m in messages.items() if t == topics.reconciler_status}
     robots, where, notes = desired.get(parse_retained(status, topics).reconciler)
-    retained = parse_retained(messages, topics, requests=robots is None)
+    full = robots is None
+    memo = memos.setdefault(full, ReadMemo()) if memos is not None else None
+    retained = parse_retained(messages, topics, requests=full, memo=memo)
     if robots is None:
         robots = desired_from_retained(retained)
     rows = build_rows(robots, retained)
@@ -112,10 +121,11 @@ def watch(
     """Each new state of the fleet until `stop` is set; None once when the broker is lost (each
     time). `changed` is set by the view (and by whoever sets `stop`)."""
     shown: str | None = None
+    memos: dict[bool, ReadMemo] = {}
     while not stop.is_set():
         changed.clear()
         if view.synced:
-            fleet = fleet_status(view.snapshot(), topics, desired)
+            fleet = fleet_status(view.snapshot(), topics, desired, memos)
             key = change_key(fleet)
             if key != shown:
                 shown = key
