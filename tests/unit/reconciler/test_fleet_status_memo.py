@@ -1,0 +1,44 @@
+"""`status --watch` keeps what it read of each payload: each redraw is the one a fresh read
+gives, with the repository to compare with and without one."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from configurator.render import render_fleet
+from configurator.wire import AgentState, AgentStatus, Topics
+from configurator.workspace import check
+from reconciler.fleet_status import DesiredCache, fleet_status
+from reconciler.observed import ReadMemo
+from tests.support.lab import ROOT
+
+T = Topics()
+
+
+def _status(robot: str, state: AgentState, digest: str | None = None) -> bytes:
+    return AgentStatus(robot_id=robot, state=state, digest=digest).model_dump_json().encode()
+
+
+@pytest.mark.parametrize("repo", [ROOT, Path("/nonexistent/lab")])
+def test_redraws_with_memos_are_fresh_reads(repo: Path) -> None:
+    fleet = render_fleet(check(ROOT).repo)
+    messages = {T.launch(r): q.payload() for r, q in fleet.requests.items()}
+    first = next(iter(fleet.requests))
+    messages[T.status(first)] = _status(first, AgentState.RUNNING, fleet.requests[first].digest)
+    messages[T.launch("stranger")] = b"{not json"
+    memos: dict[bool, ReadMemo] = {}
+    seen: list[str] = []
+    for step in range(3):
+        if step == 1:
+            messages[T.status(first)] = _status(first, AgentState.FAILED)
+        if step == 2:
+            del messages[T.launch(first)]
+        got = fleet_status(dict(messages), T, DesiredCache(repo, None), memos)
+        fresh = fleet_status(dict(messages), T, DesiredCache(repo, None))
+        assert got.as_json(heartbeat=False) == fresh.as_json(heartbeat=False), step
+        seen.append(json.dumps(got.as_json(heartbeat=False), sort_keys=True))
+    assert len(set(seen)) == 3  # each change shows
+    assert list(memos) == [repo != ROOT]  # requests read in full only without a repository
