@@ -245,16 +245,16 @@ class RetainedView:
         `kept`: what the copy keeps of each item, as `keep` would make it (the caller knows it
         without reading the payload back); by default `keep` of the payload.
         """
-        if kept is None:
-            kept = [self._kept(topic, payload) for topic, payload in items]
         if not self._synced.is_set():
             return False
+        if kept is None:
+            kept = [self._kept(topic, payload) for topic, payload in items]
         with self._lock:
             before = {topic: self._arrivals.get(topic, 0) for topic, _ in items}
-        # 10,000 publishes allocate enough to set off collections that walk every object
-        # the reconciler holds (its whole rendered fleet); none of them is a cycle.
         deadline = time.monotonic() + timeout
         infos: list[tuple[str, bytes, paho.MQTTMessageInfo]] = []
+        # 10,000 publishes allocate enough to set off collections that walk every object
+        # the reconciler holds (its whole rendered fleet); none of them is a cycle.
         with collector_paused():
             for (topic, payload), copy in zip(items, kept, strict=True):
                 if len(infos) >= PUBLISH_WINDOW:
