@@ -13,10 +13,10 @@ from configurator.composition import achievable_tasks, find_location
 from configurator.diagnostics import did_you_mean
 from configurator.gcpause import collector_paused
 from configurator.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
-from configurator.rendered import RenderedRequest, ScenarioRequests, UnresolvedMapping
+from configurator.rendered import RenderedRequest, ScenarioRequests
 from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
-from configurator.rosnames import absolute_namespace
+from configurator.rosnames import UnresolvableName, absolute_namespace
 from configurator.types import (
     JsonObject,
     MappingBinding,
@@ -91,7 +91,7 @@ def request_for(
             repo.revision,
             absolute_namespace(namespace) if namespace is not None else None,
         )
-    except UnresolvedMapping as e:
+    except UnresolvableName as e:
         raise RenderError(f"robot '{robot_id}': {e}") from None
 
 

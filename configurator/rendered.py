@@ -22,7 +22,7 @@ from configurator.launch import (
     digest_content,
     restart_content_of,
 )
-from configurator.rosnames import UnresolvableName, resolve_in
+from configurator.rosnames import resolve_in
 from configurator.types import MappingBinding
 
 # The bytes between the slots, and each slot's index in a robot's values (`_values`).
@@ -45,10 +45,6 @@ def _prefix(mark: int) -> str:
     return f"\x00robotconf{_TOKEN}.{mark}:"
 
 
-class UnresolvedMapping(Exception):
-    """A mapping name the robot's namespace (or its lack of one) cannot resolve."""
-
-
 class ScenarioRequests:
     """The requests of one scenario's robots: the scenario serialised once with each robot's
     own values left as slots (its id, name, namespace, revision and digests). A robot's
@@ -65,7 +61,7 @@ class ScenarioRequests:
     def request(
         self, robot_id: str, robot_name: str, revision: str, namespace: str | None
     ) -> RenderedRequest:
-        """The robot's request; `namespace` absolute, or None. Raises UnresolvedMapping when
+        """The robot's request; `namespace` absolute, or None. Raises rosnames.UnresolvableName when
         a mapping name needs a namespace and the robot has none."""
         content, restart, _ = self._templates_for(namespace is not None)
         values = _values(robot_id, robot_name, namespace)
@@ -95,13 +91,10 @@ class ScenarioRequests:
     def resolved(self, namespace: str | None) -> LaunchScenario:
         """The scenario with its mapping names resolved in `namespace` (fully qualified)."""
         capability = self.scenario.capability
-        try:
-            mappings = {
-                key: _renamed(binding, resolve_in(binding.name, namespace))
-                for key, binding in capability.mappings.items()
-            }
-        except UnresolvableName as e:
-            raise UnresolvedMapping(str(e)) from None
+        mappings = {
+            key: _renamed(binding, resolve_in(binding.name, namespace))
+            for key, binding in capability.mappings.items()
+        }
         return self.scenario.model_copy(
             update={"capability": capability.model_copy(update={"mappings": mappings})}
         )
@@ -123,7 +116,8 @@ class ScenarioRequests:
 
         Each part is serialised once: the scenario with its capability as a slot, the
         capability with its mappings as a slot, the mappings with their names resolved in
-        the namespace's slot; the request around the scenario, the restart content around
+        the namespace's slot (those two shared by a capability's scenarios:
+        `_capability_templates`); the request around the scenario, the restart content around
         the capability (both the same for every scenario: `_around`)."""
         capability = _capability_templates(self.scenario.capability, with_namespace, mark)
         if capability is None:
@@ -162,11 +156,8 @@ def _capability_templates(
     in_namespace = f"{prefix}namespace\x00" if with_namespace else None
     outer = capability.model_dump(mode="json")
     bindings = outer[_MAPPINGS]
-    try:
-        for binding in bindings.values():
-            binding["name"] = resolve_in(binding["name"], in_namespace)
-    except UnresolvableName as e:
-        raise UnresolvedMapping(str(e)) from None
+    for binding in bindings.values():
+        binding["name"] = resolve_in(binding["name"], in_namespace)
     mappings = canonical_json(bindings)
     outer[_MAPPINGS] = f"{prefix}{_MAPPINGS}\x00"
     around_mappings = canonical_json(outer)

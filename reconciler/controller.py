@@ -396,16 +396,18 @@ class Controller:
             (self.topics.launch(r), sign(req.model()).payload() if sign else req.payload())
             for r, req in actions.publish.items()
         ]
-        kept = [launch_summary("LaunchRequest", req.digest) for req in actions.publish.values()]
-        stops = [
-            (self.topics.launch(r), self._stop_payload(r, target.revision)) for r in actions.clear
+        # What the view keeps of each request is known without reading it back; a Stop's,
+        # the view's own `keep` works out.
+        kept: list[bytes | None] = [
+            launch_summary("LaunchRequest", req.digest) for req in actions.publish.values()
         ]
-        items += stops
-        kept += [payload for _, payload in stops]  # a Stop is kept whole (summarise_launches)
+        for r in actions.clear:
+            items.append((self.topics.launch(r), self._stop_payload(r, target.revision)))
+            kept.append(None)
         publishing = time.monotonic()
         acknowledged = self.view.publish_retained(items, self.publish_timeout, kept)
         done = time.monotonic()
-        del items, kept, stops  # 10,000 payloads: freed, then given back to the system
+        del items, kept  # 10,000 payloads: freed, then given back to the system
         heap.release()
         if not acknowledged:
             return decision.unacknowledged(self.view.last_error)

@@ -235,7 +235,7 @@ class RetainedView:
         self,
         items: Sequence[tuple[str, bytes]],
         timeout: float,
-        kept: Sequence[bytes] | None = None,
+        kept: Sequence[bytes | None] | None = None,
     ) -> bool:
         """Publishes retained QoS 1 and waits for every PUBACK; an empty payload clears a topic.
 
@@ -243,12 +243,14 @@ class RetainedView:
         acknowledgement, so the next diff does not publish them again before their echo, unless
         a message arrived on the topic meanwhile (the echo, or a newer one: it is the truth).
         `kept`: what the copy keeps of each item, as `keep` would make it (the caller knows it
-        without reading the payload back); by default `keep` of the payload.
+        without reading the payload back); None, or left out: `keep` of the payload.
         """
         if not self._synced.is_set():
             return False
-        if kept is None:
-            kept = [self._kept(topic, payload) for topic, payload in items]
+        copies = [
+            self._kept(topic, payload) if copy is None else copy
+            for (topic, payload), copy in zip(items, kept or [None] * len(items), strict=True)
+        ]
         with self._lock:
             before = {topic: self._arrivals.get(topic, 0) for topic, _ in items}
         deadline = time.monotonic() + timeout
@@ -256,7 +258,7 @@ class RetainedView:
         # 10,000 publishes allocate enough to set off collections that walk every object
         # the reconciler holds (its whole rendered fleet); none of them is a cycle.
         with collector_paused():
-            for (topic, payload), copy in zip(items, kept, strict=True):
+            for (topic, payload), copy in zip(items, copies, strict=True):
                 if len(infos) >= PUBLISH_WINDOW:
                     # At most a window in flight: paho holds each message's packet until it
                     # is written and its payload until the PUBACK, 60 MB for 10,000 at once.

@@ -80,3 +80,26 @@ def test_publishing_more_than_a_window_sends_every_message_and_keeps_what_it_is_
         assert held == dict(items)  # the broker holds the payloads themselves
     finally:
         again.stop()
+
+
+def test_what_the_caller_does_not_say_to_keep_is_kept_as_the_view_keeps_it(
+    mosquitto: Mosquitto,
+) -> None:
+    """`kept` None: the view's own `keep` of the payload (here: its upper-cased bytes)."""
+    made = RetainedView(
+        Connection(mosquitto.url),
+        [FILTER],
+        "robotconf/sync",
+        role="test",
+        no_local=True,
+        keep=lambda topic, payload: payload.upper(),
+    )
+    made.start()
+    try:
+        assert made.wait_synced(10)
+        items = [(f"robotconf/robots/k{i}/launch", f"request {i}".encode()) for i in range(3)]
+        assert made.publish_retained(items, 10, [b"told", None, b""])
+        mine = {t: p for t, p in made.snapshot().items() if "/k" in t}
+        assert mine == {items[0][0]: b"told", items[1][0]: b"REQUEST 1"}  # b"": nothing kept
+    finally:
+        made.stop()

@@ -19,8 +19,8 @@ from configurator.launch import (
     with_digest,
 )
 from configurator.render import FleetRender, RenderError, render_fleet, request_for
-from configurator.rendered import _SLOT_NAMES, ScenarioRequests, UnresolvedMapping, _prefix
-from configurator.rosnames import resolve_name
+from configurator.rendered import _SLOT_NAMES, ScenarioRequests, _prefix
+from configurator.rosnames import UnresolvableName, resolve_name
 from configurator.types import MappingBinding
 from configurator.workspace import check
 from tests.support.lab import ROOT
@@ -165,7 +165,7 @@ def test_names_absolute_relative_and_per_robot() -> None:
 
 def test_a_per_robot_name_without_a_namespace_is_a_render_error() -> None:
     scenario = _with_names(["{namespace}/cmd_vel"])
-    with pytest.raises(UnresolvedMapping, match="needs the robot's namespace"):
+    with pytest.raises(UnresolvableName, match="needs the robot's namespace"):
         ScenarioRequests(scenario).request("tb3-01", "b", "r", None)
     relative = ScenarioRequests(_with_names(["cmd_vel"])).request("tb3-01", "b", "r", None)
     assert relative.model().scenario.capability.mappings["m0"].name == "/cmd_vel"
