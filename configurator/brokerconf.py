@@ -45,10 +45,12 @@ pattern write {prefix}/robots/%u/logs
 pattern readwrite {prefix}/sync/%c
 
 # The reconciler writes every launch topic (and reads them back: what is published is its only
-# memory), writes its own status, reads what the robots report, and may ask for a restart.
+# memory), writes its own status and what a rollout's wave established, reads what the robots
+# report, and may ask for a restart.
 user {users.reconciler}
 topic readwrite {prefix}/robots/+/launch
 topic readwrite {prefix}/reconciler/status
+topic readwrite {prefix}/reconciler/rollout
 topic read {prefix}/robots/+/status
 topic read {prefix}/robots/+/description
 topic write {prefix}/robots/+/restart

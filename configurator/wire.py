@@ -54,6 +54,11 @@ class Topics:
         return f"{self.prefix}/reconciler/status"
 
     @property
+    def reconciler_rollout(self) -> str:
+        """What the current wave of a rollout established (reconciler only; retained)."""
+        return f"{self.prefix}/reconciler/rollout"
+
+    @property
     def all_launch(self) -> str:
         return f"{self.prefix}/robots/+/launch"
 

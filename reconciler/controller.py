@@ -41,6 +41,7 @@ from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
 from reconciler.observed import (
     RECONCILER_STATUS,
+    WAVE_RECORD,
     ReadMemo,
     launch_summary,
     parse_retained,
@@ -49,6 +50,7 @@ from reconciler.observed import (
 from reconciler.report import Followed, StatusWriter, one_line, status_of
 from reconciler.retained import Ignored, Presence, RetainedView, read_object, take_snapshot
 from reconciler.source import BranchSource
+from reconciler.wave_memory import WaveRecord
 
 log = logging.getLogger("robotconf.reconciler")
 
@@ -124,7 +126,7 @@ class Controller:
         # they matter only for the repair below (`_sample_running`), sampled now and then.
         self.view = RetainedView(
             connection,
-            [self.topics.all_launch, self.topics.reconciler_status],
+            [self.topics.all_launch, self.topics.reconciler_status, self.topics.reconciler_rollout],
             f"{prefix}/sync",
             role="reconciler",
             on_synced=self._wake.set,
@@ -140,7 +142,14 @@ class Controller:
         # The robots' statuses, followed live only while the head has a rollout policy: the
         # waves are gated by them. Without one they are only sampled (`_sample_active`).
         self.health: RetainedView | None = None
-        self._running_since: dict[str, tuple[str, float]] = {}  # robot -> (digest, first seen)
+        # robot -> ((digest, pid), first seen running so): another brain process is another run
+        self._running_since: dict[str, tuple[tuple[str, int | None], float]] = {}
+        self._watched = 0  # the health view's connection whose statuses were learned last
+        self._watching_since = 0.0  # when they were: a rollout's clock counts from then
+        # What a rollout's current wave established: this process's, or the retained one
+        # found at start; and what the broker holds of it.
+        self._wave_record: WaveRecord | None = None
+        self._wave_record_held: bytes | None = None
         self._recheck_at: float | None = None  # unix time a rollout's health judgment changes
         self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
@@ -286,6 +295,7 @@ class Controller:
         if seen is None:
             return Outcome.WAIT, None, None
         decision = decide(seen)
+        self._keep_wave_record(decision.wave_record)
         condition = decision.condition
         if decision.changes:
             condition = self._apply(decision)
@@ -343,6 +353,8 @@ class Controller:
             statuses=self._follow_health(rollout, now),
             running_since={robot: seen for robot, (_, seen) in self._running_since.items()},
             now=now,
+            wave_record=self._wave_record,
+            watching_since=self._watching_since,
         )
 
     def _follow_health(self, wanted: bool, now: float = 0.0) -> dict[str, AgentStatus] | None:
@@ -364,15 +376,19 @@ class Controller:
             self._running_since.clear()
         if self.health is None or not self.health.synced:
             return None
+        if self.health.connections != self._watched:
+            self._watched = self.health.connections
+            self._watching_since = now
         seen = parse_retained(
             self.health.snapshot(), self.topics, ignored=self.ignored, memo=self._health_memo
         )
         statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
         for robot, status in statuses.items():
             if status.state is AgentState.RUNNING and status.digest:
+                run = (status.digest, status.pid)
                 known = self._running_since.get(robot)
-                if known is None or known[0] != status.digest:
-                    self._running_since[robot] = (status.digest, now)
+                if known is None or known[0] != run:
+                    self._running_since[robot] = (run, now)
             else:
                 self._running_since.pop(robot, None)
         return statuses
@@ -383,6 +399,20 @@ class Controller:
         rollout = status.rollout if status is not None else None
         if rollout is not None and rollout.state == "Progressing" and not self._stop.is_set():
             self._wake.set()
+
+    def _keep_wave_record(self, record: WaveRecord | None) -> None:
+        """Remembers what the wave established, and has the broker keep it (retained) before
+        anything of the step is published: a reconciler killed after this step finds it."""
+        self._wave_record = record
+        payload = record.model_dump_json().encode() if record is not None else b""
+        if payload == (self._wave_record_held or b""):
+            return
+        if self.view.publish_retained(
+            [(self.topics.reconciler_rollout, payload)], self.publish_timeout
+        ):
+            self._wave_record_held = payload
+        else:  # kept here all the same; the broker is told at the next step
+            log.warning("the broker did not take the rollout's wave record; trying again")
 
     def _apply(self, decision: Decision) -> Condition:
         """Publishes what differs and clears what is no longer assigned; the outcome."""
@@ -508,6 +538,7 @@ class Controller:
         if self._recovered:
             return
         self._recovered = True
+        self._wave_record, self._wave_record_held = self._retained_wave_record()
         previous = self.writer.retained()
         if previous is None:
             return
@@ -518,6 +549,19 @@ class Controller:
             candidate = self._build(revision)
             if candidate.ok:
                 self.serving = candidate
+
+    def _retained_wave_record(self) -> tuple[WaveRecord | None, bytes | None]:
+        """The wave record the broker holds (a reconciler before this one left it), and its
+        payload; an unreadable one is skipped, counted, and replaced at the next change."""
+        topic = self.topics.reconciler_rollout
+        payload = self.view.get(topic)
+        if not payload:
+            return None, None
+        try:
+            return WaveRecord.model_validate(read_object(payload)), payload
+        except (PayloadError, ValidationError) as exc:
+            self.ignored.note(WAVE_RECORD, topic, payload, one_line(exc))
+            return None, payload
 
     def _stop_payload(self, robot_id: str, revision: str) -> bytes:
         """Empty (DESIGN §7), or a signed StopRequest when requests are signed: an agent that

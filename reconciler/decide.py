@@ -22,6 +22,7 @@ from configurator.wire import (
 from reconciler.desired import Desired
 from reconciler.diff import Actions, diff
 from reconciler.rollout import RolloutInput, RolloutStep, roll_out
+from reconciler.wave_memory import WaveRecord
 
 Reason = ReconcilerReason
 
@@ -55,6 +56,9 @@ class Observation:
     statuses: Mapping[str, AgentStatus] | None = None
     running_since: Mapping[str, float] = field(default_factory=dict)
     now: float = 0.0
+    # What the current wave established, and when the statuses were last (re)learned.
+    wave_record: WaveRecord | None = None
+    watching_since: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,7 @@ class Decision:
     condition: Condition
     stable: Desired | None = None  # the last revision fully applied, once this step is
     recheck_at: float | None = None  # unix time to look again though nothing arrives
+    wave_record: WaveRecord | None = None  # what a rollout's current wave established
 
     @property
     def changes(self) -> bool:
@@ -153,6 +158,8 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
             statuses=seen.statuses,
             running_since=seen.running_since,
             now=seen.now,
+            record=seen.wave_record,
+            watching_since=seen.watching_since,
         )
     )
     if step.serve_stable and stable is not None and stable.fleet is not None:
@@ -184,6 +191,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
         _rollout_condition(seen, step),
         stable=new_stable,
         recheck_at=step.recheck_at,
+        wave_record=step.record,
     )
 
 

@@ -25,6 +25,7 @@ from configurator.wire import (
 from reconciler.retained import Ignored, read_object
 
 RECONCILER_STATUS = "reconciler-status"
+WAVE_RECORD = "rollout-record"  # reconciler.wave_memory, read by the reconciler alone
 _ROBOT_LEAVES = ("launch", "status", "description")
 
 

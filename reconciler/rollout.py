@@ -1,12 +1,15 @@
 """Rollout step, pure: a commit reaches the fleet wave by wave, each gated by the robots' health.
 
-Stateless: where a rollout stands is read back from what the broker holds — the retained
-launch topics, the robots' statuses and the rollout in the reconciler's retained status — so a
-restarted reconciler resumes the same wave without publishing anything anew.
+Where a rollout stands is read back from what the broker holds — the retained launch topics,
+the robots' statuses, the rollout in the reconciler's retained status and what the current wave
+established (`reconciler.wave_memory`) — so a restarted reconciler resumes the same wave without
+publishing anything anew, and neither forgets a robot it saw healthy or failed nor counts one
+healthy it has not seen so.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -23,6 +26,7 @@ from configurator.wire import (
     RolloutStatus,
     short_rev,
 )
+from reconciler.wave_memory import WaveMemory, WaveRecord, memory_of
 
 # An agent reporting these about the new request has failed it.
 _FAILED_STATES = {AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED}
@@ -32,9 +36,9 @@ class Health(str, Enum):
     """A robot of the current wave, judged only on what it reports about the new request."""
 
     HEALTHY = "healthy"  # ran the new request for healthy_after seconds
-    FAILED = "failed"  # failed, backed off, exited or refused it; went offline; timed out
+    FAILED = "failed"  # failed, backed off, exited or refused it; went dark; timed out
     PENDING = "pending"  # on its way
-    ABSENT = "absent"  # offline before delivery: pending, never failed; waited for until timeout
+    ABSENT = "absent"  # never seen online with it: pending, never failed; waited for until timeout
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,10 @@ class RolloutInput:
     statuses: Mapping[str, AgentStatus] | None  # None: not known yet (health not judged)
     running_since: Mapping[str, float]  # robot -> unix time it was first seen running its digest
     now: float
+    # What the current wave established (the last step's record, or the retained one after a
+    # restart), and when the statuses were last (re)learned: the wave's clock counts from then.
+    record: WaveRecord | None = None
+    watching_since: float = 0.0
 
 
 @dataclass
@@ -60,6 +68,7 @@ class RolloutStep:
     recheck_at: float | None = None  # unix time a health judgment changes with no new message
     complete: bool = False  # every wave healthy: `head` is the new stable revision
     serve_stable: bool = False  # rolled back: the fleet gets the stable revision
+    record: WaveRecord | None = None  # what the current wave established, to keep retained
 
     @property
     def stopped(self) -> bool:
@@ -151,40 +160,45 @@ class _Rollout:
 
     def advance(self, wave: int, started_at: float | None) -> RolloutStep:
         """From `wave` (-1: none started yet), publish and judge waves as far as they are
-        healthy; stop on too many failures."""
+        healthy; stop on too many failures. No wave begins before the robots' statuses are
+        known: who was online when it was published is part of what it is judged on."""
         now = self.seen.now
-        if wave < 0 and not self.policy.paused:
+        known = self.seen.statuses is not None
+        if wave < 0 and not self.policy.paused and known:
             wave, started_at = 0, now
         while True:
             if wave < 0:
                 step = self.hold(-1)
-                step.status = self._status(
-                    "Paused", 0, None, {}, "paused before the first wave (rollout.paused)"
+                why = (
+                    "paused before the first wave (rollout.paused)"
+                    if self.policy.paused
+                    else "waiting for the robots' statuses before the first wave"
                 )
+                state: RolloutState = "Paused" if self.policy.paused else "Progressing"
+                step.status = self._status(state, 0, None, {}, why)
                 return step
-            judged, recheck = self._judge(wave, started_at or now)
+            begins = started_at is None or started_at == now
+            started_at = now if started_at is None else started_at
+            judged, recheck, deadline, memory = self._judge(wave, started_at, begins)
             failed = [r for r, h in judged.items() if h is Health.FAILED]
             budget = failure_budget(self.policy.max_failures, len(judged)) or 0
             if len(failed) > budget:
                 return self._failed(wave, started_at, judged)
-            done = all(h in (Health.HEALTHY, Health.FAILED) for h in judged.values()) or (
-                all(h is not Health.PENDING for h in judged.values())
-                and started_at is not None
-                and now - started_at >= self.policy.wave_timeout
+            done = known and (
+                all(h in (Health.HEALTHY, Health.FAILED) for h in judged.values())
+                or (all(h is not Health.PENDING for h in judged.values()) and now >= deadline)
             )
-            if self.seen.statuses is None and judged:
-                done = False  # health not known yet: nothing advances
             if done and wave == self.count - 1:
-                step = self.everyone()
-                return step
+                return self.everyone()
             if done and not self.policy.paused:
                 wave, started_at = wave + 1, now
                 continue
             step = self.hold(wave)
-            state: RolloutState = "Paused" if done and self.policy.paused else "Progressing"
+            state = "Paused" if done and self.policy.paused else "Progressing"
             why = "paused (rollout.paused)" if state == "Paused" else ""
             step.status = self._status(state, wave, started_at, judged, why)
             step.recheck_at = recheck
+            step.record = memory.record() if memory is not None else None
             return step
 
     def halted(self, previous: RolloutStatus) -> RolloutStep:
@@ -225,11 +239,22 @@ class _Rollout:
 
     # ------------------------------------------------------------------ health
 
-    def _judge(self, wave: int, started_at: float) -> tuple[dict[str, Health], float | None]:
-        """The health of the wave's changed robots, and when a judgment changes with time."""
-        head = self.seen.head
-        statuses = self.seen.statuses or {}
-        policy, now = self.policy, self.seen.now
+    def _judge(
+        self, wave: int, started_at: float, begins: bool
+    ) -> tuple[dict[str, Health], float | None, float, WaveMemory | None]:
+        """The health of the wave's changed robots; when a judgment changes with time; the
+        wave's deadline; and what the wave has established, this step included."""
+        head, policy, now = self.seen.head, self.policy, self.seen.now
+        members = sorted(r for r in self.changed if self.waves.get(r) == wave)
+        statuses = self.seen.statuses
+        if statuses is None:  # not known yet: nothing is judged, nothing is forgotten
+            memory = memory_of(self.seen.record, head.revision, wave, started_at, members)
+            return {r: Health.PENDING for r in members}, None, math.inf, memory
+        memory = self._memory(wave, started_at, members, statuses, begins)
+        # The wave's clock runs while the reconciler watches: restarted, or back from a lost
+        # broker, it gives the robots the whole wave_timeout again rather than blame them for
+        # what it could not see.
+        deadline = max(started_at, memory.watching_since) + policy.wave_timeout
         judged: dict[str, Health] = {}
         recheck: float | None = None
 
@@ -237,28 +262,54 @@ class _Rollout:
             nonlocal recheck
             recheck = at if recheck is None else min(recheck, at)
 
-        timeout_at = started_at + policy.wave_timeout
-        for robot in sorted(self.changed):
-            if self.waves.get(robot) != wave:
-                continue
+        for robot in members:
             digest = head.requests[robot].digest
+            since = self.seen.running_since.get(robot)
             health = _health(
+                robot,
                 statuses.get(robot),
                 digest,
                 self.seen.launches.get(robot) == digest,
-                started_at,
-                self.seen.running_since.get(robot),
+                since,
                 now,
                 policy.healthy_after,
+                memory,
             )
-            if health is Health.PENDING and robot in self.seen.running_since:
-                soon(self.seen.running_since[robot] + policy.healthy_after)
-            if health is Health.PENDING and now >= timeout_at:
+            if health is Health.PENDING and since is not None:
+                soon(since + policy.healthy_after)
+            if health is Health.PENDING and now >= deadline:
                 health = Health.FAILED  # not healthy by wave_timeout
-            if health in (Health.PENDING, Health.ABSENT) and now < timeout_at:
-                soon(timeout_at)
+                memory.failed.add(robot)
+            if health in (Health.PENDING, Health.ABSENT) and now < deadline:
+                soon(deadline)
             judged[robot] = health
-        return judged, recheck
+        return judged, recheck, deadline, memory
+
+    def _memory(
+        self,
+        wave: int,
+        started_at: float,
+        members: list[str],
+        statuses: Mapping[str, AgentStatus],
+        begins: bool,
+    ) -> WaveMemory:
+        """The wave's memory: its record when it is about this wave, else a new one whose
+        baseline is what is true now."""
+        head, watching_since = self.seen.head, self.seen.watching_since
+        memory = memory_of(self.seen.record, head.revision, wave, started_at, members)
+        if memory is None:
+            memory = WaveMemory(head.revision, wave, started_at, members, watching_since)
+            memory.rejecting = {
+                r for r in members if (s := statuses.get(r)) and s.state is AgentState.REJECTED
+            }
+            if begins:  # published in this step: those online now are sent it at once
+                memory.seen = {r for r in members if _online(statuses.get(r))}
+        elif memory.watching_since != watching_since:
+            # The statuses were learned anew (a restart, a reconnection): a robot without one
+            # may only be one the broker forgot, so its silence says nothing yet.
+            memory.seen = {r for r in memory.seen if r in statuses}
+            memory.watching_since = watching_since
+        return memory
 
     # ------------------------------------------------------------------ status
 
@@ -296,30 +347,52 @@ class _Rollout:
         )
 
 
+def _online(status: AgentStatus | None) -> bool:
+    return status is not None and status.state is not AgentState.OFFLINE
+
+
 def _health(
+    robot: str,
     status: AgentStatus | None,
     digest: str,
     delivered: bool,
-    started_at: float,
     running_since: float | None,
     now: float,
     healthy_after: float,
+    memory: WaveMemory,
 ) -> Health:
-    """One robot of the current wave. A status about another digest never counts as health
-    (the trap of judging a wave by robots still reporting the previous request)."""
-    if status is None:
+    """One robot of the current wave, judged on what the reconciler saw and remembers — never
+    on a robot's clock. A status about another digest never counts as health (the trap of
+    judging a wave by robots still reporting the previous request)."""
+    if robot in memory.failed:
+        return Health.FAILED  # a failure is not undone by what comes after, in this wave
+    if not _online(status):
+        if robot in memory.seen:
+            # Dark (its Last Will, or no status at all) after it was sent the new request:
+            # it may have died of it, whatever times its Will carries.
+            memory.failed.add(robot)
+            return Health.FAILED
         return Health.ABSENT
-    if status.state is AgentState.OFFLINE:
-        # Went offline after the wave was published: it may have died of the new request.
-        return Health.FAILED if delivered and status.since > started_at else Health.ABSENT
+    assert status is not None
+    if status.state is not AgentState.REJECTED:
+        memory.rejecting.discard(robot)
     if not delivered:
         return Health.PENDING
-    if status.state is AgentState.REJECTED and status.since >= started_at:
+    memory.seen.add(robot)
+    if status.state is AgentState.REJECTED:
+        if robot in memory.rejecting:
+            return Health.PENDING  # a rejection from before the wave, not of its request
+        memory.failed.add(robot)
         return Health.FAILED  # it refused the new request
     if status.digest != digest:
         return Health.PENDING
     if status.state in _FAILED_STATES:
+        memory.failed.add(robot)
         return Health.FAILED
-    if status.state is AgentState.RUNNING and running_since is not None:
-        return Health.HEALTHY if now - running_since >= healthy_after else Health.PENDING
+    if robot in memory.healthy:
+        return Health.HEALTHY
+    running = status.state is AgentState.RUNNING and running_since is not None
+    if running and running_since is not None and now - running_since >= healthy_after:
+        memory.healthy.add(robot)
+        return Health.HEALTHY
     return Health.PENDING

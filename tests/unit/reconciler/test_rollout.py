@@ -67,10 +67,13 @@ def step(
     stable: FleetRender | None,
     launches: Mapping[str, str | None],
     statuses: Mapping[str, AgentStatus] | None = None,
-    previous: RolloutStatus | None = None,
+    previous: RolloutStep | RolloutStatus | None = None,
     now: float = T0,
     since: Mapping[str, float] | None = None,
+    watching_since: float = 0.0,
 ) -> RolloutStep:
+    """One step after `previous`: a step of the same reconciler (its status and what its wave
+    established) or a retained status alone."""
     statuses = {} if statuses is None else statuses
     if since is None:  # every robot running the head's digest was first seen running at T0
         since = {
@@ -78,7 +81,11 @@ def step(
             for r, s in statuses.items()
             if s.state is AgentState.RUNNING and s.digest == head.requests[r].digest
         }
-    return roll_out(RolloutInput(head, stable, previous, launches, statuses, since, now))
+    record = previous.record if isinstance(previous, RolloutStep) else None
+    status = previous.status if isinstance(previous, RolloutStep) else previous
+    return roll_out(
+        RolloutInput(head, stable, status, launches, statuses, since, now, record, watching_since)
+    )
 
 
 def published(result: RolloutStep, head: FleetRender) -> list[str]:
@@ -115,7 +122,7 @@ def test_a_status_about_the_previous_digest_never_counts(
     stable, head = two
     first = step(head, stable, held(stable))
     launches = {**held(stable), **held(head, CANARY)}
-    later = step(head, stable, launches, running(stable, ROBOTS), first.status, now=T0 + 50)
+    later = step(head, stable, launches, running(stable, ROBOTS), first, now=T0 + 50)
     assert later.status is not None and later.status.pending == CANARY
     assert published(later, head) == CANARY
 
@@ -127,19 +134,19 @@ def test_healthy_waves_advance_in_order_until_complete(
     first = step(head, stable, held(stable))
     launches = {**held(stable), **held(head, CANARY)}
     # Running the new digest, but not yet for healthy_after: still pending, look again then.
-    early = step(head, stable, launches, running(head, CANARY), first.status, now=T0 + 5)
+    early = step(head, stable, launches, running(head, CANARY), first, now=T0 + 5)
     assert early.status is not None and early.status.wave == 0 and early.recheck_at == T0 + 10
     # Healthy: the next wave is published in the same step (60% of 5 is 3: two more robots).
-    second = step(head, stable, launches, running(head, CANARY), first.status, now=T0 + 10)
+    second = step(head, stable, launches, running(head, CANARY), first, now=T0 + 10)
     assert second.status is not None and second.status.wave == 1
     assert second.status.wave_started_at == T0 + 10
     assert published(second, head) == ["tb3-01", "tb3-02", "tb3-03"]
     launches = held(head, ["tb3-01", "tb3-02", "tb3-03"]) | held(stable, ["tb3-04", "tb3-05"])
     wave2 = running(head, ["tb3-01", "tb3-02", "tb3-03"])
-    third = step(head, stable, launches, wave2, second.status, now=T0 + 20)
+    third = step(head, stable, launches, wave2, second, now=T0 + 20)
     assert third.status is not None and third.status.wave_name == "all"
     assert published(third, head) == ROBOTS
-    done = step(head, stable, held(head), running(head, ROBOTS), third.status, now=T0 + 40)
+    done = step(head, stable, held(head), running(head, ROBOTS), third, now=T0 + 40)
     assert done.complete and done.status is not None and done.status.state == "Complete"
 
 
@@ -150,12 +157,12 @@ def test_a_failed_canary_rolls_back(
     stable, head = two
     first = step(head, stable, held(stable))
     launches = {**held(stable), **held(head, CANARY)}
-    failed = step(head, stable, launches, running(head, CANARY, state), first.status, T0 + 1)
+    failed = step(head, stable, launches, running(head, CANARY, state), first, T0 + 1)
     assert failed.serve_stable and failed.status is not None
     assert failed.status.state == "RolledBack" and failed.status.failed == CANARY
     assert "over max_failures 0" in failed.status.message
     # The same revision is not tried again: the next step still serves the stable one.
-    again = step(head, stable, held(stable), {}, failed.status, T0 + 500)
+    again = step(head, stable, held(stable), {}, failed, T0 + 500)
     assert again.serve_stable and again.status is not None and again.status.state == "RolledBack"
 
 
@@ -164,7 +171,7 @@ def test_halt_leaves_the_moved_robots_and_publishes_no_later_wave(lab: Lab) -> N
     first = step(head, stable, held(stable))
     launches = {**held(stable), **held(head, CANARY)}
     rejected = {"tb3-01": AgentStatus(robot_id="tb3-01", state=AgentState.REJECTED, since=T0 + 1)}
-    halted = step(head, stable, launches, rejected, first.status, T0 + 2)
+    halted = step(head, stable, launches, rejected, first, T0 + 2)
     assert not halted.serve_stable and halted.status is not None
     assert halted.status.state == "Halted" and published(halted, head) == CANARY
     assert halted.keep == set(ROBOTS) - set(CANARY)
@@ -177,15 +184,17 @@ def test_offline_before_delivery_is_pending_and_waited_for_only_until_the_timeou
     offline = {"tb3-01": AgentStatus(robot_id="tb3-01", state=AgentState.OFFLINE, since=T0 - 5)}
     first = step(head, stable, held(stable), offline)
     launches = {**held(stable), **held(head, CANARY)}
-    waiting = step(head, stable, launches, offline, first.status, T0 + 50)
+    waiting = step(head, stable, launches, offline, first, T0 + 50)
     assert waiting.status is not None and waiting.status.wave == 0
     assert waiting.status.counts == {"healthy": 0, "failed": 0, "pending": 1}
-    moved_on = step(head, stable, launches, offline, first.status, T0 + 100)
+    moved_on = step(head, stable, launches, offline, first, T0 + 100)
     assert moved_on.status is not None and moved_on.status.wave == 1  # not failed
-    # Gone offline after the request was delivered: failed.
-    died = {"tb3-01": AgentStatus(robot_id="tb3-01", state=AgentState.OFFLINE, since=T0 + 3)}
-    failed = step(head, stable, launches, died, first.status, T0 + 4)
-    assert failed.status is not None and failed.status.state == "RolledBack"
+    # Its Will says it went offline after the wave began: still never seen with the request,
+    # so not failed (the robot's clock is not the reconciler's).
+    will = {"tb3-01": AgentStatus(robot_id="tb3-01", state=AgentState.OFFLINE, since=T0 + 3)}
+    still = step(head, stable, launches, will, waiting, T0 + 60)
+    assert still.status is not None and still.status.state == "Progressing"
+    assert still.status.counts["failed"] == 0
 
 
 def test_a_robot_not_healthy_by_the_wave_timeout_has_failed(
@@ -195,7 +204,7 @@ def test_a_robot_not_healthy_by_the_wave_timeout_has_failed(
     first = step(head, stable, held(stable))
     launches = {**held(stable), **held(head, CANARY)}
     starting = running(head, CANARY, AgentState.STARTING)
-    late = step(head, stable, launches, starting, first.status, T0 + 100)
+    late = step(head, stable, launches, starting, first, T0 + 100)
     assert late.status is not None and late.status.state == "RolledBack"
 
 
@@ -211,7 +220,7 @@ def test_paused_publishes_nothing_before_the_first_wave_and_holds_a_started_one(
     moving = fleet(lab, "b")
     first = step(moving, stable, held(stable))
     launches = {**held(stable), **held(paused, CANARY)}
-    hold = step(paused, stable, launches, running(paused, CANARY), first.status, T0 + 50)
+    hold = step(paused, stable, launches, running(paused, CANARY), first, T0 + 50)
     assert hold.status is not None and hold.status.state == "Paused" and hold.status.wave == 0
     assert published(hold, paused) == CANARY
 
@@ -221,7 +230,7 @@ def test_a_restarted_reconciler_resumes_the_same_wave(two: tuple[FleetRender, Fl
     first = step(head, stable, held(stable))
     launches = {**held(stable), **held(head, CANARY)}
     # A new process: nobody seen running yet; the retained status names the wave.
-    resumed = step(head, stable, launches, running(head, CANARY), first.status, T0 + 60, {})
+    resumed = step(head, stable, launches, running(head, CANARY), first, T0 + 60, {})
     assert resumed.status is not None and resumed.status.wave == 0
     assert resumed.status.wave_started_at == T0
     assert published(resumed, head) == CANARY and resumed.keep == set(ROBOTS) - set(CANARY)
@@ -245,7 +254,7 @@ def test_the_first_rollout_without_a_stable_revision_halts_rather_than_clearing(
     assert published(first, head) == CANARY and first.keep == set()
     assert sorted(first.requests) == CANARY  # nothing to keep the later waves on
     broken = running(head, CANARY, AgentState.FAILED)
-    failed = step(head, None, held(head, CANARY), broken, first.status, T0 + 1)
+    failed = step(head, None, held(head, CANARY), broken, first, T0 + 1)
     assert failed.status is not None and failed.status.state == "Halted"
     assert "no revision ever fully rolled out" in failed.status.message
 
