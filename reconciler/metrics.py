@@ -1,4 +1,5 @@
-"""`reconcile --metrics HOST:PORT`: Prometheus metrics, served by the official client library.
+"""`reconcile --metrics HOST:PORT`: Prometheus metrics, written by the official client library
+and served by the bounded edge (`reconciler/http_edge.py`).
 
 A registry of our own (not the process-wide default), so that only robotconf_ metrics and the
 ones that explain them are scraped.
@@ -8,12 +9,23 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping
-from wsgiref.simple_server import WSGIServer
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, Info
-from prometheus_client.exposition import start_http_server
+from prometheus_client import (
+    CONTENT_TYPE_LATEST,
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    Info,
+    generate_latest,
+)
 
+from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
 from reconciler.verdicts import Verdict
+
+# A scrape is a GET without a body, one or two Prometheus servers at a time; an idle connection
+# costs only a file descriptor.
+LIMITS = Limits(connections=64, per_client=8, head=5.0, silence=5.0, deadline=10.0)
 
 
 class Metrics:
@@ -66,16 +78,26 @@ class Metrics:
             self.publishes.labels(action)
         self._applied: str | None = None
         self._lock = threading.Lock()
-        self._server: WSGIServer | None = None
+        self._server: BoundedHTTPServer | None = None
 
-    def serve(self, host: str, port: int) -> None:
-        """Listens now (OSError when it cannot) and serves on a thread of the library's."""
-        self._server, _ = start_http_server(port, host, registry=self.registry)
+    def serve(self, host: str, port: int, limits: Limits = LIMITS) -> None:
+        """Listens now (OSError when it cannot) and serves on a thread of its own."""
+        self._server = BoundedHTTPServer("metrics", _Scrapes(self.registry), limits)
+        self._server.listen(host, port)
+
+    @property
+    def port(self) -> int:
+        assert self._server is not None
+        return self._server.port
+
+    @property
+    def open_connections(self) -> int:
+        return self._server.open_connections if self._server is not None else 0
 
     def close(self) -> None:
         if self._server is not None:
-            self._server.shutdown()
-            self._server.server_close()
+            self._server.close()
+            self._server = None
 
     def step(
         self,
@@ -109,3 +131,18 @@ class Metrics:
 
     def webhook(self, server: str, outcome: str) -> None:
         self.webhooks.labels(server, outcome).inc()
+
+
+class _Scrapes:
+    """The metrics listener's service: any path, GET or HEAD, as Prometheus exporters do."""
+
+    def __init__(self, registry: CollectorRegistry) -> None:
+        self.registry = registry
+
+    def answer(self, request: Request) -> Response:
+        if request.method not in ("GET", "HEAD"):
+            return Response.text(405, "GET or HEAD only", ("Allow", "GET, HEAD"))
+        return Response(200, generate_latest(self.registry), CONTENT_TYPE_LATEST)
+
+    def refused(self, request: Request, code: int, message: str) -> Response:
+        return Response.text(code, message)  # no method of a scrape has a body read

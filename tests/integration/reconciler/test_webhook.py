@@ -158,7 +158,7 @@ def test_a_signed_push_fetches_at_once_and_nothing_else_does(
         slow.settimeout(60)
         assert slow.recv(1024) == b""
         slow_body.settimeout(60)
-        assert slow_body.makefile("rb").readline().startswith(b"HTTP/1.0 408 ")
+        assert slow_body.makefile("rb").readline().startswith(b"HTTP/1.1 408 ")
 
         seen = scrape(metrics)
         name = "robotconf_webhooks_total"
