@@ -1,20 +1,26 @@
 """Alert receivers: each URL gets events POSTed by a worker thread of its own.
 
-A bounded queue (the oldest event dropped, and counted, when full), a short timeout and a few
-retries with backoff: a receiver that fails or hangs never delays reconciling, nor the others.
+A bounded queue (the oldest event dropped, and counted, when full), a deadline per POST and a
+few retries with backoff: a receiver that fails or hangs never delays reconciling, nor the others.
 """
 
 from __future__ import annotations
 
+import base64
 import collections
+import contextlib
+import http.client
 import json
 import logging
+import socket
+import ssl
 import threading
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from urllib.parse import urlsplit
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import unquote, urlsplit, urlunsplit
 
 from configurator.backoff import Backoff
 from reconciler.events import Event
@@ -23,23 +29,26 @@ log = logging.getLogger("robotconf.reconciler")
 
 SLACK = "slack:"
 QUEUE = 100  # events waiting per receiver; beyond, the oldest is dropped
-TIMEOUT = 5.0  # seconds a receiver has to answer one POST
+TIMEOUT = 5.0  # seconds one POST may take in all: connecting, sending, the answer's status
 ATTEMPTS = 3  # POSTs of one event before it is given up
 RETRY_INITIAL, RETRY_MAX = 1.0, 10.0
 # Outcomes a receiver's metrics count: sent, failed (given up after retries), dropped (queue).
 OUTCOMES = ("sent", "failed", "dropped")
 
 Counter = Callable[[str, str], None]  # (receiver name, outcome)
+Outcome = tuple[str | None, bool]  # (why the POST failed, or None; whether retrying is pointless)
 
 
 @dataclass(frozen=True)
 class Receiver:
     """A validated receiver URL. `name` is what logs and metrics show: its position and host,
-    never its credentials nor its path (a Slack webhook's path is its secret)."""
+    never its credentials nor its path (a Slack webhook's path is its secret). `url` has no
+    credentials: they travel as `authorization` (HTTP Basic, as curl sends them)."""
 
-    url: str
+    url: str = field(repr=False)
     slack: bool
     name: str
+    authorization: str | None = field(default=None, repr=False)
 
     def body(self, event: Event) -> bytes:
         if self.slack:
@@ -48,23 +57,47 @@ class Receiver:
 
 
 def parse_receiver(text: str, index: int = 1) -> Receiver:
-    """`http(s)://…`, or `slack:https://…` for a Slack-compatible `{"text": …}` body.
-    ValueError with a one-line reason, which never repeats the URL's credentials or path."""
+    """`http(s)://[user:password@]host[:port]/…`, or `slack:https://…` for a Slack-compatible
+    `{"text": …}` body. ValueError with a one-line reason, which never repeats any part of
+    the URL: a broken one may hold its password where its host or port should be."""
     slack = text.startswith(SLACK)
     url = text[len(SLACK) :] if slack else text
+    where = f"--notify #{index}"
+    # urlsplit drops tabs and line breaks silently, and http.client refuses what is not
+    # ASCII or holds a space at the first POST, quoting the URL: both are refused here.
+    if not url.isascii() or any(c <= " " or c == "\x7f" for c in url):
+        raise ValueError(
+            f"{where} must be ASCII without spaces or control characters "
+            "(percent-encode them; an international host name in its xn-- form)"
+        )
     try:
         parts = urlsplit(url)
         host, port = parts.hostname, parts.port
     except ValueError:
-        raise ValueError(f"--notify #{index} is not a valid URL") from None
-    if parts.scheme not in ("http", "https"):
         raise ValueError(
-            f"--notify #{index} must be an http:// or https:// URL (optionally prefixed slack:)"
-        )
+            f"{where} is not a valid URL: scheme://[user:password@]host[:port]/path, with any "
+            "@ : / ? # in the user name or password percent-encoded"
+        ) from None
+    if parts.scheme not in ("http", "https"):
+        raise ValueError(f"{where} must be an http:// or https:// URL (optionally prefixed slack:)")
     if not host:
-        raise ValueError(f"--notify #{index} has no host")
-    shown = f"{parts.scheme}://{host}{f':{port}' if port else ''}"
-    return Receiver(url, slack, f"#{index} {SLACK if slack else ''}{shown}")
+        raise ValueError(f"{where} has no host")
+    if "@" in parts.path + parts.query + parts.fragment:
+        # `http://user:pa/ss@host/` means host `user`: a password with / ? or # unencoded.
+        raise ValueError(
+            f"{where} has an @ after its host: percent-encode any / ? # in its password "
+            "(%2F %3F %23) and any @ in its path (%40)"
+        )
+    shown = f"[{host}]" if ":" in host else host
+    if port is not None:
+        shown += f":{port}"
+    authorization = None
+    if parts.username is not None:
+        pair = f"{unquote(parts.username)}:{unquote(parts.password or '')}"
+        authorization = "Basic " + base64.b64encode(pair.encode()).decode("ascii")
+    bare = urlunsplit((parts.scheme, parts.netloc.rpartition("@")[2], parts.path, parts.query, ""))
+    name = f"#{index} {SLACK if slack else ''}{parts.scheme}://{shown}"
+    return Receiver(bare, slack, name, authorization)
 
 
 class Sender:
@@ -88,9 +121,8 @@ class Sender:
         self._lock = threading.Lock()
         self._ready = threading.Event()
         self._stop = threading.Event()
+        self._attempt: _Attempt | None = None  # the POST under way, given up at a stop
         self.dropped = 0
-        # The environment's proxy settings apply: a receiver is reached as curl would.
-        self._opener = urllib.request.build_opener()
         self._thread = threading.Thread(
             target=self._run, name=f"notify {receiver.name}", daemon=True
         )
@@ -99,9 +131,14 @@ class Sender:
         self._thread.start()
 
     def stop(self, timeout: float = 1.0) -> None:
-        """Events still queued are not sent: a stop does not wait for a slow receiver."""
+        """Events still queued are not sent, and a POST under way is given up: a stop does
+        not wait for a slow receiver."""
         self._stop.set()
         self._ready.set()
+        with self._lock:
+            attempt = self._attempt
+        if attempt is not None:
+            attempt.give_up()
         self._thread.join(timeout)
 
     def put(self, event: Event) -> None:
@@ -140,6 +177,8 @@ class Sender:
             if error is None:
                 self._counted("sent")
                 return
+            if self._stop.is_set():  # given up by the stop, not by the receiver
+                return
             if final or attempt == self.attempts:
                 log.warning(
                     "notify %s: %s event not delivered after %d attempt(s): %s",
@@ -153,29 +192,207 @@ class Sender:
             if self._stop.wait(backoff.next()):
                 return
 
-    def _post(self, body: bytes) -> tuple[str | None, bool]:
-        """None, or why the POST failed and whether retrying is pointless (a 4xx refusal)."""
-        request = urllib.request.Request(
-            self.receiver.url,
-            data=body,
-            headers={"Content-Type": "application/json", "User-Agent": "robotconf"},
-            method="POST",
-        )
+    def _post(self, body: bytes) -> Outcome:
+        headers = {"Content-Type": "application/json", "User-Agent": "robotconf"}
+        if self.receiver.authorization is not None:
+            headers["Authorization"] = self.receiver.authorization
+        request = urllib.request.Request(self.receiver.url, body, headers, method="POST")
+        attempt = _Attempt(request, self.timeout, self.receiver.name)
+        with self._lock:
+            if self._stop.is_set():
+                return "stopped", True
+            self._attempt = attempt
         try:
-            with self._opener.open(request, timeout=self.timeout) as answer:
-                answer.read(65536)
-            return None, False
-        except urllib.error.HTTPError as exc:
-            final = 400 <= exc.code < 500 and exc.code not in (408, 429)
-            return f"HTTP {exc.code}", final
-        except (OSError, ValueError) as exc:
-            # URLError wraps the cause, whose text may name the host but never the path.
-            reason = getattr(exc, "reason", exc)
-            return f"{type(exc).__name__}: {reason}", False
+            return attempt.result()
+        finally:
+            with self._lock:
+                self._attempt = None
 
     def _counted(self, outcome: str) -> None:
         if self._count is not None:
             self._count(self.receiver.name, outcome)
+
+
+class _Attempt:
+    """One POST, on a thread of its own, that the sender waits for until its deadline: a
+    socket timeout bounds each read, not the POST (a receiver answering a byte at a time
+    holds it for ever), and nothing bounds a name lookup. At the deadline the POST is given
+    up: its connection is shut down, which ends a read or a TLS handshake at once, and the
+    sender goes on (a thread still connecting ends on its own, its socket closed)."""
+
+    def __init__(self, request: urllib.request.Request, timeout: float, name: str) -> None:
+        self._request = request
+        self.timeout = timeout
+        self._lock = threading.Lock()
+        self._ended = threading.Event()
+        self._outcome: Outcome | None = None
+        self._given_up = False
+        # A duplicate of each socket the POST connects: shutting it down ends any wait on
+        # the connection, even in a TLS handshake (which takes the original's descriptor).
+        self._handles: list[socket.socket] = []
+        self._thread = threading.Thread(target=self._run, name=f"notify {name} POST", daemon=True)
+
+    def result(self) -> Outcome:
+        """Starts the POST and waits for its outcome, at most until its deadline."""
+        self._thread.start()
+        in_time = self._ended.wait(self.timeout)
+        with self._lock:
+            if self._outcome is not None:
+                return self._outcome
+            self._give_up()
+        return (f"no answer within {self.timeout:g} s" if not in_time else "given up"), False
+
+    def give_up(self) -> None:
+        with self._lock:
+            self._give_up()
+        self._ended.set()
+
+    def track(self, sock: socket.socket) -> None:
+        """Called with each socket the POST connects, before anything is sent on it."""
+        with self._lock:
+            if self._given_up:
+                sock.close()
+                raise TimeoutError("the POST was given up")
+            self._handles.append(sock.dup())
+
+    def _give_up(self) -> None:  # with the lock held
+        self._given_up = True
+        self._close_handles(shut=True)
+
+    def _close_handles(self, *, shut: bool) -> None:
+        for handle in self._handles:
+            if shut:
+                with contextlib.suppress(OSError):
+                    handle.shutdown(socket.SHUT_RDWR)
+            handle.close()
+        self._handles.clear()
+
+    def _run(self) -> None:
+        try:
+            outcome = _post_once(_opener(self), self._request, self.timeout)
+        except Exception:  # a bug must end this POST as a failure, not silently
+            log.exception("notify: internal error in a POST")
+            outcome = "internal error", True
+        with self._lock:
+            if not self._given_up:
+                self._outcome = outcome
+            self._close_handles(shut=False)
+        self._ended.set()
+
+
+def _post_once(
+    opener: urllib.request.OpenerDirector, request: urllib.request.Request, timeout: float
+) -> Outcome:
+    """The answer's status is all that counts: its body is not read."""
+    try:
+        with opener.open(request, timeout=timeout):
+            return None, False
+    except urllib.error.HTTPError as exc:
+        with exc:
+            return _refused(exc.code, exc.headers.get("Location"))
+    except (OSError, ValueError, http.client.HTTPException) as exc:
+        return _why(exc), False
+
+
+def _refused(code: int, location: str | None) -> Outcome:
+    """A 3xx is a mistake in the URL (not retried); a 4xx other than 408 and 429 a refusal."""
+    if 300 <= code < 400:
+        where = _host_of(location)
+        return f"HTTP {code}, a redirect to {where}: not followed (give the URL it names)", True
+    return f"HTTP {code}", 400 <= code < 500 and code not in (408, 429)
+
+
+def _host_of(location: str | None) -> str:
+    """Where a redirect points, by its host only: the rest may be a secret."""
+    if not location:
+        return "nowhere (no Location)"
+    try:
+        host = urlsplit(location).hostname
+    except ValueError:
+        return "an unreadable Location"
+    return host or "the same host"
+
+
+def _why(exc: BaseException) -> str:
+    """Why a POST failed, told from what cannot quote the receiver's URL (its path is a
+    secret): never the text of an exception of urllib or http.client, which may."""
+    if isinstance(exc, urllib.error.URLError) and isinstance(exc.reason, BaseException):
+        exc = exc.reason
+    if isinstance(exc, TimeoutError):
+        return "timed out"
+    if isinstance(exc, ssl.SSLCertVerificationError):
+        return f"TLS: {exc.verify_message}"
+    if isinstance(exc, ssl.SSLError):
+        return f"TLS: {exc.reason or type(exc).__name__}"
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{type(exc).__name__}: {exc.strerror}"
+    return type(exc).__name__
+
+
+class _Tracked(http.client.HTTPConnection):
+    """A connection that hands the socket it connects to its attempt (before TLS, so that a
+    TLS handshake can be ended too)."""
+
+    attempt: _Attempt | None = None
+
+    def connect(self) -> None:
+        super().connect()
+        assert self.attempt is not None
+        self.attempt.track(self.sock)
+
+
+class _TrackedTLS(http.client.HTTPSConnection, _Tracked):
+    """HTTPS: its `connect` calls _Tracked's (the TCP connection) before the handshake."""
+
+
+class _HTTPHandler(urllib.request.HTTPHandler):
+    def __init__(self, attempt: _Attempt) -> None:
+        super().__init__()
+        self.attempt = attempt
+
+    def http_open(self, req: urllib.request.Request) -> http.client.HTTPResponse:
+        return self.do_open(self._connection, req)
+
+    def _connection(self, host: str, **kwargs: Any) -> http.client.HTTPConnection:
+        connection = _Tracked(host, **kwargs)
+        connection.attempt = self.attempt
+        return connection
+
+
+class _HTTPSHandler(urllib.request.HTTPSHandler):
+    def __init__(self, attempt: _Attempt) -> None:
+        super().__init__()
+        self.attempt = attempt
+
+    def https_open(self, req: urllib.request.Request) -> http.client.HTTPResponse:
+        return self.do_open(self._connection, req)
+
+    def _connection(self, host: str, **kwargs: Any) -> http.client.HTTPConnection:
+        connection = _TrackedTLS(host, **kwargs)  # the default context: certificates checked
+        connection.attempt = self.attempt
+        return connection
+
+
+class _NoRedirect(urllib.request.HTTPRedirectHandler):
+    """A redirect is not followed: urllib would turn the POST into a GET without its body
+    (301, 302, 303) and count it sent. It surfaces as the HTTPError of its 3xx instead."""
+
+    def redirect_request(
+        self,
+        req: urllib.request.Request,
+        fp: Any,
+        code: int,
+        msg: str,
+        headers: Any,
+        newurl: str,
+    ) -> None:
+        return None
+
+
+def _opener(attempt: _Attempt) -> urllib.request.OpenerDirector:
+    # The environment's proxy settings apply (urllib's default ProxyHandler): a receiver is
+    # reached as curl would reach it.
+    return urllib.request.build_opener(_NoRedirect(), _HTTPHandler(attempt), _HTTPSHandler(attempt))
 
 
 class Notifier:
@@ -196,6 +413,7 @@ class Notifier:
 
     def tell(self, events: Sequence[Event]) -> None:
         for event in events:
+            # The message quotes robots: the log's formatter (configurator.logsafe) escapes it.
             log.info("event %s: %s", event.kind.value, event.message)
             for sender in self.senders:
                 sender.put(event)
