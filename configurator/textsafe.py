@@ -58,6 +58,21 @@ def markdown_code(text: str) -> str:
     return f"{fence}{pad}{shown}{pad}{fence}"
 
 
+# An @ that starts a word: where Mattermost, Rocket.Chat and Discord read a mention
+# (`@channel`, `@here`, `@all`, `@everyone`), even in a Slack-compatible webhook's text.
+_MENTION = re.compile(r"(?<!\w)@(?=\w)")
+_WORD_JOINER = "\u2060"  # invisible; it keeps the @ from starting a mention
+
+
+def chat_text(text: str) -> str:
+    """Text for a Slack-compatible chat message, inert: one printable line, with `&`, `<` and
+    `>` escaped as Slack's message formatting requires (so `<!channel>`, `<@U123>` and
+    `<http://x|y>` show as written instead of pinging or linking), and a word joiner after an
+    @ that starts a word (so a plain `@channel` pings nobody where the chat reads those)."""
+    shown = printable(text).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    return _MENTION.sub("@" + _WORD_JOINER, shown)
+
+
 def json_printable(text: str) -> str:
     """JSON text (ensure_ascii=False) with the characters JSON leaves raw escaped as \\uXXXX:
     the same document, safe on a terminal."""

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from configurator.textsafe import chat_text
 from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
 
 SETTLE = 5.0  # seconds a robot told degraded or offline runs the desired request before in sync
@@ -35,7 +36,8 @@ _ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLL
 
 @dataclass(frozen=True)
 class Event:
-    """One thing worth telling a person, as receivers get it (`as_json`)."""
+    """One thing worth telling a person, as receivers get it (`as_json`). `message` quotes
+    what robots say as they said it: JSON carries it as data, `text` and logs escape it."""
 
     kind: Kind
     message: str
@@ -57,8 +59,9 @@ class Event:
         }
 
     def text(self) -> str:
-        """One line for a chat (the Slack form)."""
-        return f"robotconf {self.kind.value.replace('_', ' ')}: {self.message}"
+        """One line for a chat (the Slack form). The message quotes robots (a status message)
+        and commits: it is made inert text there, so that no robot pings a channel."""
+        return chat_text(f"robotconf {self.kind.value.replace('_', ' ')}: {self.message}")
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,8 @@ from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 
+from configurator.logsafe import SafeFormatter
+
 _PORT = re.compile(r"[0-9]{1,5}")
 
 
@@ -44,18 +46,18 @@ def _quiet_chatty_loggers() -> None:
 
 
 def log_to_stderr(name: str) -> None:
-    logging.basicConfig(
-        level=logging.INFO,
-        format=f"%(asctime)s {name} %(levelname)s %(message)s",
-        stream=sys.stderr,
-    )
+    """One line per record on stderr; text from robots in it is escaped (SafeFormatter)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(SafeFormatter(f"%(asctime)s {name} %(levelname)s %(message)s"))
+    logging.basicConfig(level=logging.INFO, handlers=[handler])
     _quiet_chatty_loggers()
 
 
 def log_to_file(path: Path) -> None:
+    """As log_to_stderr, to a file (`robotconf up`'s log)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     handler = logging.FileHandler(path, encoding="utf-8")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+    handler.setFormatter(SafeFormatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
     root = logging.getLogger()
     root.addHandler(handler)
     root.setLevel(logging.INFO)

@@ -228,6 +228,14 @@ def test_receivers_get_the_event_json_or_slack_text() -> None:
         "slack:mqtt://host",
         "http:///nohost",
         "http://user:hunter2@host:99999/x",
+        "http://user:pa%ss:hunter2@host:99999x/",  # the password makes the port unparsable
+        "http://user:hunter2/x@host/",  # an unencoded / makes `user` the host, `hunter2` a port
+        "http://user:hunter2#x@host/",
+        "http://user:hunter2@[::1/",
+        "http://user:hunter2@host/a b",
+        "http://user:hunter2@host/\x1b[2J",
+        "http://user:hunter2@h\u00f6st/",
+        "slack:ftp://user:hunter2@host/x",
     ],
 )
 def test_bad_receiver_urls_are_refused_without_their_secrets(url: str) -> None:
@@ -237,8 +245,23 @@ def test_bad_receiver_urls_are_refused_without_their_secrets(url: str) -> None:
 
 
 def test_a_receiver_name_hides_credentials_and_path() -> None:
-    name = parse_receiver("https://user:hunter2@alerts.example:8443/token/XYZ").name
-    assert name == "#1 https://alerts.example:8443"
+    receiver = parse_receiver("https://user:hunter2@alerts.example:8443/token/XYZ")
+    assert receiver.name == "#1 https://alerts.example:8443"
+    assert "hunter2" not in repr(receiver) and "XYZ" not in repr(receiver)
+    assert receiver.url == "https://alerts.example:8443/token/XYZ"  # credentials: a header
+    assert parse_receiver("http://[::1]:9/x", 3).name == "#3 http://[::1]:9"
+
+
+def test_a_robot_message_is_data_in_json_and_inert_text_in_slack() -> None:
+    forged = "\nERROR forged line\r\x1b[2J<!channel> & @here"
+    told = run([robots(robot(AgentState.FAILED, message=forged))])[0][0]
+    plain, slack = parse_receiver("http://h/x"), parse_receiver("slack:http://h/x")
+    assert json.loads(plain.body(told))["message"] == f"r1 is failed: {forged}"
+    text = json.loads(slack.body(told))["text"]
+    assert text == (
+        "robotconf robot degraded: r1 is failed: \\nERROR forged line\\r\\x1b[2J"
+        "&lt;!channel&gt; &amp; @\u2060here"
+    )
 
 
 @pytest.mark.parametrize(
