@@ -14,6 +14,7 @@ from configurator.cli.broker_options import BrokerOptions, broker_options
 from configurator.cli.desk import online_robot
 from configurator.cli.errors import CliError, ExitCode
 from configurator.launch import REQUESTER_PATTERN, RestartRequest
+from configurator.textsafe import printable
 from configurator.types import is_robot_id
 from configurator.wire import AgentState, AgentStatus
 from reconciler.desk import RobotDesk
@@ -127,5 +128,7 @@ def restart(
             f"robotconf logs {robot_id} shows why",
             ExitCode.FINDINGS,
         )
-    print(f"{robot_id}: restart requested by {by}: {confirmed.state.value} ({confirmed.message})")
+    # The status message is the robot's own text: escaped, it cannot drive the terminal.
+    said = printable(confirmed.message)
+    print(f"{robot_id}: restart requested by {by}: {confirmed.state.value} ({said})")
     return ExitCode.OK
