@@ -1,0 +1,210 @@
+"""Rollouts against real deaths: robots (agent and brain, SIGKILL) and the reconciler killed at
+each step of a wave — before its publish, right after it, during `healthy_after`, at the gate
+to the next wave — on a real Mosquitto. A robot that dies of its new request fails its wave; a
+restarted reconciler resumes, never rolling back a healthy wave."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import time
+
+from configurator.rendered import RenderedRequest
+from configurator.wire import AgentState, ReconcilerStatus
+from tests.integration.reconciler.conftest import Fleet
+from tests.integration.reconciler.test_rollout import (
+    CANARY,
+    complete,
+    rename_all,
+    running_digest,
+    with_policy,
+)
+from tests.support.fleet import start_agent
+from tests.support.watch import wait_for
+
+LAST = "tb3-06"  # in the last wave, with the canary's scenario
+
+
+def policy(healthy_after: float, wave_timeout: float) -> str:
+    return (
+        "rollout:\n  waves: [{name: canary, selector: {ring: canary}}, {name: all}]\n"
+        f"  healthy_after: {healthy_after}\n  max_failures: 0\n"
+        f"  wave_timeout: {wave_timeout}\n  on_failure: rollback\n"
+    )
+
+
+def live_digests(fleet: Fleet, robot: str) -> list[str]:
+    """The digests of the requests published to `robot` live (not retained), in order."""
+    topic = fleet.watch.topics.launch(robot)
+    return [
+        json.loads(payload)["digest"]
+        for t, payload, _ in list(fleet.watch.live_launches)
+        if t == topic and payload
+    ]
+
+
+def wait_published(fleet: Fleet, robot: str, request: RenderedRequest) -> None:
+    fleet.watch.wait(
+        lambda: request.digest in live_digests(fleet, robot), f"{robot}'s new request published"
+    )
+
+
+def kill_robot(fleet: Fleet, robot: str) -> None:
+    """The robot loses power: its agent and its brain, SIGKILL, nothing said but the Will."""
+    status = fleet.watch.status(robot)
+    fleet.agents[robot].kill()
+    if status is not None and status.pid is not None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(status.pid, signal.SIGKILL)
+    fleet.watch.wait_for(robot, lambda s: s.state is AgentState.OFFLINE, "its Last Will")
+
+
+def kill_reconciler(fleet: Fleet) -> None:
+    assert fleet.reconciler is not None
+    fleet.reconciler.kill()
+
+
+def rolled_back(status: ReconcilerStatus, revision: str) -> bool:
+    return (
+        status.reason == "RolledBack"
+        and status.rollout is not None
+        and status.rollout.revision == revision
+    )
+
+
+def never_rolled_back(fleet: Fleet, stable: dict[str, RenderedRequest]) -> None:
+    """No robot was sent its stable request again after the rollout began."""
+    for robot, request in stable.items():
+        assert request.digest not in live_digests(fleet, robot), f"{robot} was rolled back"
+
+
+def start(fleet: Fleet, healthy_after: float, wave_timeout: float) -> dict[str, RenderedRequest]:
+    stable = with_policy(fleet, policy(healthy_after, wave_timeout))
+    fleet.watch.live_launches.clear()
+    return fleet.requests(stable)
+
+
+# ------------------------------------------------------------------ robots that die
+
+
+def test_a_canary_killed_right_after_its_wave_is_published_fails_it(fleet: Fleet) -> None:
+    stable = start(fleet, healthy_after=2, wave_timeout=60)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_published(fleet, CANARY, new[CANARY])
+    kill_robot(fleet, CANARY)
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
+    assert status.rollout is not None and status.rollout.failed == [CANARY]
+    assert live_digests(fleet, LAST) == []  # the next wave was never published
+    assert fleet.watch.digest(CANARY) == stable[CANARY].digest  # held for when it is back
+
+
+def test_a_canary_killed_during_healthy_after_fails_it(fleet: Fleet) -> None:
+    start(fleet, healthy_after=30, wave_timeout=120)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
+    kill_robot(fleet, CANARY)
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
+    assert status.rollout is not None and status.rollout.failed == [CANARY]
+    assert live_digests(fleet, LAST) == []
+
+
+def test_a_robot_killed_at_the_gate_fails_the_wave_it_was_just_sent(fleet: Fleet) -> None:
+    start(fleet, healthy_after=1, wave_timeout=60)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_published(fleet, LAST, new[LAST])  # the canary was healthy: the gate opened
+    kill_robot(fleet, LAST)
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
+    assert status.rollout is not None and LAST in status.rollout.failed
+    assert status.rollout.wave_name == "all"
+
+
+def test_a_robot_dead_before_its_wave_is_waited_for_then_passed_over(fleet: Fleet) -> None:
+    stable = start(fleet, healthy_after=0.5, wave_timeout=3)
+    kill_robot(fleet, CANARY)
+    head = rename_all(fleet, "v2")
+    status = fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+    assert status.rollout is not None
+    never_rolled_back(fleet, stable)
+    # Back on: its request waited for it, retained.
+    new = fleet.requests(head)
+    fleet.agents[CANARY] = start_agent(fleet.lab, CANARY, fleet.broker.url, fleet.folder / "agents")
+    wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary back, on the head")
+
+
+# ------------------------------------------------------------------ a reconciler that dies
+
+
+def test_a_reconciler_killed_before_a_wave_is_published_rolls_it_out(fleet: Fleet) -> None:
+    stable = start(fleet, healthy_after=0.5, wave_timeout=60)
+    kill_reconciler(fleet)
+    head = rename_all(fleet, "v2")
+    fleet.start_reconciler("--interval", "5")
+    fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+    fleet.watch.wait_running(fleet.requests(head))
+    never_rolled_back(fleet, stable)
+
+
+def test_a_reconciler_killed_right_after_a_publish_resumes_it(fleet: Fleet) -> None:
+    stable = start(fleet, healthy_after=1, wave_timeout=60)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_published(fleet, CANARY, new[CANARY])
+    kill_reconciler(fleet)
+    fleet.start_reconciler("--interval", "5")
+    fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+    fleet.watch.wait_running(new)
+    never_rolled_back(fleet, stable)
+    assert live_digests(fleet, CANARY) == [new[CANARY].digest]  # published once
+
+
+def test_a_reconciler_killed_during_healthy_after_and_back_after_the_timeout_goes_on(
+    fleet: Fleet,
+) -> None:
+    """The issue's example: the canary runs the new request all along; the reconciler comes
+    back after the wave's timeout. It must not blame the canary for what it did not watch."""
+    stable = start(fleet, healthy_after=4, wave_timeout=5)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
+    kill_reconciler(fleet)
+    pid = fleet.watch.status(CANARY)
+    time.sleep(6)  # past the wave's timeout, with nobody watching
+    fleet.start_reconciler("--interval", "5")
+    fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+    fleet.watch.wait_running(new)
+    never_rolled_back(fleet, stable)
+    latest = fleet.watch.status(CANARY)
+    assert pid is not None and latest is not None and latest.pid == pid.pid  # never restarted
+
+
+def test_a_reconciler_killed_at_the_gate_resumes_the_next_wave(fleet: Fleet) -> None:
+    stable = start(fleet, healthy_after=1, wave_timeout=60)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_published(fleet, LAST, new[LAST])
+    kill_reconciler(fleet)
+    fleet.start_reconciler("--interval", "5")
+    fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+    fleet.watch.wait_running(new)
+    never_rolled_back(fleet, stable)
+
+
+def test_a_canary_that_dies_while_the_reconciler_is_down_fails_it(fleet: Fleet) -> None:
+    start(fleet, healthy_after=30, wave_timeout=120)
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
+    # The reconciler saw it online with its request: that is kept on the broker.
+    fleet.watch.wait_reconciler(
+        lambda s: s.rollout is not None and s.rollout.revision == head, "the wave under way"
+    )
+    kill_reconciler(fleet)
+    kill_robot(fleet, CANARY)
+    fleet.start_reconciler("--interval", "5")
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
+    assert status.rollout is not None and status.rollout.failed == [CANARY]
