@@ -142,8 +142,10 @@ class Controller:
         # The robots' statuses, followed live only while the head has a rollout policy: the
         # waves are gated by them. Without one they are only sampled (`_sample_active`).
         self.health: RetainedView | None = None
-        # robot -> ((digest, pid), first seen running so): another brain process is another run
-        self._running_since: dict[str, tuple[tuple[str, int | None], float]] = {}
+        # robot -> (its run, first seen running so): a run is a digest in one brain process
+        # entered at one time (the agent's, compared only with itself), so a brain that crashed
+        # and runs again between two looks is a new run, not a settled one.
+        self._running_since: dict[str, tuple[tuple[str, int | None, float], float]] = {}
         self._watched = 0  # the health view's connection whose statuses were learned last
         self._watching_since = 0.0  # when they were: a rollout's clock counts from then
         # What a rollout's current wave established: this process's, or the retained one
@@ -385,7 +387,7 @@ class Controller:
         statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
         for robot, status in statuses.items():
             if status.state is AgentState.RUNNING and status.digest:
-                run = (status.digest, status.pid)
+                run = (status.digest, status.pid, status.since)
                 known = self._running_since.get(robot)
                 if known is None or known[0] != run:
                     self._running_since[robot] = (run, now)
