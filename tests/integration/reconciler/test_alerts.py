@@ -19,12 +19,13 @@ import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
 from configurator.mqtt import Connection
-from configurator.wire import AgentState
+from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.events import Event, Kind
 from reconciler.notify import QUEUE, Notifier, Sender, parse_receiver
 from reconciler.source import LocalBranch
 from reconciler.telemetry import Telemetry
 from tests.integration.reconciler.conftest import Fleet
+from tests.support.agents import publish
 from tests.support.fleet import GitLab, Running, refused_reconcile, start_reconciler
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
@@ -367,3 +368,50 @@ def test_a_rolled_back_rollout_is_told_once(fleet: Fleet, receivers: dict[str, R
     assert [e["robot"] for e in ok.events("robot_degraded")] == ["tb3-01"]
     assert [e["revision"] for e in ok.events("robot_in_sync")] == [stable]
     assert not ok.events("rollout_halted") and not ok.events("commit_refused")
+
+
+FORGED = "\nERROR forged line\r\x1b[2J<!channel> <@U024BE7LH> @here"
+
+
+def test_a_robot_can_neither_forge_a_log_line_nor_ping_a_channel(
+    lab: GitLab,
+    mosquitto: Mosquitto,
+    watch: FleetWatch,
+    receivers: dict[str, Receiver],
+    tmp_path: Any,
+) -> None:
+    """A status published by hand (no agent) for an assigned robot, its message made to
+    forge a line of the reconciler's log, clear its terminal and ping a chat channel."""
+    ok, slack = receivers["ok"], receivers["slack"]
+    reconciler = start_reconciler(
+        lab, mosquitto.url, tmp_path / "reconciler.log", "--interval", "1",
+        "--notify", ok.url, "--notify", "slack:" + slack.url,
+    )  # fmt: skip
+    try:
+        head = lab.head()
+        watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == head, "applied")
+        robot = lab.robots()[0]
+        status = AgentStatus(robot_id=robot, state=AgentState.FAILED, revision=head, message=FORGED)
+        publish(mosquitto.url, Topics("robotconf").status(robot), status.model_dump_json().encode())
+        told = wait_for(lambda: ok.events("robot_degraded", robot=robot), "the robot told")
+        texts = wait_for(lambda: slack.got(), "the chat told")
+        wait_for(lambda: "event robot_degraded" in reconciler.output(), "the event logged")
+    finally:
+        assert reconciler.stop() == 0, reconciler.output()[-3000:]
+    # JSON carries what the robot said as data, exactly.
+    assert told[0]["message"] == f"{robot} is failed: {FORGED}"
+    # The chat gets inert text: no command, no mention, one line.
+    (text,) = (body["text"] for body in texts)
+    for command in ("<!channel>", "<@U024BE7LH>", "@here", "\n", "\r", "\x1b"):
+        assert command not in text
+    assert "&lt;!channel&gt; &lt;@\u2060U024BE7LH&gt; @\u2060here" in text
+    # The reconciler's log: the message stays inside its line, escaped; no escape sequence.
+    raw = reconciler.log.read_bytes()
+    assert b"\x1b" not in raw and b"\r" not in raw
+    lines = raw.decode("utf-8").split("\n")
+    assert not [line for line in lines if line.startswith("ERROR forged")]
+    (logged,) = (line for line in lines if "event robot_degraded" in line)
+    assert logged.endswith(
+        f"event robot_degraded: {robot} is failed: \\nERROR forged line\\r\\x1b[2J"
+        "<!channel> <@U024BE7LH> @here"
+    )
