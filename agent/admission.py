@@ -55,6 +55,9 @@ MAX_COMMAND_BYTES = 4 * 1024
 # A restart is carried out only this close (either way, seconds) to when it was issued: a
 # captured one cannot be held back and replayed later.
 RESTART_MAX_AGE = 300.0
+# Restarts dated ahead of this robot's clock remembered at once (each for RESTART_MAX_AGE):
+# beyond, another one dated ahead is refused until the oldest is forgotten.
+MAX_RESTARTS_AHEAD = 32
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,53 @@ class Restart:
 
     requested_by: str
     issued_at: float
+
+
+@dataclass(frozen=True)
+class RestartMemory:
+    """What an agent remembers of the restarts it carried out, so that each is carried out
+    once (persisted in its work directory).
+
+    `watermark`: restarts issued at or before it are refused. It is the issue time of the last
+    one carried out, but never later than this robot's clock was then: a desk whose clock runs
+    fast must not lock out the restarts of correct clocks that follow. `ahead`: the issue times
+    of those carried out that were dated after the robot's clock (and so after the watermark),
+    refused again by name while they are within RESTART_MAX_AGE."""
+
+    watermark: float | None = None
+    ahead: frozenset[float] = frozenset()
+
+    def refusal(self, issued_at: float) -> str | None:
+        """Why a restart issued at `issued_at` was carried out already; None if it was not."""
+        if self.watermark is not None and issued_at <= self.watermark:
+            return (
+                f"restart issued at {_iso(issued_at)} is not newer than the last one carried "
+                f"out ({_iso(self.watermark)}): a duplicate or a replay"
+            )
+        if issued_at in self.ahead:
+            return (
+                f"restart issued at {_iso(issued_at)} was carried out already: a duplicate or "
+                "a replay"
+            )
+        return None
+
+    def carried_out(self, issued_at: float, now: float) -> RestartMemory:
+        """The memory once the restart issued at `issued_at` is carried out at `now` (wall)."""
+        watermark = min(issued_at, now)
+        if self.watermark is not None:
+            watermark = max(watermark, self.watermark)
+        ahead = set(self.ahead)
+        if issued_at > watermark:
+            ahead.add(issued_at)
+        return RestartMemory(watermark, frozenset(ahead)).pruned(now)
+
+    def pruned(self, now: float) -> RestartMemory:
+        """Without what the watermark or the age limit refuses anyway."""
+        floor = now - RESTART_MAX_AGE
+        kept = frozenset(
+            t for t in self.ahead if t >= floor and (self.watermark is None or t > self.watermark)
+        )
+        return self if kept == self.ahead else RestartMemory(self.watermark, kept)
 
 
 @dataclass(frozen=True)
@@ -182,12 +232,12 @@ def interpret_restart(
     payload: bytes,
     robot_id: str,
     verify: Verifier | None,
-    newest_issued_at: float | None,
+    memory: RestartMemory,
     now: float,
 ) -> Restart | Reject:
     """The admission of one restart-topic payload, in the order of `interpret`: bounded parse,
     address, signature (when this agent verifies), then the model; then freshness: issued
-    within RESTART_MAX_AGE of `now` (wall time) and after the newest restart carried out, so
+    within RESTART_MAX_AGE of `now` (wall time) and not carried out before (`memory`), so
     that each restart happens once, a duplicate delivery included."""
     try:
         data = parse_object(payload, max_bytes=MAX_COMMAND_BYTES)
@@ -218,10 +268,14 @@ def interpret_restart(
             f"than {RESTART_MAX_AGE:g} s apart (an old restart replayed, or a clock is wrong: "
             "check NTP)"
         )
-    if newest_issued_at is not None and issued <= newest_issued_at:
+    problem = memory.refusal(issued)
+    if problem is not None:
+        return Reject(problem)
+    if issued > now and len(memory.pruned(now).ahead) >= MAX_RESTARTS_AHEAD:
         return Reject(
-            f"restart issued at {_iso(issued)} is not newer than the last one carried out "
-            f"({_iso(newest_issued_at)}): a duplicate or a replay"
+            f"restart issued at {_iso(issued)}, ahead of this robot's clock ({_iso(now)}), "
+            f"and {MAX_RESTARTS_AHEAD} such restarts were carried out in the last "
+            f"{RESTART_MAX_AGE:g} s: a desk's clock is wrong (check NTP)"
         )
     return Restart(request.requested_by, issued)
 

@@ -1,20 +1,19 @@
-"""The brain's log for the desk (`robotconf logs`): a tail and a followed stream, with secrets
-redacted, lines cut to the message bound, and everything paced at about RATE lines a second.
+"""The brain's log for the desk (`robotconf logs`): tails and a followed stream, redacted, cut to
+the message bound, paced at about RATE lines a second and shared fairly between who asks.
 
 No MQTT here: the runtime asks `LogStream` for the chunks due and publishes them.
 """
 
 from __future__ import annotations
 
-import copy
 import json
 import os
-import re
-from collections import deque
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections import OrderedDict, deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from agent.redact import MIN_SECRET_CHARS, REDACTED, Pem, Redactor, pem_state_after
 from configurator.wire import (
     LOG_FOLLOW_TTL,
     MAX_LOG_MESSAGE_BYTES,
@@ -22,65 +21,30 @@ from configurator.wire import (
     LogsRequest,
 )
 
-RATE = 100.0  # lines a second, sustained
+__all__ = ["MIN_SECRET_CHARS", "REDACTED", "LogStream", "Redactor", "fit_line", "read_tail"]
+
+RATE = 100.0  # lines a second, sustained, for all who ask together
 BURST = 200.0  # lines at once, after a quiet while
 POLL_INTERVAL = 0.25  # seconds between looks at the log file while followed
 READ_LIMIT = 256 * 1024  # bytes read from the file per look; the rest is skipped, counted
 TAIL_WINDOW = 1024 * 1024  # bytes read back from the end of a file for a tail
-QUEUE_LIMIT = 2 * 1000  # lines waiting to go out; beyond, followed lines are dropped, counted
-ASKS_PER_SECOND = 5  # requests served in a second; more are ignored (each reads the file)
+# Bytes read back before a tail (or the stream's start) for an open PEM block: a private key,
+# RSA 16384 included, is far shorter, so a look back that finds no marker is outside one.
+LOOKBACK = 64 * 1024
+# Lines waiting to go out: the tails together, and the followed stream on its own. Beyond,
+# the tail with the most lines waiting loses its oldest (counted, said as `dropped`), and new
+# followed lines are dropped (counted).
+QUEUE_LIMIT = 2 * 1000
+QUEUE_BYTES = 4 * 1024 * 1024  # the tails' lines waiting, in bytes of JSON
+QUANTUM = 10  # lines one waiting answer sends before the next one's turn
+# Asks served (each reads the log): per session, and for everyone together; more are refused.
+SESSION_ASKS_PER_SECOND = 5.0
+ASKS_PER_SECOND = 20.0
+MAX_SESSIONS = 256  # sessions whose ask budget is remembered (an idle one's is full anyway)
 # What a chunk's JSON holds besides its lines; a line gets the rest of the message bound.
 _CHUNK_OVERHEAD = 512
 MAX_LINE_BYTES = MAX_LOG_MESSAGE_BYTES - _CHUNK_OVERHEAD
-MIN_SECRET_CHARS = 3  # shorter values (ROS_DOMAIN_ID: 7) are redacted only as NAME=value
-REDACTED = "[redacted]"
-
-_PEM_BEGIN = re.compile(r"-----BEGIN [A-Z0-9 ]*PRIVATE KEY-----")
-_PEM_END = re.compile(r"-----END [A-Z0-9 ]*PRIVATE KEY-----")
-_URL_PASSWORD = re.compile(r"(?i)\b([a-z][a-z0-9+.-]*://[^\s/:@]*):[^\s/@]+@")
-
-
-class Redactor:
-    """Takes secrets out of log lines: the values of agent.yaml's `env:` and the broker
-    password anywhere they appear (each at least MIN_SECRET_CHARS long), `NAME=value` for
-    every `env:` name whatever its value, passwords in URLs, and private-key PEM blocks.
-    Stateful: a PEM block spans lines, so one Redactor reads one stream in order."""
-
-    def __init__(self, secrets: Iterable[str], names: Iterable[str]) -> None:
-        values = sorted(
-            {s for s in secrets if len(s) >= MIN_SECRET_CHARS and "\n" not in s},
-            key=len,
-            reverse=True,
-        )
-        self._values = re.compile("|".join(re.escape(v) for v in values)) if values else None
-        named = sorted(set(names), key=len, reverse=True)
-        self._assignments = (
-            re.compile(r"\b(" + "|".join(re.escape(n) for n in named) + r")(\s*[=:]\s*)(\S+)")
-            if named
-            else None
-        )
-        self._in_key = False
-
-    def fresh(self) -> Redactor:
-        """The same rules for another read of the log, with no PEM block open."""
-        other = copy.copy(self)
-        other._in_key = False
-        return other
-
-    def line(self, text: str) -> str:
-        if self._in_key:
-            if _PEM_END.search(text):
-                self._in_key = False
-            return REDACTED
-        begin = _PEM_BEGIN.search(text)
-        if begin is not None:
-            self._in_key = _PEM_END.search(text, begin.end()) is None
-            return text[: begin.start()] + REDACTED
-        if self._values is not None:
-            text = self._values.sub(REDACTED, text)
-        if self._assignments is not None:
-            text = self._assignments.sub(lambda m: m.group(1) + m.group(2) + REDACTED, text)
-        return _URL_PASSWORD.sub(lambda m: m.group(1) + ":" + REDACTED + "@", text)
+_BLOCK = 64 * 1024  # a tail reads back this much at a time, until it has its lines
 
 
 def _encoded_size(line: str) -> int:
@@ -101,88 +65,276 @@ def fit_line(line: str, limit: int = MAX_LINE_BYTES) -> str:
     return line[:keep] + marker
 
 
-def _lines_of(raw: bytes) -> list[str]:
-    text = raw.decode("utf-8", errors="replace")
-    return [line.rstrip("\r") for line in text.split("\n")]
+def _decode(raw: bytes) -> str:
+    return raw.decode("utf-8", errors="replace").rstrip("\r")
 
 
-def read_tail(path: Path, count: int, window: int = TAIL_WINDOW) -> list[str]:
-    """The last `count` lines of the log, from the rotated file before it when the current one
-    holds fewer; each file read back at most `window` bytes from its end."""
-    if count <= 0:
-        return []
-    lines: list[str] = []
-    for candidate in (path, path.with_name(path.name + ".1")):
-        try:
-            with open(candidate, "rb") as log:
-                size = os.fstat(log.fileno()).st_size
-                start = max(0, size - window)
-                log.seek(start)
-                raw = log.read(window)
-        except OSError:
-            continue
-        found = _lines_of(raw)
-        if found and found[-1] == "":
-            found.pop()  # the newline that ends the file
-        if start > 0 and found:
-            found.pop(0)  # begun mid-line
-        lines = found + lines
-        if len(lines) >= count:
-            break
-    return lines[-count:]
+def _older(path: Path) -> Path:
+    """The rotated copy before `path`: brain.log -> brain.log.1 -> brain.log.2."""
+    stem, _, suffix = path.name.rpartition(".")
+    if stem and suffix.isdigit():
+        return path.with_name(f"{stem}.{int(suffix) + 1}")
+    return path.with_name(path.name + ".1")
+
+
+def pem_state_before(path: Path, offset: int, copies: bool = True, budget: int = LOOKBACK) -> Pem:
+    """Whether the byte at `offset` of the log file `path` is inside a private-key PEM block,
+    by looking back (at most `budget` bytes, into the rotated copy before it if need be).
+
+    At a file's start, lines may have been lost between the copy and the truncation of a
+    rotation: only an open block in the copy before it says INSIDE; else UNKNOWN. The start of
+    the current log with no copy before it is the log's own start (OUTSIDE) when rotation
+    keeps `copies`, and UNKNOWN when it only truncates."""
+    start = max(0, offset - budget)
+    try:
+        with open(path, "rb") as log:
+            log.seek(start)
+            data = log.read(offset - start)
+    except OSError:
+        data = b""
+    found = pem_state_after(data.decode("utf-8", errors="replace"))
+    if found is not None:
+        return found
+    if start > 0:
+        return Pem.OUTSIDE  # no key is that long: not inside one
+    older = _older(path)
+    try:
+        size = older.stat().st_size
+    except OSError:
+        if older.name != path.name + ".1":
+            return Pem.UNKNOWN  # the oldest copy begins where a deleted one ended
+        return Pem.OUTSIDE if copies else Pem.UNKNOWN
+    before = pem_state_before(older, size, copies, budget - offset)
+    return Pem.INSIDE if before is Pem.INSIDE else Pem.UNKNOWN
 
 
 @dataclass
-class _Queued:
-    session: str | None  # None: a followed line
-    line: str | None  # None: the end of the tail for `session`
+class _FileTail:
+    path: Path
+    lines: list[str]
+    offset: int  # of the first line
+
+
+def _file_tail(path: Path, count: int, window: int, end: int | None = None) -> _FileTail | None:
+    """The last `count` lines of one file (as of `end` bytes, else its size), read back at most
+    `window` bytes, a block at a time; None when it cannot be read."""
+    try:
+        with open(path, "rb") as log:
+            size = os.fstat(log.fileno()).st_size if end is None else end
+            floor = max(0, size - window)
+            start, data = size, b""
+            # One more line break than lines asked for: the one before the first line.
+            while start > floor and data.count(b"\n") <= count:
+                step = min(_BLOCK, start - floor)
+                start -= step
+                log.seek(start)
+                data = log.read(step) + data
+    except OSError:
+        return None
+    data = data[: size - start]  # the file may have grown since `end`
+    pieces = data.split(b"\n")
+    if pieces and pieces[-1] == b"":
+        pieces.pop()  # the line break that ends the file
+    if start > 0 and pieces:
+        pieces.pop(0)  # begun before what was read
+    kept = pieces[-count:] if count > 0 else []
+    ends_in_break = data.endswith(b"\n")
+    offset = size - sum(len(p) + 1 for p in kept) + (0 if ends_in_break or not kept else 1)
+    return _FileTail(path, [_decode(p) for p in kept], offset)
+
+
+def _tail_files(
+    path: Path, count: int, window: int = TAIL_WINDOW, end: int | None = None
+) -> list[_FileTail]:
+    """The last `count` lines of the log, from the rotated copy before it when the current
+    file holds fewer, oldest file first."""
+    found: list[_FileTail] = []
+    have = 0
+    for candidate, upto in ((path, end), (_older(path), None)):
+        if have >= count:
+            break
+        part = _file_tail(candidate, count - have, window, upto)
+        if part is None:
+            continue
+        found.insert(0, part)
+        have += len(part.lines)
+    return found
+
+
+def read_tail(path: Path, count: int, window: int = TAIL_WINDOW) -> list[str]:
+    """The last `count` lines of the log, as written (not redacted)."""
+    if count <= 0:
+        return []
+    return [line for part in _tail_files(path, count, window) for line in part.lines]
+
+
+def redacted_tail(
+    path: Path,
+    count: int,
+    redactor: Redactor,
+    copies: bool = True,
+    end: int | None = None,
+    window: int = TAIL_WINDOW,
+) -> list[str]:
+    """The last `count` lines of the log as they may leave the robot: redacted from the PEM
+    state found by looking back before the first of them, each cut to fit a message."""
+    if count <= 0:
+        return []
+    parts = _tail_files(path, count, window, end)
+    if not parts:
+        return []
+    first = parts[0]
+    reader = redactor.fresh(pem_state_before(first.path, first.offset, copies))
+    lines: list[str] = []
+    for n, part in enumerate(parts):
+        if n > 0 and reader.state is not Pem.INSIDE:
+            # A rotation lies between: lines may have been lost at it (see pem_state_before).
+            reader.state = Pem.UNKNOWN
+        lines += [fit_line(reader.line(line)) for line in part.lines]
+    return lines
+
+
+class _Budget:
+    """A token bucket of asks."""
+
+    def __init__(self, rate: float, now: float) -> None:
+        self.rate = rate
+        self.tokens = rate  # a second's worth at once
+        self.at = now
+
+    def refill(self, now: float) -> float:
+        self.tokens = min(self.rate, self.tokens + max(0.0, now - self.at) * self.rate)
+        self.at = now
+        return self.tokens
+
+
+@dataclass
+class _Tail:
+    """One answer's lines still to send; its end follows the last of them."""
+
+    lines: deque[str]
+    dropped: int = 0  # its lines left out before the next ones sent: the tails outgrew the queue
+
+
+@dataclass
+class _Waiting:
+    """One session's answers still to send, in the order asked."""
+
+    tails: deque[_Tail] = field(default_factory=deque)
+    lines: int = 0
+    size: int = 0
 
 
 class LogStream:
     """One robot's log answers: tails for who asked, and the followed stream while anyone
-    asks for it (until LOG_FOLLOW_TTL after the newest request)."""
+    asks for it (until LOG_FOLLOW_TTL after the newest request).
 
-    def __init__(self, path: Path, robot_id: str, redactor: Redactor) -> None:
+    Fair to every asker: asks are budgeted per session as well as in all, and the lines go
+    out in turns of QUANTUM between the answers waiting (each session's, and the stream), so a
+    short tail goes out promptly however much another asker has waiting."""
+
+    def __init__(self, path: Path, robot_id: str, redactor: Redactor, copies: bool = True) -> None:
         self.path = path
         self.robot_id = robot_id
-        self._redactor = redactor
-        self._queue: deque[_Queued] = deque()
+        self._rules = redactor
+        self._copies = copies  # rotation keeps copies (log.backups > 0)
+        self._redactor = redactor.fresh()  # the followed stream's
+        self._waiting: dict[str, _Waiting] = {}
+        self._waiting_lines = 0
+        self._waiting_size = 0
+        self._stream: deque[str] = deque()
+        self._turns: deque[str | None] = deque()  # sessions with lines waiting; None: the stream
+        self._turn_left = QUANTUM
         self._tokens = BURST
         self._refilled_at: float | None = None
         self._follow_until: float | None = None
         self._offset = 0
         self._inode: int | None = None
         self._partial = b""
+        self._discarding = False  # the rest of a line that was cut or skipped is not shown
         self._next_poll = 0.0
         self._dropped = 0  # followed lines not sent, told in the next stream chunk
-        self._asks: deque[float] = deque()
+        self._budgets: OrderedDict[str, _Budget] = OrderedDict()
+        self._all: _Budget | None = None
 
     @property
     def following(self) -> bool:
         return self._follow_until is not None
 
-    def ask(self, request: LogsRequest, now: float) -> bool:
-        """Queues the tail for `request` (and starts or extends following); False when asked
-        too often to serve."""
-        while self._asks and now - self._asks[0] >= 1.0:
-            self._asks.popleft()
-        if len(self._asks) >= ASKS_PER_SECOND:
-            return False
-        self._asks.append(now)
+    # ------------------------------------------------------------ asks
+
+    def ask(self, request: LogsRequest, now: float) -> str | None:
+        """Queues the tail for `request` (and starts or extends following); None when served,
+        else why it is refused (asked too often)."""
+        refusal = self._admit(request.session, now)
+        if refusal is not None:
+            return refusal
+        end: int | None = None
         if request.follow and self._follow_until is None:
             # The stream starts where the tail ends: nothing twice, nothing missed.
-            self._start_following()
-        tail = read_tail(self.path, min(request.lines, max(0, QUEUE_LIMIT - len(self._queue))))
-        redactor = self._redactor.fresh()  # a tail is its own read of the file
-        for line in tail:
-            self._queue.append(_Queued(request.session, fit_line(redactor.line(line))))
-        self._queue.append(_Queued(request.session, None))
+            end = self._start_following()
+        lines = redacted_tail(self.path, request.lines, self._rules, self._copies, end)
+        self._enqueue(request.session, lines)
         if request.follow:
             self._follow_until = now + LOG_FOLLOW_TTL
-        return True
+        return None
 
-    def _start_following(self) -> None:
+    def _admit(self, session: str, now: float) -> str | None:
+        """Takes an ask from the session's budget and from everyone's; neither is touched when
+        either is spent, so a refused ask costs nobody anything."""
+        if self._all is None:
+            self._all = _Budget(ASKS_PER_SECOND, now)
+        budget = self._budgets.get(session)
+        own = SESSION_ASKS_PER_SECOND if budget is None else budget.refill(now)
+        if own < 1:
+            return f"session {session} asks more than {SESSION_ASKS_PER_SECOND:g} times a second"
+        if self._all.refill(now) < 1:
+            return f"more than {ASKS_PER_SECOND:g} asks a second from all desks together"
+        if budget is None:
+            budget = self._budgets[session] = _Budget(SESSION_ASKS_PER_SECOND, now)
+        budget.tokens -= 1
+        self._all.tokens -= 1
+        self._budgets.move_to_end(session)
+        # Forget budgets that are full again (oldest first): a new session starts full.
+        while self._budgets:
+            oldest = next(iter(self._budgets.values()))
+            if len(self._budgets) <= MAX_SESSIONS and oldest.refill(now) < oldest.rate:
+                break
+            self._budgets.popitem(last=False)
+        return None
+
+    def _enqueue(self, session: str, lines: list[str]) -> None:
+        waiting = self._waiting.get(session)
+        if waiting is None:
+            waiting = self._waiting[session] = _Waiting()
+            self._turns.append(session)
+        size = sum(_encoded_size(line) + 1 for line in lines)
+        waiting.tails.append(_Tail(deque(lines)))
+        waiting.lines += len(lines)
+        waiting.size += size
+        self._waiting_lines += len(lines)
+        self._waiting_size += size
+        self._fit_waiting()
+
+    def _fit_waiting(self) -> None:
+        """Over the queue's bounds, the session with the most lines waiting loses its oldest
+        unsent one, until the tails fit: whoever asks beyond a fair share pays for it alone."""
+        while self._waiting_lines > QUEUE_LIMIT or self._waiting_size > QUEUE_BYTES:
+            waiting = max(self._waiting.values(), key=lambda w: w.lines)
+            tail = next(t for t in waiting.tails if t.lines)
+            size = _encoded_size(tail.lines.popleft()) + 1
+            tail.dropped += 1
+            waiting.lines -= 1
+            waiting.size -= size
+            self._waiting_lines -= 1
+            self._waiting_size -= size
+
+    # ------------------------------------------------------------ following
+
+    def _start_following(self) -> int:
+        """Follows from the log's current end (returned), in the PEM state found there."""
         self._partial = b""
+        self._discarding = False
         try:
             stat = self.path.stat()
         except OSError:
@@ -190,7 +342,11 @@ class LogStream:
         else:
             self._offset, self._inode = stat.st_size, stat.st_ino
         self._next_poll = 0.0
-        self._redactor = self._redactor.fresh()
+        self._redactor = self._rules.fresh(self._state_at(self._offset))
+        return self._offset
+
+    def _state_at(self, offset: int) -> Pem:
+        return pem_state_before(self.path, offset, self._copies)
 
     def poll(self, now: float) -> None:
         """Reads what the brain wrote since the last look, while followed."""
@@ -205,41 +361,70 @@ class LogStream:
             with open(self.path, "rb") as log:
                 stat = os.fstat(log.fileno())
                 if stat.st_ino != self._inode or stat.st_size < self._offset:
-                    # Rotated (copy-then-truncate) or replaced: read the new file from its start.
+                    # Rotated (copy-then-truncate) or replaced: read the new file from its
+                    # start, in the state that the copy before it ends in.
                     self._offset, self._inode, self._partial = 0, stat.st_ino, b""
+                    self._discarding = False
+                    self._redactor.state = self._state_at(0)
                 skipped = max(0, stat.st_size - self._offset - READ_LIMIT)
                 if skipped:
                     self._offset += skipped
                     self._partial = b""
+                    self._discarding = True  # begun mid-line
                 log.seek(self._offset)
                 raw = log.read(READ_LIMIT)
         except OSError:
             return
+        at = self._offset  # where `raw` starts in the file
         self._offset += len(raw)
-        data = self._partial + raw
-        lines = _lines_of(data)
-        self._partial = lines.pop().encode("utf-8") if lines else b""
-        if len(self._partial) > MAX_LINE_BYTES:
-            lines.append(self._partial.decode("utf-8", "replace"))
-            self._partial = b""
+        lines: list[str] = []
         if skipped:
-            if lines:
-                lines.pop(0)  # begun mid-line
-            lines.insert(
-                0,
+            lines.append(
                 f"[robotconf: skipped {skipped:,} bytes: the brain writes faster than "
-                "the log stream carries]",
+                "the log stream carries]"
             )
+        if self._discarding:
+            newline = raw.find(b"\n")
+            if newline < 0:
+                self._queue_stream(lines)
+                return
+            self._discarding = False
+            raw, at = raw[newline + 1 :], at + newline + 1
+            # What was left out may have opened or closed a key: look back from here.
+            self._redactor.state = self._state_at(at)
+            data = raw
+        else:
+            data = self._partial + raw
+        pieces = data.split(b"\n")
+        self._partial = pieces.pop()
+        if len(self._partial) > MAX_LINE_BYTES:
+            # Shown cut, as a tail shows it; the rest of it, whenever it comes, is not shown.
+            pieces.append(self._partial)
+            self._partial = b""
+            self._discarding = True
+        self._queue_stream(lines, [_decode(piece) for piece in pieces])
+
+    def _queue_stream(self, notices: list[str], lines: Sequence[str] = ()) -> None:
+        was_empty = not self._stream
+        for notice in notices:
+            self._stream.append(notice)
         for line in lines:
-            if len(self._queue) >= QUEUE_LIMIT:
+            if len(self._stream) >= QUEUE_LIMIT:
                 self._dropped += 1
+                self._redactor.track(line)  # not sent, but it may open or close a key
                 continue
-            self._queue.append(_Queued(None, fit_line(self._redactor.line(line))))
+            self._stream.append(fit_line(self._redactor.line(line)))
+        if was_empty and self._stream:
+            self._turns.append(None)
+
+    # ------------------------------------------------------------ sending
 
     def due(self, now: float) -> float | None:
         """When `poll`/`take` next have work; None when nobody asks for anything."""
         when: list[float] = []
-        if self._queue:
+        if any(not w.tails[0].lines for w in self._waiting.values()):
+            when.append(now)  # an end to send: it costs no line
+        if self._turns:
             wait = 0.0 if self._tokens >= 1 else (1 - self._tokens) / RATE
             when.append(now + wait)
         if self._follow_until is not None:
@@ -247,36 +432,60 @@ class LogStream:
         return min(when) if when else None
 
     def take(self, now: float) -> list[LogsChunk]:
-        """The chunks to publish now: as many lines as the rate allows, each chunk at most
-        MAX_LOG_MESSAGE_BYTES, a tail's end marked."""
+        """The chunks to publish now: as many lines as the rate allows, in turns between the
+        answers waiting, each chunk at most MAX_LOG_MESSAGE_BYTES, a tail's end marked."""
         self._refill(now)
-        chunks: list[LogsChunk] = []
-        current: LogsChunk | None = None
-        size = 0
-        while self._queue and (self._tokens >= 1 or self._queue[0].line is None):
-            item = self._queue[0]
-            line_size = 0 if item.line is None else _encoded_size(item.line) + 1
-            fits = current is not None and size + line_size <= MAX_LOG_MESSAGE_BYTES
-            if current is None or current.session != item.session or not fits:
-                current = self._chunk(item.session)
-                chunks.append(current)
-                size = _CHUNK_OVERHEAD
-            self._queue.popleft()
-            if item.line is None:
-                current.end = True
-                current = None  # a tail's end closes its chunk
-                continue
-            current.lines.append(item.line)
-            size += line_size
+        out = _Chunks(self)
+        for session in list(self._waiting):
+            self._send_ends(session, out)
+        while self._turns and self._tokens >= 1:
+            key = self._turns[0]
+            if key is None:
+                out.line(None, self._stream.popleft())
+                more = bool(self._stream)
+                if not more:
+                    self._turns.popleft()
+            else:
+                waiting = self._waiting[key]
+                tail = waiting.tails[0]
+                line = tail.lines.popleft()
+                size = _encoded_size(line) + 1
+                waiting.lines -= 1
+                waiting.size -= size
+                self._waiting_lines -= 1
+                self._waiting_size -= size
+                out.line(key, line, tail.dropped)
+                tail.dropped = 0
+                more = self._send_ends(key, out)  # out of the turns once it has nothing left
             self._tokens -= 1
-        if self._dropped and not any(c.session is None for c in chunks):
-            chunks.append(self._chunk(None))  # say what was dropped, even with nothing new
-        for chunk in chunks:
+            self._turn_left -= 1
+            if not more:
+                self._turn_left = QUANTUM
+            elif self._turn_left <= 0:
+                self._turns.rotate(-1)
+                self._turn_left = QUANTUM
+        if self._dropped and not any(c.session is None for c in out.chunks):
+            out.chunks.append(self._chunk(None))  # say what was dropped, even with nothing new
+        for chunk in out.chunks:
             chunk.following = self._follow_until is not None
-        return chunks
+        return out.chunks
 
-    def _chunk(self, session: str | None) -> LogsChunk:
-        dropped = 0
+    def _send_ends(self, session: str, out: _Chunks) -> bool:
+        """Ends the session's tails that have no line left; True while it has lines waiting."""
+        waiting = self._waiting[session]
+        while waiting.tails and not waiting.tails[0].lines:
+            out.end(session, waiting.tails.popleft().dropped)
+        if waiting.tails:
+            return True
+        del self._waiting[session]
+        if self._turns[0] == session:
+            self._turns.popleft()
+            self._turn_left = QUANTUM
+        else:
+            self._turns.remove(session)  # ended before its turn came (it had no lines)
+        return False
+
+    def _chunk(self, session: str | None, dropped: int = 0) -> LogsChunk:
         if session is None:
             dropped, self._dropped = self._dropped, 0
         return LogsChunk(robot_id=self.robot_id, session=session, dropped=dropped)
@@ -288,6 +497,41 @@ class LogStream:
 
     def stop(self) -> None:
         """Nobody reads any more (the broker connection is lost): drop what waits."""
-        self._queue.clear()
+        self._waiting.clear()
+        self._waiting_lines = self._waiting_size = 0
+        self._stream.clear()
+        self._turns.clear()
+        self._turn_left = QUANTUM
         self._follow_until = None
         self._partial = b""
+        self._discarding = False
+
+
+class _Chunks:
+    """The chunks of one `take`: each session's (and the stream's) lines in order, a chunk
+    closed by its tail's end or when the next line would not fit."""
+
+    def __init__(self, stream: LogStream) -> None:
+        self._stream = stream
+        self.chunks: list[LogsChunk] = []
+        self._open: dict[str | None, tuple[LogsChunk, int]] = {}
+
+    def line(self, session: str | None, line: str, dropped: int = 0) -> None:
+        size = _encoded_size(line) + 1
+        current = self._open.get(session)
+        if current is None or dropped or current[1] + size > MAX_LOG_MESSAGE_BYTES:
+            # `dropped` counts lines left out before a chunk's own: it starts one.
+            chunk = self._stream._chunk(session, dropped)
+            self.chunks.append(chunk)
+            current = (chunk, _CHUNK_OVERHEAD)
+        current[0].lines.append(line)
+        self._open[session] = (current[0], current[1] + size)
+
+    def end(self, session: str, dropped: int) -> None:
+        current = self._open.pop(session, None)
+        if current is None or dropped:
+            chunk = self._stream._chunk(session, dropped)
+            self.chunks.append(chunk)
+        else:
+            chunk = current[0]
+        chunk.end = True  # a tail's end closes its chunk

@@ -52,10 +52,10 @@ from agent.workdir import (
     LOG_FILE,
     PID_FILE,
     REQUEST_FILE,
-    RESTART_ISSUED_FILE,
     SEQ_FILE,
     STAGED_FILE,
     IssuedStore,
+    RestartLedger,
     SeqStore,
     write_atomic,
 )
@@ -99,13 +99,18 @@ class Agent:
         self.inbox = Inbox()
         self.seq = SeqStore(self.workdir / SEQ_FILE)
         self.issued = IssuedStore(self.workdir / ISSUED_FILE)
-        self.restart_issued = IssuedStore(self.workdir / RESTART_ISSUED_FILE)
+        self.restarts = RestartLedger(self.workdir)
         self.refusals = Throttle(REFUSAL_LOG_EVERY, limit=5)
         self.supervisor = Supervisor(config.robot_id, policy_of(config))
         self.brain_log = process.BrainLog(
             self.workdir / LOG_FILE, config.log.max_bytes, config.log.backups
         )
-        self.logs = LogStream(self.workdir / LOG_FILE, config.robot_id, redactor_of(config))
+        self.logs = LogStream(
+            self.workdir / LOG_FILE,
+            config.robot_id,
+            redactor_of(config),
+            copies=config.log.backups > 0,
+        )
         self.link = BrokerLink(
             config.connection(),
             config.prefix,
@@ -362,13 +367,17 @@ class Agent:
                 "every reconnect; publish it without the retain flag"
             )
             return
+        memory = admission.RestartMemory(self.restarts.watermark, self.restarts.ahead)
+        wall = now_wall()
         outcome = admission.interpret_restart(
-            event.payload, self.config.robot_id, self.verify, self.restart_issued.newest, now_wall()
+            event.payload, self.config.robot_id, self.verify, memory, wall
         )
         if isinstance(outcome, admission.Reject):
             self._refused(f"restart refused: {outcome.reason}")
             return
-        self.restart_issued.accepted(outcome.issued_at)
+        # Remembered before it is carried out: whatever follows, it is not carried out twice.
+        done = memory.carried_out(outcome.issued_at, wall)
+        self.restarts.record(done.watermark, done.ahead)
         effects, problem = self.supervisor.restart(outcome.requested_by, outcome.issued_at, now)
         if problem is not None:
             self._refused(f"restart requested by {outcome.requested_by} not carried out: {problem}")
@@ -384,8 +393,9 @@ class Agent:
             return
         if not self.logs.following and request.follow:
             log.info("streaming the brain's log to the desk while asked")
-        if not self.logs.ask(request, now):
-            self._refused("logs request ignored: more than a few a second")
+        refusal = self.logs.ask(request, now)
+        if refusal is not None:
+            self._refused(f"logs request ignored: {refusal}")
 
     def _refused(self, line: str) -> None:
         """A desk request that does nothing: said in the agent's log and, for the operator

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import math
 import os
 import threading
 from pathlib import Path
@@ -22,7 +23,8 @@ PID_FILE = "brain.pid"
 SEQ_FILE = "agent.seq"
 LOCK_FILE = "agent.lock"
 ISSUED_FILE = "newest-issued-at"
-RESTART_ISSUED_FILE = "newest-restart-issued-at"  # of the newest restart carried out
+RESTART_ISSUED_FILE = "newest-restart-issued-at"  # the restarts' watermark (RestartLedger)
+RESTARTS_AHEAD_FILE = "restarts-ahead"  # restarts carried out that were dated ahead of the clock
 
 
 class SeqStore:
@@ -82,6 +84,50 @@ class IssuedStore:
         # Losing the file weakens replay protection only across a restart; keep working.
         with contextlib.suppress(OSError):
             write_atomic(self._path, f"{issued_at!r}\n".encode("ascii"), mode=0o600)
+
+
+class RestartLedger:
+    """The restarts carried out, as replay protection needs them across agent restarts: the
+    watermark (one number, in the file older agents wrote) and the issue times of those dated
+    ahead of the robot's clock (one a line). Both fsynced."""
+
+    def __init__(self, workdir: Path) -> None:
+        self._watermark_path = workdir / RESTART_ISSUED_FILE
+        self._ahead_path = workdir / RESTARTS_AHEAD_FILE
+        numbers = _read_floats(self._watermark_path)
+        self.watermark: float | None = numbers[0] if numbers else None
+        self.ahead = frozenset(_read_floats(self._ahead_path))
+
+    def record(self, watermark: float | None, ahead: frozenset[float]) -> None:
+        """Remembers a new state, in an order that leaves the files refusing more, never less,
+        should the agent die between two writes: what is added first, what is forgotten last."""
+        union = self.ahead | ahead
+        if union != self.ahead:
+            self._write_ahead(union)
+        if watermark is not None and watermark != self.watermark:
+            self.watermark = watermark
+            _write_quietly(self._watermark_path, f"{watermark!r}\n")
+        if ahead != union:
+            self._write_ahead(ahead)  # what the watermark or the age limit refuses anyway
+
+    def _write_ahead(self, ahead: frozenset[float]) -> None:
+        self.ahead = ahead
+        _write_quietly(self._ahead_path, "".join(f"{t!r}\n" for t in sorted(ahead)))
+
+
+def _write_quietly(path: Path, text: str) -> None:
+    # Losing the file weakens replay protection only across a restart; keep working.
+    with contextlib.suppress(OSError):
+        write_atomic(path, text.encode("ascii"), mode=0o600)
+
+
+def _read_floats(path: Path) -> list[float]:
+    """The finite numbers of a file, one a line; none when it is missing or damaged."""
+    try:
+        numbers = [float(line) for line in path.read_text(encoding="ascii").split()]
+    except (OSError, ValueError):
+        return []
+    return [n for n in numbers if math.isfinite(n)]
 
 
 class WorkdirLock:

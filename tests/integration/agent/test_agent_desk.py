@@ -453,3 +453,167 @@ def test_garbage_restart_requests_restart_nothing(
     done = robotconf("restart", ROBOT, "--as", "ops", broker=mosquitto)
     assert done.returncode == 0, done.stderr
     new_brain(watch, agent, first.pid)
+
+
+# ---------------------------------------------------------------- fairness and clocks
+
+# Writes 300 numbered lines at once, then a tick five times a second: a log worth polling.
+WORDY = [
+    sys.executable,
+    "-u",
+    "-c",
+    "import time\n"
+    "print(''.join('early %d\\n' % n for n in range(300)), end='')\n"
+    "n = 0\n"
+    "while True:\n"
+    "    print('tick', n)\n"
+    "    n += 1\n"
+    "    time.sleep(0.2)\n",
+    "{launch_request}",
+]
+
+
+class Poller:
+    """A dashboard: asks for the last `lines` four times a second, over one session or a new
+    one per ask, and counts the tails it got whole (their `end`)."""
+
+    def __init__(self, broker: Mosquitto, lines: int, fresh_sessions: bool) -> None:
+        self.lines = lines
+        self.fresh_sessions = fresh_sessions
+        self.asked = 0
+        self.ends = 0
+        self._sessions: set[str] = set()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self.client = make_client(Connection(url=broker.url), f"dashboard-{time.monotonic_ns()}")
+        subscribed = threading.Event()
+
+        def on_connect(c: paho.Client, u: Any, f: Any, rc: Any, p: Any) -> None:
+            c.subscribe(TOPICS.logs(ROBOT), qos=1)
+
+        def on_subscribe(c: paho.Client, u: Any, mid: Any, rc: Any, p: Any) -> None:
+            subscribed.set()
+
+        def on_message(c: paho.Client, u: Any, msg: paho.MQTTMessage) -> None:
+            chunk = json.loads(msg.payload)
+            with self._lock:
+                if chunk.get("end") and chunk.get("session") in self._sessions:
+                    self.ends += 1
+
+        self.client.on_connect = on_connect
+        self.client.on_subscribe = on_subscribe
+        self.client.on_message = on_message
+        self.client.connect(broker.host, broker.port)
+        self.client.loop_start()
+        assert subscribed.wait(TIMEOUT)
+        self._thread = threading.Thread(target=self._poll, daemon=True)
+        self._thread.start()
+
+    def _poll(self) -> None:
+        n = 0
+        while not self._stop.wait(0.25):
+            session = f"dash{n}" if self.fresh_sessions else "dash"
+            n += 1
+            with self._lock:
+                self._sessions.add(session)
+                self.asked += 1
+            payload = json.dumps({"session": session, "lines": self.lines}).encode()
+            self.client.publish(TOPICS.logs_request(ROBOT), payload, qos=1)
+
+    def answered(self) -> int:
+        with self._lock:
+            return self.ends
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(TIMEOUT)
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+@pytest.mark.parametrize("fresh_sessions", [False, True], ids=["one-session", "new-sessions"])
+def test_a_polling_dashboard_does_not_starve_an_operators_tail(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, fresh_sessions: bool
+) -> None:
+    agent, request = run_brain(make_agent, watch, mosquitto, WORDY)
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    wait_for(lambda: "early 299" in agent.brain_log(), "the brain's first lines")
+    dashboard = Poller(mosquitto, lines=50, fresh_sessions=fresh_sessions)
+    try:
+        # The dashboard asks for more than the robot sends (200 lines a second): let its
+        # backlog build before the operator asks, and go on asking while the operator does.
+        wait_for(lambda: dashboard.asked >= 12 and dashboard.answered() >= 2, "dashboard tails")
+        for attempt in range(5):
+            done = robotconf("logs", ROBOT, "-n", "5", broker=mosquitto)
+            assert done.returncode == 0, (attempt, done.stderr, agent.log_tail(40))
+            assert len(done.stdout.splitlines()) == 5, (attempt, done.stdout)
+        # The dashboard is served too, at its share.
+        before = dashboard.answered()
+        wait_for(lambda: dashboard.answered() > before, "the dashboard's next tail")
+    finally:
+        dashboard.close()
+    assert agent.proc is not None and agent.proc.poll() is None
+
+
+def test_a_restart_dated_ahead_locks_out_no_later_restart_and_replays_stay_refused(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    keys = generate_keys(tmp_path / "keys")
+    private = load_private_key(keys.private)
+    agent = make_agent(command=CHATTY, env={"API_TOKEN": "x"}, public_key=str(keys.public))
+    agent.start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = sign(make_request(), private)
+    publish(mosquitto.url, TOPICS.launch(ROBOT), request.payload())
+    first = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(first.pid)
+
+    # A desk whose clock runs four minutes fast: within the five minutes either way, so done.
+    ahead = sign(
+        RestartRequest(robot_id=ROBOT, requested_by="fastdesk", issued_at=0),
+        private,
+        time.time() + 240,
+    ).payload()
+    publish(mosquitto.url, TOPICS.restart(ROBOT), ahead, retain=False)
+    second = new_brain(watch, agent, first.pid)
+    assert second.restart_requested_by == "fastdesk"
+
+    # Then an operator with a correct clock: carried out, not refused as older.
+    restarts = Listener(mosquitto, TOPICS.restart(ROBOT))
+    try:
+        done = robotconf(
+            "restart", ROBOT, "--signing-key", str(keys.private), "--as", "ops", broker=mosquitto
+        )
+        assert done.returncode == 0, (done.stderr, agent.log_tail(40))
+        third = new_brain(watch, agent, second.pid)
+        assert third.restart_requested_by == "ops"
+        genuine = restarts.taken()[-1][1]
+    finally:
+        restarts.close()
+
+    def replays_refused(current: AgentStatus, refusals_before: int) -> None:
+        for payload in (ahead, genuine):
+            publish(mosquitto.url, TOPICS.restart(ROBOT), payload, retain=False)
+        wait_for(
+            lambda: agent.log_tail(400).count("restart refused") >= refusals_before + 2,
+            "both replays refused",
+        )
+        latest = watch.latest(ROBOT)
+        assert latest is not None and latest.pid == current.pid, latest
+        assert latest.state is AgentState.RUNNING
+
+    replays_refused(third, agent.log_tail(400).count("restart refused"))
+
+    # A dead robot is a killed agent: what it remembers of the restarts survives it.
+    assert agent.proc is not None
+    agent.proc.kill()
+    agent.proc.wait()
+    agent.start()
+    fourth = new_brain(watch, agent, third.pid)  # the orphan stopped, the request again
+    replays_refused(fourth, agent.log_tail(400).count("restart refused"))
+    # And nobody is locked out: the next genuine restart is carried out.
+    done = robotconf(
+        "restart", ROBOT, "--signing-key", str(keys.private), "--as", "ops2", broker=mosquitto
+    )
+    assert done.returncode == 0, (done.stderr, agent.log_tail(40))
+    assert new_brain(watch, agent, fourth.pid).restart_requested_by == "ops2"

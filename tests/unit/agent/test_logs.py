@@ -9,10 +9,13 @@ from agent.logs import (
     ASKS_PER_SECOND,
     BURST,
     MAX_LINE_BYTES,
+    MAX_SESSIONS,
+    QUANTUM,
     QUEUE_LIMIT,
     RATE,
     READ_LIMIT,
     REDACTED,
+    SESSION_ASKS_PER_SECOND,
     LogStream,
     Redactor,
     fit_line,
@@ -21,8 +24,10 @@ from agent.logs import (
 from configurator.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, LogsChunk, LogsRequest
 
 
-def stream(path: Path, secrets: tuple[str, ...] = (), names: tuple[str, ...] = ()) -> LogStream:
-    return LogStream(path, "tb3-01", Redactor(secrets, names))
+def stream(
+    path: Path, secrets: tuple[str, ...] = (), names: tuple[str, ...] = (), copies: bool = True
+) -> LogStream:
+    return LogStream(path, "tb3-01", Redactor(secrets, names), copies=copies)
 
 
 def ask(session: str = "s1", lines: int = 50, follow: bool = False) -> LogsRequest:
@@ -42,7 +47,7 @@ def test_a_tail_is_the_last_lines_and_ends_with_a_marked_chunk(tmp_path: Path) -
     log = tmp_path / "brain.log"
     write(log, *[f"line {n}" for n in range(100)])
     logs = stream(log)
-    assert logs.ask(ask(lines=5), 0.0)
+    assert logs.ask(ask(lines=5), 0.0) is None
     chunks = logs.take(0.0)
     assert lines_of(chunks) == [f"line {n}" for n in range(95, 100)]
     assert chunks[-1].end and chunks[-1].session == "s1" and not chunks[-1].following
@@ -188,11 +193,100 @@ def test_a_flood_is_skipped_and_said(tmp_path: Path) -> None:
     assert total_dropped > 0
 
 
-def test_asks_beyond_a_few_a_second_are_ignored(tmp_path: Path) -> None:
+def test_asks_are_budgeted_per_session_and_for_all_desks(tmp_path: Path) -> None:
     logs = stream(tmp_path / "brain.log")
-    served = [logs.ask(ask(f"s{n}", lines=1), 0.0) for n in range(ASKS_PER_SECOND + 3)]
-    assert served.count(True) == ASKS_PER_SECOND
-    assert logs.ask(ask("later", lines=1), 1.5)
+    own = int(SESSION_ASKS_PER_SECOND)
+    served = [logs.ask(ask("busy", lines=1), 0.0) for _ in range(own + 3)]
+    assert served[:own] == [None] * own
+    assert all(r is not None and "session busy asks more than" in r for r in served[own:])
+    # Others are served meanwhile, up to the ceiling of everyone together.
+    others = [logs.ask(ask(f"s{n}", lines=1), 0.0) for n in range(int(ASKS_PER_SECOND))]
+    assert others.count(None) == int(ASKS_PER_SECOND) - own
+    refused = [r for r in others if r is not None]
+    assert all("from all desks together" in r for r in refused)
+    # A refused ask costs nothing: the session refused by the ceiling is served once it is not
+    # reached; the busy one again once its own budget has refilled one ask, and only one.
+    later = 1.0 / SESSION_ASKS_PER_SECOND
+    assert logs.ask(ask("s19", lines=1), later) is None
+    assert logs.ask(ask("busy", lines=1), later) is None
+    assert logs.ask(ask("busy", lines=1), later) is not None
+    assert logs.ask(ask("busy", lines=1), 1.5) is None
+
+
+def test_session_budgets_are_bounded_and_forgotten_once_full(tmp_path: Path) -> None:
+    logs = stream(tmp_path / "brain.log")
+    for n in range(MAX_SESSIONS * 3):
+        assert logs.ask(ask(f"s{n}", lines=0), n * 0.1) is None
+    assert len(logs._budgets) <= MAX_SESSIONS
+    assert len(logs._budgets) < 5  # idle ones are full again: nothing to remember
+
+
+def sent_order(logs: LogStream, until: float, step: float = 0.01) -> list[tuple[str | None, str]]:
+    """(session, line or '<end>') in the order they go out, taking every `step` seconds."""
+    order: list[tuple[str | None, str]] = []
+    t = 0.0
+    while t <= until:
+        for chunk in logs.take(t):
+            order += [(chunk.session, line) for line in chunk.lines]
+            if chunk.end:
+                order.append((chunk.session, "<end>"))
+        t += step
+    return order
+
+
+def test_a_short_tail_goes_out_within_a_turn_of_a_long_backlog(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, *[f"line {n}" for n in range(2000)])
+    logs = stream(log)
+    for _ in range(4):  # a dashboard asking for more than the robot sends
+        assert logs.ask(ask("dash", lines=1000), 0.0) is None
+    first = sent_order(logs, 0.0)  # the burst goes to the dashboard: nobody else asked yet
+    assert logs.ask(ask("op", lines=5), 0.0) is None
+    order = sent_order(logs, 60.0)
+    ops = [n for n, (session, _) in enumerate(order) if session == "op"]
+    assert [order[n][1] for n in ops] == [f"line {n}" for n in range(1995, 2000)] + ["<end>"]
+    # Only the rest of the dashboard's current turn goes out before the operator's lines.
+    assert ops[0] <= QUANTUM
+    # The dashboard gets every one of its tails, whole or with the oldest lines said dropped.
+    assert [line for _, line in first + order].count("<end>") == 4 + 1
+
+
+def test_over_the_bound_the_longest_waiting_answer_loses_its_oldest_lines(
+    tmp_path: Path,
+) -> None:
+    log = tmp_path / "brain.log"
+    write(log, *[f"line {n}" for n in range(1000)])
+    logs = stream(log)
+    for n in range(4):  # new sessions each time: 4,000 lines asked, more than the queue holds
+        assert logs.ask(ask(f"big{n}", lines=1000), 0.0) is None
+    assert logs.ask(ask("small", lines=3), 0.0) is None
+    chunks: list[LogsChunk] = []
+    for t in range(60):
+        chunks += logs.take(float(t))
+    small = [c for c in chunks if c.session == "small"]
+    assert lines_of(small, "small") == ["line 997", "line 998", "line 999"]
+    assert sum(c.dropped for c in small) == 0 and small[-1].end
+    for n in range(4):
+        mine = [c for c in chunks if c.session == f"big{n}"]
+        got, dropped = lines_of(mine, f"big{n}"), sum(c.dropped for c in mine)
+        assert mine[-1].end and len(got) + dropped == 1000
+        assert got == [f"line {k}" for k in range(dropped, 1000)]  # the newest kept, in order
+    assert sum(c.dropped for c in chunks) == 4 * 1000 + 3 - QUEUE_LIMIT
+
+
+def test_the_followed_stream_takes_its_turn_beside_tails(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, *[f"old {n}" for n in range(1000)])
+    logs = stream(log)
+    assert logs.ask(ask("f", lines=0, follow=True), 0.0) is None
+    assert logs.ask(ask("t", lines=1000), 0.0) is None
+    logs.take(0.0)
+    write(log, "new 1", "new 2")
+    logs.poll(0.5)
+    order = sent_order(logs, 1.0)
+    streamed = [n for n, (session, _) in enumerate(order) if session is None]
+    assert [order[n][1] for n in streamed] == ["new 1", "new 2"]
+    assert streamed[0] <= QUANTUM
 
 
 def test_a_lost_connection_drops_what_waits(tmp_path: Path) -> None:
@@ -225,3 +319,136 @@ def test_a_bug_while_sending_the_log_stops_the_stream_not_the_agent(tmp_path: Pa
     agent.logs.take = broken  # type: ignore[method-assign]
     agent._send_logs(1.0)  # logged, not raised
     assert not agent.logs.following
+
+
+# ---------------------------------------------------------------- keys, whatever the window
+
+BODY = [
+    f"MIIE{n:02d}" + "QIBADANBgkqhkiG9w0BAQEFAASCBKcwggSjAgEAAoIBAQDm" + "x" * 10 for n in range(25)
+]
+KEY = ["-----BEGIN RSA PRIVATE KEY-----", *BODY, "-----END RSA PRIVATE KEY-----"]
+
+
+def leaked(text: str) -> list[str]:
+    return [b for b in BODY if b[:12] in text]
+
+
+def tail_text(log: Path, lines: int, secrets: tuple[str, ...] = (), copies: bool = True) -> str:
+    logs = stream(log, secrets=secrets, copies=copies)
+    assert logs.ask(ask(lines=lines), 0.0) is None
+    return "\n".join(lines_of(logs.take(0.0)))
+
+
+def test_a_tail_that_begins_inside_a_key_shows_none_of_it(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "before", *KEY, "after 1", "after 2")
+    for count in range(1, len(KEY) + 4):
+        text = tail_text(log, count)
+        assert not leaked(text), count
+        assert text.endswith("after 1\nafter 2" if count > 1 else "after 2")
+
+
+def test_a_key_split_by_a_rotation_stays_hidden_on_both_sides(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(tmp_path / "brain.log.1", "old line", *KEY[:10])
+    write(log, *KEY[10:], "after")
+    for count in range(1, len(KEY) + 4):
+        text = tail_text(log, count)
+        assert not leaked(text), count
+        assert text.endswith("after") and ("old line" in text) == (count >= len(KEY) + 2)
+
+
+def test_a_key_whose_beginning_a_rotation_lost_stays_hidden(tmp_path: Path) -> None:
+    # Written between the copy and the truncation: in neither file. What follows looks like
+    # a key's body and ends like one: the desk sees neither.
+    log = tmp_path / "brain.log"
+    write(tmp_path / "brain.log.1", "old 1", "old 2")
+    write(log, *KEY[12:], "after", "ZZZZ")
+    for count in range(1, len(KEY) + 3):
+        text = tail_text(log, count)
+        assert not leaked(text), count
+        # After a line that is not base64, lines are shown.
+        assert text.endswith("after\nZZZZ" if count > 1 else "ZZZZ")
+    assert tail_text(log, 100).startswith("old 1\nold 2\n")
+
+
+def test_the_start_of_a_log_that_is_only_truncated_is_treated_as_unknown(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, *KEY[5:], "after")
+    assert not leaked(tail_text(log, 100, copies=False))
+    # With copies kept and none there, the file's start is the log's own start.
+    write(tmp_path / "young.log", "Starting", "after")
+    assert tail_text(tmp_path / "young.log", 5) == "Starting\nafter"
+
+
+def test_following_from_inside_a_key_shows_none_of_it(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "before", *KEY[:5])  # the brain is printing a key, slowly
+    logs = stream(log)
+    assert logs.ask(ask(lines=0, follow=True), 0.0) is None
+    logs.take(0.0)
+    write(log, *KEY[5:], "after")
+    logs.poll(0.5)
+    text = "\n".join(lines_of(sent(logs, 0.5, 5.0), None))
+    assert not leaked(text) and text.endswith("after")
+
+
+def sent(logs: LogStream, start: float, until: float) -> list[LogsChunk]:
+    chunks: list[LogsChunk] = []
+    t = start
+    while t <= until:
+        chunks += logs.take(t)
+        t += 0.1
+    return chunks
+
+
+def test_a_skip_inside_a_key_keeps_it_hidden(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "start")
+    logs = stream(log)
+    logs.ask(ask(lines=0, follow=True), 0.0)
+    logs.take(0.0)
+    body = [BODY[n % len(BODY)] for n in range(40 * 1024 // 64)]
+    write(log, "-----BEGIN PRIVATE KEY-----", *body, "-----END PRIVATE KEY-----")
+    # More than a look reads: the look starts in the middle of the key's body.
+    flood = (READ_LIMIT - len(body) * 65 // 2) // 1000
+    write(log, *["y" * 999 for _ in range(flood)], "end of flood")
+    logs.poll(0.5)
+    text = "\n".join(lines_of(sent(logs, 0.5, 60.0), None))
+    assert text.startswith("[robotconf: skipped ") and text.endswith("end of flood")
+    assert not leaked(text)
+
+
+def test_a_streamed_line_cut_for_length_shows_nothing_of_its_rest(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "start")
+    logs = stream(log, secrets=("s3cr3t-token",))
+    logs.ask(ask(lines=0, follow=True), 0.0)
+    logs.take(0.0)
+    with log.open("a") as f:
+        f.write("x" * (MAX_LINE_BYTES + 100) + " s3cr")
+    logs.poll(0.5)
+    with log.open("a") as f:
+        f.write("3t-token, then the rest of that long line\nnext line\n")
+    logs.poll(1.0)
+    got = lines_of(sent(logs, 0.5, 5.0), None)
+    assert len(got) == 2 and "[robotconf: line cut" in got[0] and got[1] == "next line"
+    assert "3t-token" not in "\n".join(got)
+
+
+def test_the_stream_starts_where_the_tail_ends(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "one", "two")
+    logs = stream(log)
+    logs.ask(ask(lines=5, follow=True), 0.0)
+    write(log, "three")
+    logs.poll(0.5)
+    chunks = sent(logs, 0.5, 2.0)
+    assert lines_of(chunks) == ["one", "two"] and lines_of(chunks, None) == ["three"]
+
+
+def test_colours_cannot_split_a_secret_and_never_leave(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "token \x1b[1;31ms3cr\x1b[0m3t-\x1b]8;;http://x\x07token\x1b[m ok")
+    text = tail_text(log, 1, secrets=("s3cr3t-token",))
+    assert text == f"token {REDACTED} ok"

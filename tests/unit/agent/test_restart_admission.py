@@ -10,12 +10,15 @@ import pytest
 
 from agent.admission import (
     MAX_COMMAND_BYTES,
+    MAX_RESTARTS_AHEAD,
     RESTART_MAX_AGE,
     Reject,
     Restart,
+    RestartMemory,
     Verifier,
     interpret_restart,
 )
+from agent.workdir import RESTART_ISSUED_FILE, RestartLedger
 from configurator.launch import RestartRequest
 from configurator.signing import (
     generate_keys,
@@ -33,13 +36,23 @@ def restart(robot_id: str = "tb3-01", at: float = NOW, by: str = "alice") -> Res
 
 
 def outcome(
-    payload: bytes, verify: Verifier | None = None, newest: float | None = None
+    payload: bytes,
+    verify: Verifier | None = None,
+    newest: float | None = None,
+    memory: RestartMemory | None = None,
+    now: float = NOW,
 ) -> Restart | Reject:
-    return interpret_restart(payload, "tb3-01", verify, newest, NOW)
+    return interpret_restart(payload, "tb3-01", verify, memory or RestartMemory(newest), now)
 
 
-def reason(payload: bytes, verify: Verifier | None = None, newest: float | None = None) -> str:
-    found = outcome(payload, verify, newest)
+def reason(
+    payload: bytes,
+    verify: Verifier | None = None,
+    newest: float | None = None,
+    memory: RestartMemory | None = None,
+    now: float = NOW,
+) -> str:
+    found = outcome(payload, verify, newest, memory, now)
     assert isinstance(found, Reject), found
     return found.reason
 
@@ -94,6 +107,60 @@ def test_each_restart_is_carried_out_once() -> None:
     assert "not newer than the last one" in reason(payload, newest=NOW - 10)
     assert "not newer than the last one" in reason(payload, newest=NOW - 5)
     assert isinstance(outcome(restart(at=NOW - 4).payload(), newest=NOW - 5), Restart)
+
+
+def test_a_restart_dated_ahead_locks_out_no_restart_from_a_correct_clock() -> None:
+    ahead = restart(at=NOW + 240, by="fastdesk").payload()
+    assert outcome(ahead) == Restart("fastdesk", NOW + 240)
+    memory = RestartMemory().carried_out(NOW + 240, NOW)
+    # The watermark stops at the robot's clock; the one dated ahead is remembered by itself.
+    assert memory == RestartMemory(NOW, frozenset({NOW + 240}))
+    assert outcome(restart(at=NOW + 1, by="ops").payload(), memory=memory, now=NOW + 1.5) == (
+        Restart("ops", NOW + 1)
+    )
+    assert "carried out already" in reason(ahead, memory=memory, now=NOW + 2)
+    after = memory.carried_out(NOW + 1, NOW + 1.5)
+    assert after == RestartMemory(NOW + 1, frozenset({NOW + 240}))
+    assert "carried out already" in reason(ahead, memory=after, now=NOW + 2)
+    assert "not newer than the last one" in reason(
+        restart(at=NOW + 1, by="ops").payload(), memory=after, now=NOW + 2
+    )
+    # Another fast desk, later: carried out too, and remembered beside the first.
+    assert isinstance(outcome(restart(at=NOW + 250).payload(), memory=after, now=NOW + 3), Restart)
+    # Once its time has come, the watermark covers it, and it is forgotten by itself.
+    late = after.carried_out(NOW + 241, NOW + 241)
+    assert late == RestartMemory(NOW + 241, frozenset())
+
+
+def test_restarts_dated_ahead_are_remembered_up_to_a_bound() -> None:
+    memory = RestartMemory()
+    for n in range(MAX_RESTARTS_AHEAD):
+        payload = restart(at=NOW + 10 + n).payload()
+        assert isinstance(outcome(payload, memory=memory), Restart)
+        memory = memory.carried_out(NOW + 10 + n, NOW)
+    assert "a desk's clock is wrong" in reason(restart(at=NOW + 100).payload(), memory=memory)
+    # A correct clock is never refused for it; and the age limit forgets the ones ahead.
+    assert isinstance(outcome(restart(at=NOW + 0.5).payload(), memory=memory, now=NOW + 1), Restart)
+    later = NOW + 10 + MAX_RESTARTS_AHEAD + RESTART_MAX_AGE
+    assert memory.pruned(later).ahead == frozenset()
+    assert isinstance(outcome(restart(at=later + 100).payload(), memory=memory, now=later), Restart)
+
+
+def test_the_restart_ledger_survives_an_agent_restart(tmp_path: Path) -> None:
+    ledger = RestartLedger(tmp_path)
+    assert (ledger.watermark, ledger.ahead) == (None, frozenset())
+    ledger.record(NOW, frozenset({NOW + 240, NOW + 250}))
+    again = RestartLedger(tmp_path)
+    assert (again.watermark, again.ahead) == (NOW, frozenset({NOW + 240, NOW + 250}))
+    again.record(NOW + 245, frozenset({NOW + 250}))
+    assert RestartLedger(tmp_path).ahead == frozenset({NOW + 250})
+    for path in tmp_path.iterdir():
+        assert path.stat().st_mode & 0o777 == 0o600
+    # An older agent's watermark (one number) is read as such; a damaged file as nothing.
+    (tmp_path / RESTART_ISSUED_FILE).write_text("1800000000.25\n")
+    assert RestartLedger(tmp_path).watermark == 1800000000.25
+    (tmp_path / RESTART_ISSUED_FILE).write_text("nan\n")
+    assert RestartLedger(tmp_path).watermark is None
 
 
 def test_with_a_key_only_a_signed_restart_is_carried_out(keyed: tuple[Any, Verifier]) -> None:
