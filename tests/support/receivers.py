@@ -1,11 +1,14 @@
 """Real local HTTP receivers for alert tests: one that records and answers as told (200, 500,
-a redirect), and one that answers a byte at a time and notices when the client gives up."""
+a redirect), and one that answers a byte at a time (over TLS too, or its TLS handshake) and
+notices when the client gives up."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import select
 import socket
+import ssl
 import threading
 from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -83,10 +86,15 @@ class Dripper:
     """Reads each request whole, then answers 200 one byte every `every` seconds: each read of
     the client is quick, the answer takes len(ANSWER) * every seconds. Records, per request,
     how many bytes of the answer went out before the client went away (`given_up`), or that
-    all did (`answered`)."""
+    all did (`answered`). With `tls`, over TLS; with `handshake` too, it is the server's part
+    of the TLS handshake that goes out a byte at a time (no request is ever read)."""
 
-    def __init__(self, every: float) -> None:
+    def __init__(
+        self, every: float, tls: ssl.SSLContext | None = None, handshake: bool = False
+    ) -> None:
         self.every = every
+        self.tls = tls
+        self.handshake = handshake
         self.listener = socket.create_server(("127.0.0.1", 0))
         self._lock = threading.Lock()
         self._closed = threading.Event()
@@ -97,7 +105,8 @@ class Dripper:
 
     @property
     def url(self) -> str:
-        return f"http://127.0.0.1:{self.listener.getsockname()[1]}/hook"
+        scheme = "https" if self.tls is not None else "http"
+        return f"{scheme}://127.0.0.1:{self.listener.getsockname()[1]}/hook"
 
     def _serve(self) -> None:
         while not self._closed.is_set():
@@ -108,32 +117,61 @@ class Dripper:
             threading.Thread(target=self._drip, args=(connection,), daemon=True).start()
 
     def _drip(self, connection: socket.socket) -> None:
-        with connection:
-            if not _read_request(connection):
+        with contextlib.ExitStack() as stack:
+            stack.enter_context(connection)
+            if self.tls is not None and self.handshake:
+                answer = _server_hello(self.tls, connection)
+            else:
+                if self.tls is not None:
+                    try:
+                        connection = self.tls.wrap_socket(connection, server_side=True)
+                    except OSError:
+                        return
+                    stack.enter_context(connection)
+                answer = ANSWER if _read_request(connection) else b""
+            if not answer:
                 return
             with self._lock:
                 self.received += 1
-            for sent in range(len(ANSWER)):
-                # Readable before the next byte is due: the client closed its end.
-                readable, _, _ = select.select([connection], [], [], self.every)
+            for sent in range(len(answer)):
                 if self._closed.is_set():
                     return
-                if readable and not connection.recv(1):
-                    with self._lock:
-                        self.given_up.append(sent)
-                    return
-                try:
-                    connection.sendall(ANSWER[sent : sent + 1])
-                except OSError:
+                if not self._send(connection, answer[sent : sent + 1]):
                     with self._lock:
                         self.given_up.append(sent)
                     return
             with self._lock:
                 self.answered += 1
 
+    def _send(self, connection: socket.socket, byte: bytes) -> bool:
+        """Sends one byte when it is due; False when the client went away before."""
+        try:
+            # Readable before the next byte is due: the client closed its end.
+            readable, _, _ = select.select([connection], [], [], self.every)
+            if readable and not connection.recv(1):
+                return False
+            connection.sendall(byte)
+        except OSError:
+            return False
+        return True
+
     def close(self) -> None:
         self._closed.set()
         self.listener.close()
+
+
+def _server_hello(tls: ssl.SSLContext, connection: socket.socket) -> bytes:
+    """The server's first flight of a TLS handshake (hello, certificate, …) answering the
+    client's hello, as bytes to send by hand."""
+    incoming, outgoing = ssl.MemoryBIO(), ssl.MemoryBIO()
+    server = tls.wrap_bio(incoming, outgoing, server_side=True)
+    hello = connection.recv(65536)
+    if not hello:
+        return b""
+    incoming.write(hello)
+    with contextlib.suppress(ssl.SSLWantReadError):
+        server.do_handshake()
+    return outgoing.read()
 
 
 def _read_request(connection: socket.socket) -> bool:

@@ -6,13 +6,16 @@ from __future__ import annotations
 
 import base64
 import logging
+import ssl
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from reconciler.events import Event, Kind
 from reconciler.notify import Sender, parse_receiver
 from tests.support.receivers import ANSWER, Dripper, Recorder
+from tests.support.tlsutil import make_pki
 from tests.support.watch import wait_for
 
 EVENT = Event(Kind.COMMIT_REFUSED, "bbbbbbbbbbbb on main refused (BuildFailed): nope", 1.0, "main")
@@ -51,6 +54,46 @@ def test_a_receiver_answering_a_byte_at_a_time_is_given_up_at_the_deadline() -> 
         assert given_up[0] < len(ANSWER) and dripper.answered == 0
     finally:
         sender.stop()
+        dripper.close()
+
+
+@pytest.fixture
+def tls(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> ssl.SSLContext:
+    """A server context whose certificate the client trusts (its default context, which
+    reads SSL_CERT_FILE): HTTPS receivers are checked as in production."""
+    pki = make_pki(tmp_path / "pki")
+    monkeypatch.setenv("SSL_CERT_FILE", str(pki.ca_cert))
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    context.load_cert_chain(pki.server_cert, pki.server_key)
+    return context
+
+
+@pytest.mark.parametrize("handshake", [False, True], ids=["answer", "handshake"])
+def test_an_https_receiver_dripping_its_answer_or_its_handshake_is_given_up(
+    tls: ssl.SSLContext, handshake: bool
+) -> None:
+    good = Dripper(every=0.0, tls=tls)
+    dripper = Dripper(every=0.4, tls=tls, handshake=handshake)
+    counted = Counted()
+    senders = [
+        Sender(parse_receiver(good.url, 1), counted, timeout=5.0, attempts=1),
+        Sender(parse_receiver(dripper.url, 2), counted, timeout=1.0, attempts=1),
+    ]
+    for sender in senders:
+        sender.start()
+    try:
+        for sender in senders:
+            sender.put(EVENT)
+        wait_for(lambda: len(counted.outcomes) == 2, "both outcomes")
+        assert sorted(o for _, o in counted.outcomes) == ["failed", "sent"]
+        assert (f"#1 {good.url.removesuffix('/hook')}", "sent") in counted.outcomes
+        assert good.answered == 1
+        given_up = wait_for(lambda: dripper.given_up, "the receiver seeing the client leave")
+        assert dripper.answered == 0 and given_up[0] > 0  # given up mid-way
+    finally:
+        for sender in senders:
+            sender.stop()
+        good.close()
         dripper.close()
 
 
