@@ -144,8 +144,8 @@ def start_webhook(
     "--notify",
     multiple=True,
     metavar="URL",
-    help="POST alert events as JSON to this http(s) URL (repeatable); slack:URL posts "
-    'a Slack-compatible {"text": ...} instead',
+    help="POST alert events as JSON to this http(s) URL (repeatable; user:password@ in it is "
+    'sent as HTTP Basic authentication); slack:URL posts a Slack-compatible {"text": ...} instead',
 )
 @click.option(
     "--metrics",
