@@ -1,4 +1,5 @@
-"""The embedded broker of `robotconf up`: amqtt (pure Python, MQTT 3.1.1) on its own thread.
+"""The embedded broker of `robotconf up`: amqtt (pure Python, MQTT 3.1.1) on its own thread,
+taking no client without the password `up` generates for it.
 
 Imported only by `up` when no `--broker` is given, so nothing else needs amqtt.
 """
@@ -15,8 +16,12 @@ from collections.abc import Iterator
 from importlib import metadata
 from typing import Any
 
+from reconciler.broker_login import BrokerLogin
+
 DEFAULT_PORT = 1883
 START_TIMEOUT = 15.0
+CONNECT_TIMEOUT = 10.0  # seconds a client has, once connected, to send its whole CONNECT
+MAX_CLIENTS = 256  # connections at once; more are closed at once (an fd each, below ulimit -n)
 
 
 class BrokerStartError(Exception):
@@ -73,11 +78,23 @@ def _version() -> str:
 
 
 class EmbeddedBroker:
-    """An amqtt broker on 127.0.0.1; the port is 1883 when free, else any free one."""
+    """An amqtt broker on 127.0.0.1 that takes only clients giving `login`; the port is 1883
+    when free, else any free one."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int | None = None) -> None:
+    def __init__(
+        self,
+        login: BrokerLogin,
+        host: str = "127.0.0.1",
+        port: int | None = None,
+        *,
+        connect_timeout: float = CONNECT_TIMEOUT,
+        max_clients: int = MAX_CLIENTS,
+    ) -> None:
+        self.login = login
         self.host = host
         self.port = port or 0
+        self.connect_timeout = connect_timeout
+        self.max_clients = max_clients
         self._loop: asyncio.AbstractEventLoop | None = None
         self._broker: Any = None
         self._thread: threading.Thread | None = None
@@ -96,6 +113,13 @@ class EmbeddedBroker:
                 "the embedded broker needs amqtt: pip install 'robotconf[server]' "
                 "(or pass --broker mqtt://HOST:PORT to use a running broker)"
             ) from exc
+        from reconciler.broker_gate import gated
+
+        if not gated():  # amqtt outside the pinned range: its CONNECT is read elsewhere
+            logging.getLogger("robotconf.broker").warning(
+                "amqtt %s: logins are checked only by amqtt itself (see reconciler/broker_gate.py)",
+                _version(),
+            )
         # amqtt logs every connection and any client that vanishes; keep that out of the screen.
         logging.getLogger("amqtt").setLevel(logging.ERROR)
         logging.getLogger("transitions").setLevel(logging.ERROR)
@@ -126,21 +150,32 @@ class EmbeddedBroker:
             raise BrokerStartError(f"port {port}: {_reason(self._error)}")
 
     def _run(self) -> None:
-        from amqtt.broker import Broker
+        from reconciler.broker_gate import GatedBroker, LoginPlugin
 
         loop = asyncio.new_event_loop()
         self._loop = loop
         asyncio.set_event_loop(loop)
+        plugin = f"{LoginPlugin.__module__}.{LoginPlugin.__name__}"
         config = {
             "listeners": {"default": {"type": "tcp", "bind": f"{self.host}:{self.port}"}},
-            # No logging or $SYS plugins: a quiet broker for one machine, anonymous on loopback.
+            # No logging or $SYS plugins: a quiet broker for one machine. Every local user can
+            # reach 127.0.0.1: only clients with up's login are let in.
             "plugins": {
-                "amqtt.plugins.authentication.AnonymousAuthPlugin": {"allow_anonymous": True}
+                plugin: {
+                    "username": self.login.username,
+                    "password_file": str(self.login.password_file),
+                }
             },
         }
 
         async def main() -> None:
-            self._broker = Broker(config, loop=loop)
+            self._broker = GatedBroker(
+                config,
+                self.login,
+                connect_timeout=self.connect_timeout,
+                max_clients=self.max_clients,
+                loop=loop,
+            )
             _harden(self._broker)
             await self._broker.start()
 

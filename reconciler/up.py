@@ -9,10 +9,12 @@ What is shown, and how, is the caller's (configurator/cli/up.py): an UpScreen.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import fcntl
 import itertools
 import logging
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -372,26 +374,36 @@ def _run_up(
         say(f"note: {note}")
 
     broker: Any = None
+    login: Any = None  # the embedded broker's BrokerLogin
     if given_broker:
         url = given_broker
         say(f"broker: {redact_url(url)} (given)")
     else:
         from reconciler.broker import BrokerStartError, EmbeddedBroker
+        from reconciler.broker_login import broker_login
 
-        broker = EmbeddedBroker()
+        login = broker_login(setup.workdir / "broker")
+        broker = EmbeddedBroker(login)
         try:
             broker.start()
         except BrokerStartError as exc:
             raise CliError(f"{exc}; or pass --broker mqtt://HOST:PORT") from None
         url = broker.url
         taken = "" if broker.port == 1883 else " (port 1883 is taken)"
-        say(f"broker: embedded amqtt at {url}{taken}")
+        say(
+            f"broker: embedded amqtt at {url}{taken}, for user {login.username} only: its "
+            f"password is in {login.password_file} (0600), readable by you alone"
+        )
     try:
         connection = connect(url)
     except CliError:
         if broker is not None:
             broker.stop()
         raise
+    if login is not None:  # up's reconciler, its agents and the operator: one login
+        connection = dataclasses.replace(
+            connection, username=login.username, password_file=login.password_file
+        )
     signer, public_key = None, None
     if signing:
         keys = _demo_keys(setup.workdir / "keys")
@@ -425,13 +437,20 @@ def _run_up(
         f"{len(setup.fleet.requests)} robot(s); agent files and logs in {setup.workdir}"
     )
     shown = redact_url(url)  # a password in the URL stays out of the terminal
+    options = f"--broker {shown}" + (
+        f" --username {login.username} --password-file {_shown_path(login.password_file)}"
+        if login is not None
+        else ""
+    )
     header = [
         f"robotconf up: broker {shown}, branch '{setup.branch}' of {setup.root}",
-        f"  another terminal: robotconf status --broker {shown}    Ctrl-C stops everything",
+        f"  another terminal: robotconf status {options}    Ctrl-C stops everything",
+        "  (robotconf logs ROBOT and robotconf restart ROBOT take the same options)",
         *[f"  note: {n}" for n in setup.notes],
         "",
     ]
-    say(f"another terminal: robotconf status --broker {shown}   Ctrl-C stops everything")
+    say(f"another terminal: robotconf status {options}   Ctrl-C stops everything")
+    say("robotconf logs ROBOT and robotconf restart ROBOT take the same options")
     thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
     thread.start()
     view.start()
@@ -508,6 +527,13 @@ def _loop(
                     say(summary(fleet))
         changed.wait(5.0)
         time.sleep(0.2)  # coalesce a burst of status messages into one redraw
+
+
+def _shown_path(path: Path) -> str:
+    """`path` relative to the current folder when it is under it (shorter), quoted for a shell."""
+    with contextlib.suppress(ValueError):
+        path = path.relative_to(Path.cwd())
+    return shlex.quote(str(path))
 
 
 def summary(fleet: FleetStatus) -> str:

@@ -27,6 +27,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from agent.config import parse_config
 from configurator.mqtt import Connection
 from reconciler.broker import EmbeddedBroker, free_port
+from reconciler.broker_login import broker_login
 from reconciler.desired import load_desired
 from reconciler.up import agent_yaml, prepare
 from tests.support.fleet import GitLab, Proc, robotconf_argv
@@ -96,15 +97,29 @@ def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -
             match = re.search(r"embedded amqtt at (mqtt://[\d.]+:\d+)", out)
             assert match, out
             url = match.group(1)
+            # The options it prints are the ones that work: the broker takes no one else.
+            password = Path(up_folder(lab)) / "broker" / "operator.password"
+            login = ["--username", "operator", "--password-file", str(password)]
+            shown = "--username operator --password-file .robotconf/up/broker/operator.password"
+            assert f"another terminal: robotconf status --broker {url} {shown}" in out
+            assert oct(password.stat().st_mode & 0o777) == "0o600"
 
-            status = subprocess.run(
-                robotconf_argv("status", "--repo", str(lab.root), "--broker", url),
-                capture_output=True,
-                text=True,
-                timeout=60,
-            )
+            def run(*argv: str) -> subprocess.CompletedProcess[str]:
+                return subprocess.run(
+                    robotconf_argv(*argv, "--broker", url),
+                    capture_output=True,
+                    text=True,
+                    timeout=60,
+                )
+
+            status = run("status", "--repo", str(lab.root), *login)
             assert status.returncode == 0, status.stdout + status.stderr
             assert len(re.findall(r"^tb3-0\d\s+InSync\s", status.stdout, re.M)) == 5
+            logs = run("logs", "tb3-01", "--lines", "5", *login)
+            assert logs.returncode == 0 and logs.stdout.strip(), logs.stdout + logs.stderr
+            # Any other user of the machine can reach 127.0.0.1, but not read a robot's log.
+            spy = run("logs", "tb3-01", "--lines", "5")
+            assert spy.returncode != 0 and logs.stdout.strip() not in spy.stdout, spy.stdout
 
             # A commit while it runs is rolled out too (the uncommitted edit goes with it).
             head = lab.commit("looser guide")
@@ -382,7 +397,7 @@ def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path
     assert out.count(said) == 1  # said once, not at every status change
 
 
-def test_the_embedded_broker_takes_many_clients_at_once_without_an_error() -> None:
+def test_the_embedded_broker_takes_many_clients_at_once_without_an_error(tmp_path: Path) -> None:
     """amqtt 0.11/0.12 raised "dictionary changed size during iteration" when a client
     connected while others subscribed (reconciler/broker.py): up's five agents did, at most
     starts. Thirty clients with five subscriptions each make it happen at every run."""
@@ -394,11 +409,13 @@ def test_the_embedded_broker_takes_many_clients_at_once_without_an_error() -> No
 
     keep = Keep(logging.ERROR)
     logging.getLogger().addHandler(keep)
-    broker = EmbeddedBroker(port=free_port("127.0.0.1"))
+    broker = EmbeddedBroker(broker_login(tmp_path), port=free_port("127.0.0.1"))
     broker.start()
+    password = broker.login.password()
     clients: list[paho.Client] = []
     try:
         publisher = paho.Client(CallbackAPIVersion.VERSION2)
+        publisher.username_pw_set("operator", password)
         publisher.connect("127.0.0.1", broker.port)
         publisher.loop_start()
         clients.append(publisher)
@@ -414,6 +431,7 @@ def test_the_embedded_broker_takes_many_clients_at_once_without_an_error() -> No
 
         def connect(n: int) -> None:
             client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"c{n}", userdata=n)
+            client.username_pw_set("operator", password)
             client.on_connect = on_connect
             client.on_subscribe = on_subscribe
             client.connect("127.0.0.1", broker.port)
@@ -434,6 +452,71 @@ def test_the_embedded_broker_takes_many_clients_at_once_without_an_error() -> No
         broker.stop()
         logging.getLogger().removeHandler(keep)
     assert [r.getMessage() for r in errors] == []
+
+
+class Client:
+    """A paho client of the embedded broker; what its CONNACKs said and what it received."""
+
+    def __init__(self, port: int, client_id: str, password: str | None = None) -> None:
+        self.connacks: list[Any] = []
+        self.received: list[bytes] = []
+        self.subscribed = threading.Event()
+        self.paho = paho.Client(CallbackAPIVersion.VERSION2, client_id=client_id)
+        if password is not None:
+            self.paho.username_pw_set("operator", password)
+        self.paho.on_connect = lambda c, u, f, code, p: self.connacks.append(code)
+        self.paho.on_message = lambda c, u, message: self.received.append(message.payload)
+        self.paho.on_subscribe = lambda *_: self.subscribed.set()
+        self.paho.connect("127.0.0.1", port)
+        self.paho.loop_start()
+        wait_for(lambda: self.connacks, f"{client_id}'s CONNACK")
+
+    @property
+    def refused(self) -> bool:
+        return bool(self.connacks[0].is_failure)
+
+    def close(self) -> None:
+        self.paho.loop_stop()
+        self.paho.disconnect()
+
+
+def test_the_embedded_broker_takes_only_up_s_login(tmp_path: Path) -> None:
+    """Every local user can reach 127.0.0.1: without up's login a client reads no robot's log and,
+    with an agent's client id, does not knock that agent off its subscriptions (amqtt alone would
+    drop them before refusing it); a client that never sends its CONNECT is closed."""
+    login = broker_login(tmp_path / "broker")
+    assert oct((tmp_path / "broker").stat().st_mode & 0o777) == "0o700"
+    broker = EmbeddedBroker(login, port=free_port("127.0.0.1"), connect_timeout=1.0)
+    broker.start()
+    password = login.password()
+    clients: list[Client] = []
+    try:
+        agent = Client(broker.port, "robotconf-agent-tb3-01", password)
+        clients.append(agent)
+        assert not agent.refused
+        agent.paho.subscribe("robotconf/robots/tb3-01/logs", qos=1)
+        assert agent.subscribed.wait(30)
+        spy = Client(broker.port, "spy")
+        thief = Client(broker.port, "robotconf-agent-tb3-01")
+        guess = Client(broker.port, "guess", password[:-1])
+        clients += [spy, thief, guess]
+        assert spy.refused and thief.refused and guess.refused
+        spy.paho.subscribe("robotconf/robots/+/logs", qos=1)
+
+        operator = Client(broker.port, "operator", password)
+        clients.append(operator)
+        operator.paho.publish("robotconf/robots/tb3-01/logs", b"a brain's line", qos=1)
+        wait_for(lambda: agent.received, "the agent, still subscribed, to get the line")
+        assert agent.received == [b"a brain's line"]
+        assert spy.received == [] and thief.received == []
+
+        with socket.create_connection(("127.0.0.1", broker.port)) as silent:
+            silent.settimeout(60)
+            assert silent.recv(16) == b""  # closed by the broker, never by us
+    finally:
+        for client in clients:
+            client.close()
+        broker.stop()
 
 
 def test_up_builds_its_head_once_and_hands_that_build_to_the_reconciler(lab: GitLab) -> None:

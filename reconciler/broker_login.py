@@ -1,0 +1,51 @@
+"""The one login of `robotconf up`'s embedded broker: user `operator` and a password generated once
+into a file only its owner can read. No amqtt here: `up` makes it before the broker starts."""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import secrets
+from dataclasses import dataclass
+from pathlib import Path
+
+USERNAME = "operator"  # the one user: up's reconciler, its agents, and the operator's commands
+PASSWORD_NAME = "operator.password"
+
+
+@dataclass(frozen=True)
+class BrokerLogin:
+    """The user name and password every client of the embedded broker must give."""
+
+    username: str
+    password_file: Path
+
+    def password(self) -> str:
+        return self.password_file.read_text(encoding="utf-8").strip()
+
+    def accepts(self, username: str | None, password: str | bytes | None) -> bool:
+        """Compared in constant time, so that not even the password's length shows."""
+        given = password.encode() if isinstance(password, str) else (password or b"")
+        try:
+            wanted = self.password().encode()
+        except OSError:  # the file is gone: nobody gets in
+            return False
+        same = hmac.compare_digest(hashlib.sha256(given).digest(), hashlib.sha256(wanted).digest())
+        return same and username == self.username
+
+
+def broker_login(folder: Path) -> BrokerLogin:
+    """The login of the broker whose files are in `folder` (0700): its password file (0600) is
+    made once with a random password, and kept, so that agents and the operator's commands
+    keep working across `up`s."""
+    folder.mkdir(parents=True, exist_ok=True)
+    os.chmod(folder, 0o700)
+    path = folder / PASSWORD_NAME
+    if not path.is_file() or not path.read_text(encoding="utf-8").strip():
+        path.unlink(missing_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as out:
+            out.write(secrets.token_urlsafe(32) + "\n")
+    os.chmod(path, 0o600)
+    return BrokerLogin(USERNAME, path)
