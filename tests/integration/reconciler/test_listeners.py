@@ -241,3 +241,54 @@ def test_a_client_is_its_address_and_an_ipv6_host_its_64() -> None:
     assert client_key("2001:db8:1:2:aaaa::1") == client_key("2001:db8:1:2:bbbb::9")
     assert client_key("2001:db8:1:2::1") == "2001:db8:1:2::/64"
     assert client_key("2001:db8:1:3::1") != client_key("2001:db8:1:2::1")
+
+
+GARBAGE = [
+    b"\x00\xff\xfe binary\r\n\r\n",
+    b"GET / HTTP/1.1\r\nX: " + b"a" * 20_000 + b"\r\n\r\n",  # a head over 16 KiB
+    b"GET / HTTP/1.1\r\n" + b"".join(b"X-%d: y\r\n" % n for n in range(200)) + b"\r\n",
+    b"GET /\r\n\r\n",  # HTTP/0.9
+    b"GET / HTTP/2.0\r\n\r\n",
+    b"GET  /  HTTP/1.1\r\n\r\n",
+    "GET /é HTTP/1.1\r\nX: é\r\n\r\n".encode(),
+    b"GET / HTTP/1.1\r\nContent-Length: 5\r\n\r\nhello and more",  # a body a GET never reads
+    b"POST / HTTP/1.1\r\nContent-Length: 99999999999999\r\n\r\n",
+    b"POST / HTTP/1.1\r\nContent-Length: 1\r\nContent-Length: 2\r\n\r\nab",
+    b"POST / HTTP/1.1\r\nContent-Length: -1\r\n\r\n",
+    b"POST / HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n5\r\nhello\r\n0\r\n\r\n",
+]
+
+
+@pytest.mark.parametrize("service", ["webhook", "metrics"])
+def test_garbage_is_answered_or_cut_and_the_listener_keeps_answering(
+    service: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, "robotconf.reconciler")
+    server: WebhookServer | Metrics
+    if service == "webhook":
+        server = WebhookServer(SECRET.encode(), "main", lambda: None)
+        server.serve("127.0.0.1", 0)
+    else:
+        server = Metrics()
+        server.serve("127.0.0.1", 0)
+    try:
+        for garbage in GARBAGE:
+            with connect_from(ATTACKER, server.port) as sock:
+                sock.settimeout(30)
+                sock.sendall(garbage)
+                sock.shutdown(socket.SHUT_WR)
+                answer = b""
+                with contextlib.suppress(ConnectionResetError):
+                    while chunk := sock.recv(65536):
+                        answer += chunk
+            status = answer.split(b"\r\n", 1)[0]
+            assert status == b"" or status.startswith(b"HTTP/1.1 "), (garbage[:40], answer)
+            assert not status.startswith(b"HTTP/1.1 5") or b" 505 " in status, answer
+            if service == "webhook":
+                assert signed_push(server.port)[0] == 200
+            else:
+                with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/", timeout=30) as ok:
+                    assert ok.status == 200
+    finally:
+        server.close()
+    assert not [m for m in caplog.messages if "internal error" in m]
