@@ -148,6 +148,9 @@ class Controller:
         self._running_since: dict[str, tuple[tuple[str, int | None, float], float]] = {}
         self._watched = 0  # the health view's connection whose statuses were learned last
         self._watching_since = 0.0  # when they were: a rollout's clock counts from then
+        # robot -> when first seen dark (offline, or its status gone) on that connection
+        self._dark_since: dict[str, float] = {}
+        self._had_status: set[str] = set()  # robots with a status on that connection
         # What a rollout's current wave established: this process's, or the retained one
         # found at start; and what the broker holds of it.
         self._wave_record: WaveRecord | None = None
@@ -357,6 +360,7 @@ class Controller:
             now=now,
             wave_record=self._wave_record,
             watching_since=self._watching_since,
+            dark_since=dict(self._dark_since),
         )
 
     def _follow_health(self, wanted: bool, now: float = 0.0) -> dict[str, AgentStatus] | None:
@@ -376,15 +380,25 @@ class Controller:
             self.health.stop()
             self.health = None
             self._running_since.clear()
+            self._dark_since.clear()
+            self._had_status.clear()
         if self.health is None or not self.health.synced:
             return None
         if self.health.connections != self._watched:
             self._watched = self.health.connections
             self._watching_since = now
+            self._dark_since.clear()
+            self._had_status.clear()
         seen = parse_retained(
             self.health.snapshot(), self.topics, ignored=self.ignored, memo=self._health_memo
         )
         statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
+        self._had_status |= statuses.keys()
+        for robot in self._had_status:
+            if robot in statuses and statuses[robot].state is not AgentState.OFFLINE:
+                self._dark_since.pop(robot, None)
+            else:  # its Last Will, or its status gone
+                self._dark_since.setdefault(robot, now)
         for robot, status in statuses.items():
             if status.state is AgentState.RUNNING and status.digest:
                 run = (status.digest, status.pid, status.since)

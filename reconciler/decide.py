@@ -59,6 +59,7 @@ class Observation:
     # What the current wave established, and when the statuses were last (re)learned.
     wave_record: WaveRecord | None = None
     watching_since: float = 0.0
+    dark_since: Mapping[str, float] = field(default_factory=dict)  # robot -> first seen dark
 
 
 @dataclass(frozen=True)
@@ -160,6 +161,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
             now=seen.now,
             record=seen.wave_record,
             watching_since=seen.watching_since,
+            dark_since=seen.dark_since,
         )
     )
     if step.serve_stable and stable is not None and stable.fleet is not None:

@@ -30,6 +30,9 @@ from reconciler.wave_memory import WaveMemory, WaveRecord, memory_of
 
 # An agent reporting these about the new request has failed it.
 _FAILED_STATES = {AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED}
+# Seconds a robot stays dark, watched without a break, before it counts as gone: a broker that
+# shuts down publishes every client's Last Will just before it drops the reconciler too.
+DARK_GRACE = 2.0
 
 
 class Health(str, Enum):
@@ -56,6 +59,8 @@ class RolloutInput:
     # restart), and when the statuses were last (re)learned: the wave's clock counts from then.
     record: WaveRecord | None = None
     watching_since: float = 0.0
+    # robot -> when the reconciler first saw it dark (offline, or its status gone) since then
+    dark_since: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -265,16 +270,21 @@ class _Rollout:
         for robot in members:
             digest = head.requests[robot].digest
             since = self.seen.running_since.get(robot)
+            dark_at = self.seen.dark_since.get(robot, memory.watching_since) + DARK_GRACE
             health = _health(
                 robot,
                 statuses.get(robot),
                 digest,
                 self.seen.launches.get(robot) == digest,
                 since,
+                now >= dark_at,
                 now,
                 policy.healthy_after,
                 memory,
             )
+            dark = robot in memory.seen and not _online(statuses.get(robot))
+            if health is Health.PENDING and dark and now < dark_at and robot not in memory.doubted:
+                soon(dark_at)  # dark a moment ago: gone once it has lasted
             if health is Health.PENDING and since is not None:
                 soon(since + policy.healthy_after)
             if health is Health.PENDING and now >= deadline:
@@ -305,9 +315,10 @@ class _Rollout:
             if begins:  # published in this step: those online now are sent it at once
                 memory.seen = {r for r in members if _online(statuses.get(r))}
         elif memory.watching_since != watching_since:
-            # The statuses were learned anew (a restart, a reconnection): a robot without one
-            # may only be one the broker forgot, so its silence says nothing yet.
-            memory.seen = {r for r in memory.seen if r in statuses}
+            # The statuses were learned anew (a restart, a reconnection): a robot dark now may
+            # have died meanwhile, or only be one whose broker restarted (which publishes every
+            # Last Will as it stops, or forgets them all): it has until the deadline to be back.
+            memory.doubted = {r for r in memory.seen if not _online(statuses.get(r))}
             memory.watching_since = watching_since
         return memory
 
@@ -357,6 +368,7 @@ def _health(
     digest: str,
     delivered: bool,
     running_since: float | None,
+    gone: bool,
     now: float,
     healthy_after: float,
     memory: WaveMemory,
@@ -367,13 +379,16 @@ def _health(
     if robot in memory.failed:
         return Health.FAILED  # a failure is not undone by what comes after, in this wave
     if not _online(status):
-        if robot in memory.seen:
-            # Dark (its Last Will, or no status at all) after it was sent the new request:
-            # it may have died of it, whatever times its Will carries.
+        if robot not in memory.seen:
+            return Health.ABSENT
+        if gone and robot not in memory.doubted:
+            # Dark (its Last Will, or no status at all) after it was sent the new request,
+            # for DARK_GRACE: it may have died of it, whatever times its Will carries.
             memory.failed.add(robot)
             return Health.FAILED
-        return Health.ABSENT
+        return Health.PENDING  # failed at the wave's deadline if it is not back by then
     assert status is not None
+    memory.doubted.discard(robot)
     if status.state is not AgentState.REJECTED:
         memory.rejecting.discard(robot)
     if not delivered:

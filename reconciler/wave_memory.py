@@ -37,6 +37,7 @@ class WaveRecord(BaseModel):
     healthy: str = Field("", description="seen running the new request for healthy_after")
     failed: str = Field("", description="failed the wave: stays failed")
     rejecting: str = Field("", description="rejected a request already as the wave began")
+    doubted: str = Field("", description="seen, then dark when the statuses were learned anew")
 
 
 @dataclass
@@ -52,6 +53,7 @@ class WaveMemory:
     healthy: set[str] = field(default_factory=set)
     failed: set[str] = field(default_factory=set)
     rejecting: set[str] = field(default_factory=set)
+    doubted: set[str] = field(default_factory=set)
 
     def record(self) -> WaveRecord:
         members = self.members
@@ -65,6 +67,7 @@ class WaveMemory:
             healthy=_bits(members, self.healthy),
             failed=_bits(members, self.failed),
             rejecting=_bits(members, self.rejecting),
+            doubted=_bits(members, self.doubted),
         )
 
 
@@ -100,6 +103,7 @@ def memory_of(
             healthy=_members(members, record.healthy),
             failed=_members(members, record.failed),
             rejecting=_members(members, record.rejecting),
+            doubted=_members(members, record.doubted),
         )
     except ValueError:
         return None

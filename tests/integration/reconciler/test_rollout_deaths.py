@@ -10,10 +10,14 @@ import json
 import os
 import signal
 import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
 
 from configurator.rendered import RenderedRequest
 from configurator.wire import AgentState, ReconcilerStatus
-from tests.integration.reconciler.conftest import Fleet
+from tests.integration.reconciler.conftest import EXTRA_ROBOT, Fleet
 from tests.integration.reconciler.test_rollout import (
     CANARY,
     complete,
@@ -21,8 +25,9 @@ from tests.integration.reconciler.test_rollout import (
     running_digest,
     with_policy,
 )
-from tests.support.fleet import start_agent
-from tests.support.watch import wait_for
+from tests.support.fleet import GitLab, start_agent
+from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
 
 LAST = "tb3-06"  # in the last wave, with the canary's scenario
 
@@ -59,6 +64,28 @@ def kill_robot(fleet: Fleet, robot: str) -> None:
         with contextlib.suppress(ProcessLookupError):
             os.kill(status.pid, signal.SIGKILL)
     fleet.watch.wait_for(robot, lambda s: s.state is AgentState.OFFLINE, "its Last Will")
+
+
+@contextlib.contextmanager
+def fleet_on(tmp_path: Path, broker: Mosquitto) -> Iterator[Fleet]:
+    """The `fleet` fixture's six robots and reconciler, on a broker of the test's own."""
+    lab = GitLab(tmp_path / "lab")
+    lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
+    lab.commit("a sixth robot")
+    watch = FleetWatch(broker.url)
+    fleet = Fleet(lab, broker, watch, tmp_path)
+    try:
+        for robot_id in lab.robots():
+            fleet.agents[robot_id] = start_agent(lab, robot_id, broker.url, tmp_path / "agents")
+        fleet.start_reconciler("--interval", "5")
+        fleet.converged = watch.wait_running(fleet.requests())
+        yield fleet
+    finally:
+        watch.close()
+        if fleet.reconciler is not None:
+            fleet.reconciler.stop()
+        for proc in fleet.agents.values():
+            proc.stop()
 
 
 def kill_reconciler(fleet: Fleet) -> None:
@@ -195,7 +222,9 @@ def test_a_reconciler_killed_at_the_gate_resumes_the_next_wave(fleet: Fleet) -> 
 
 
 def test_a_canary_that_dies_while_the_reconciler_is_down_fails_it(fleet: Fleet) -> None:
-    start(fleet, healthy_after=30, wave_timeout=120)
+    # Back, the reconciler cannot tell a death from a broker that restarted meanwhile: the
+    # canary has until the wave's timeout, counted from the restart, to come back.
+    start(fleet, healthy_after=6, wave_timeout=8)
     head = rename_all(fleet, "v2")
     new = fleet.requests(head)
     wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
@@ -208,3 +237,28 @@ def test_a_canary_that_dies_while_the_reconciler_is_down_fails_it(fleet: Fleet) 
     fleet.start_reconciler("--interval", "5")
     status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
     assert status.rollout is not None and status.rollout.failed == [CANARY]
+
+
+# ------------------------------------------------------------------ a broker that restarts
+
+
+@pytest.mark.parametrize("persistent", [True, False], ids=["persistent", "forgetful"])
+def test_a_broker_restarted_mid_wave_rolls_nothing_back(tmp_path: Path, persistent: bool) -> None:
+    """Mosquitto publishes every client's Last Will as it stops, and a persistent one keeps
+    them: robots that are only reconnecting are not dead. One that forgets everything holds no
+    status at all for a while: not dead either."""
+    broker = Mosquitto(tmp_path / "broker", persistence=persistent)
+    (tmp_path / "broker").mkdir()
+    broker.start()
+    with fleet_on(tmp_path, broker) as fleet:
+        stable = start(fleet, healthy_after=3, wave_timeout=60)
+        head = rename_all(fleet, "v2")
+        new = fleet.requests(head)
+        wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
+        broker.restart()
+        fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+        fleet.watch.wait_running(new)
+        # A forgetful broker lost every request: the robots of waves not begun were given the
+        # stable one again, as a robot that holds nothing readable is. The canary never was.
+        never_rolled_back(fleet, stable if persistent else {CANARY: stable[CANARY]})
+    broker.kill()

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from configurator.render import FleetRender
 from configurator.wire import AgentState, AgentStatus
-from reconciler.rollout import RolloutStep
+from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
 from reconciler.wave_memory import WaveMemory, memory_of
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout import (
@@ -203,8 +203,6 @@ def test_no_wave_is_published_before_the_statuses_are_known(
     two: tuple[FleetRender, FleetRender],
 ) -> None:
     stable, head = two
-    from reconciler.rollout import RolloutInput, roll_out
-
     blind = roll_out(RolloutInput(head, stable, None, held(stable), None, {}, T0))
     assert published(blind, head) == [] and blind.status is not None
     assert blind.status.state == "Progressing" and blind.status.wave_started_at is None
@@ -245,4 +243,68 @@ def test_sets_survive_their_record(robots: list[str], data: st.DataObject) -> No
         memory.healthy,
         memory.failed,
         memory.rejecting,
+    )
+
+
+def test_dark_counts_once_it_has_lasted_while_the_reconciler_watched(
+    two: tuple[FleetRender, FleetRender],
+) -> None:
+    """A broker that shuts down publishes every Last Will just before it drops the reconciler:
+    a robot is gone only once it has stayed dark for DARK_GRACE, watched."""
+    stable, head = two
+    first = step(head, stable, held(stable), running(stable, ROBOTS))
+    launches = {**held(stable), **held(head, CANARY)}
+    will = {**running(stable, ROBOTS[1:]), **offline(CANARY, T0)}
+    dark = {"tb3-01": T0 + 1}
+    moment = roll(head, stable, launches, will, first, T0 + 1.5, dark)
+    assert state(moment) == "Progressing" and moment.recheck_at == T0 + 1 + DARK_GRACE
+    gone = roll(head, stable, launches, will, moment, T0 + 1 + DARK_GRACE, dark)
+    assert state(gone) == "RolledBack"
+
+
+def test_a_robot_dark_when_statuses_are_learned_anew_has_until_the_deadline(
+    two: tuple[FleetRender, FleetRender],
+) -> None:
+    stable, head = two
+    first = step(head, stable, held(stable), running(stable, ROBOTS))
+    launches = {**held(stable), **held(head, CANARY)}
+    seen = step(head, stable, launches, running(head, CANARY), first, T0 + 1)
+    # The broker restarted: every Will it published as it stopped is what it holds now.
+    wills = offline(ROBOTS, T0)
+    again = {"watching_since": T0 + 5, "dark_since": dict.fromkeys(ROBOTS, T0 + 5)}
+    doubt = roll(head, stable, launches, wills, seen, T0 + 50, **again)
+    assert state(doubt) == "Progressing" and doubt.recheck_at == T0 + 105
+    # Back: judged as ever.
+    back = roll(head, stable, launches, running(head, CANARY), doubt, T0 + 51, **again)
+    assert state(back) == "Progressing" and back.status is not None
+    assert back.status.counts["failed"] == 0
+    # Never back: failed at the wave's deadline, counted from when it was watched again.
+    assert state(roll(head, stable, launches, wills, doubt, T0 + 104, **again)) == "Progressing"
+    assert state(roll(head, stable, launches, wills, doubt, T0 + 105, **again)) == "RolledBack"
+
+
+def roll(
+    head: FleetRender,
+    stable: FleetRender,
+    launches: dict[str, str | None],
+    statuses: dict[str, AgentStatus],
+    previous: RolloutStep,
+    now: float,
+    dark_since: dict[str, float] | None = None,
+    watching_since: float = 0.0,
+) -> RolloutStep:
+    """A step with the reconciler's own dark clocks."""
+    return roll_out(
+        RolloutInput(
+            head,
+            stable,
+            previous.status,
+            launches,
+            statuses,
+            {},
+            now,
+            previous.record,
+            watching_since,
+            dark_since or {},
+        )
     )
