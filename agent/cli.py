@@ -18,6 +18,7 @@ from agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
 from agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
 from agent.workdir import WorkdirLock
 from configurator.cli.errors import CliError, ExitCode
+from configurator.logsafe import SafeFormatter
 from configurator.signing import SigningKeyError
 
 PROG = "robotconf agent"
@@ -127,7 +128,8 @@ def _clash(paths: Sequence[Path], configs: Sequence[AgentConfig]) -> str | None:
 
 def _log_to_stderr(level: str, configs: Sequence[AgentConfig]) -> None:
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(asctime)s %(robot_id)s %(levelname)s %(message)s"))
+    # Statuses, requests and refusals quote what peers sent: one line each, escaped.
+    handler.setFormatter(SafeFormatter("%(asctime)s %(robot_id)s %(levelname)s %(message)s"))
     # Lines logged outside any one agent's turn name the process's robot, or all of them.
     handler.addFilter(RobotIdFilter(",".join(config.robot_id for config in configs)))
     logging.basicConfig(level=level.upper(), handlers=[handler])

@@ -14,6 +14,7 @@ from pydantic import ValidationError
 
 from configurator.mqtt import Connection
 from configurator.safejson import PayloadError
+from configurator.textsafe import printable
 from configurator.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
 from reconciler.observed import RobotSeen, parse_retained
 from reconciler.retained import RetainedView, read_object, take_snapshot
@@ -33,7 +34,8 @@ class Unknown:
 
     def message(self, url: str) -> str:
         close = difflib.get_close_matches(self.robot_id, self.known, n=3)
-        hint = f"; did you mean {', '.join(close)}?" if close else ""
+        # Ids come from topic names anyone allowed on the broker may make up: shown escaped.
+        hint = f"; did you mean {', '.join(printable(c) for c in close)}?" if close else ""
         count = len(self.known)
         return (
             f"unknown robot {self.robot_id!r}: {url} holds no status, description or launch "

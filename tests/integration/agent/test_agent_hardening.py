@@ -3,6 +3,7 @@ one can start (issue 10, items 3 and 9): real agents, real Mosquitto, the stand-
 
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
@@ -87,3 +88,21 @@ def test_a_request_that_cannot_be_written_leaves_the_brain_running(
     agent.note_brain(status.pid)
     assert agent.request_on_disk()["digest"] == request.digest
     assert not staged.exists()
+
+
+def test_a_peer_cannot_forge_a_line_in_the_agents_log(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    agent = make_agent().start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    forged = "\n2026-01-01 00:00:00 tb3-01 ERROR FORGED\r\x1b[2J\u2028"
+    request = make_request().model_dump(mode="json")
+    request["robot_id"] = "tb3-01" + forged
+    publish(mosquitto.url, LAUNCH, json.dumps(request).encode())
+    refused = watch.wait_state(ROBOT, AgentState.REJECTED, agent=agent)
+    assert "FORGED" in refused.message  # what it refused is said...
+    log = agent.stderr_path.read_text(encoding="utf-8")
+    assert "FORGED" in log
+    # ... on its own line, escaped: no line of the agent's log is the peer's.
+    assert not any(line.startswith("2026-01-01") for line in log.splitlines())
+    assert "\x1b" not in log and "\r" not in log and "\u2028" not in log

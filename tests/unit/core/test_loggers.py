@@ -73,3 +73,18 @@ def test_the_check_tells_good_names_from_bad(source: str, ok: bool) -> None:
     calls = _get_logger_calls(ast.parse(source))
     assert len(calls) == 1
     assert (_problem(module, calls[0]) is None) is ok
+
+
+def test_every_log_handler_escapes_what_peers_wrote() -> None:
+    """Log lines quote robots' and peers' text: each handler the project sets up formats with
+    `configurator.logsafe.SafeFormatter`, never a plain `logging.Formatter`."""
+    plain = [
+        f"{path.relative_to(ROOT)}:{node.lineno}"
+        for path in _sources()
+        if path.name != "logsafe.py"
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Call)
+        and isinstance(node.func, ast.Attribute)
+        and node.func.attr == "Formatter"
+    ]
+    assert plain == [], f"use SafeFormatter: {plain}"
