@@ -86,3 +86,12 @@ def _final_line(exc: BaseException) -> str:
 def _each_line(text: str) -> str:
     """Text whose line breaks are its own: each line made printable on its own."""
     return "\n".join(printable(line) for line in text.split("\n"))
+
+
+def escape_stray_records() -> None:
+    """A command that sets up no logging of its own still prints what a library logs at
+    WARNING, through Python's last-resort handler: escaped too."""
+    handler = logging.StreamHandler()
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(SafeFormatter("robotconf: %(message)s"))
+    logging.lastResort = handler

@@ -11,6 +11,7 @@ import click
 
 from configurator.cli.errors import CliError
 from configurator.cli.options import F
+from configurator.logsafe import escape_stray_records
 from configurator.mqtt import Connection
 from configurator.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX, validate_prefix
 
@@ -78,6 +79,7 @@ def broker_options(command: F) -> F:
 
     @functools.wraps(command)
     def gathered(*args: Any, **kwargs: Any) -> Any:
+        escape_stray_records()  # these commands read what robots publish
         mqtt = BrokerOptions(**{name: kwargs.pop(name) for name in _BROKER_FIELDS})
         return command(*args, mqtt=mqtt, **kwargs)
 

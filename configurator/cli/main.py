@@ -142,8 +142,10 @@ def main(argv: list[str] | None = None) -> int:
             return ExitCode.TOOL
         if os.environ.get("ROBOTCONF_DEBUG"):
             raise
+        from configurator.textsafe import printable
+
         print(
-            f"robotconf: internal error: {type(exc).__name__}: {exc} "
+            f"robotconf: internal error: {type(exc).__name__}: {printable(str(exc))} "
             "(set ROBOTCONF_DEBUG=1 for the traceback)",
             file=sys.stderr,
         )

@@ -88,3 +88,20 @@ def test_every_log_handler_escapes_what_peers_wrote() -> None:
         and node.func.attr == "Formatter"
     ]
     assert plain == [], f"use SafeFormatter: {plain}"
+
+
+def test_a_command_without_logging_of_its_own_escapes_stray_records(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    import logging
+
+    from configurator.logsafe import escape_stray_records
+
+    before = logging.lastResort
+    try:
+        escape_stray_records()
+        logging.getLogger("robotconf.test").warning("from %s", "tb3-01\nERROR forged\x1b[2J")
+    finally:
+        logging.lastResort = before
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "\x1b" not in err and "forged" in err
