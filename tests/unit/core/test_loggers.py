@@ -100,7 +100,11 @@ def test_a_command_without_logging_of_its_own_escapes_stray_records(
     before = logging.lastResort
     try:
         escape_stray_records()
-        logging.getLogger("robotconf.test").warning("from %s", "tb3-01\nERROR forged\x1b[2J")
+        record = logging.makeLogRecord(
+            {"msg": "from %s", "args": ("tb3-01\nERROR forged\x1b[2J",), "levelno": 30}
+        )
+        assert logging.lastResort is not None
+        logging.lastResort.handle(record)  # what logging does when no handler is set up
     finally:
         logging.lastResort = before
     err = capsys.readouterr().err
