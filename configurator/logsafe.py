@@ -89,9 +89,10 @@ def _each_line(text: str) -> str:
 
 
 def escape_stray_records() -> None:
-    """A command that sets up no logging of its own still prints what a library logs at
-    WARNING, through Python's last-resort handler: escaped too."""
+    """A command that sets up no logging of its own still prints an error a library logs
+    (a bug in a network callback), through Python's last-resort handler: escaped too. Not
+    warnings: what goes wrong with the broker, the command says itself, once."""
     handler = logging.StreamHandler()
-    handler.setLevel(logging.WARNING)
+    handler.setLevel(logging.ERROR)
     handler.setFormatter(SafeFormatter("robotconf: %(message)s"))
     logging.lastResort = handler

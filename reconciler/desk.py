@@ -79,7 +79,8 @@ class RobotDesk:
         self.view.stop()
 
     def wait_synced(self, timeout: float) -> bool:
-        return self.view.wait_synced(timeout)
+        """False at once when the broker refuses the connection (`view.refused` says why)."""
+        return self.view.wait_synced(timeout, or_refused=True)
 
     def robot(self) -> RobotSeen | None:
         """The robot as its retained topics show it; None when nothing is retained for it."""

@@ -162,6 +162,9 @@ class RetainedView:
         self._synced = threading.Event()
         self._connected = False
         self.last_error: str | None = None
+        # Why the broker refused our CONNECT (a login, an ACL), until it accepts one: a command
+        # says so at once instead of waiting for an answer that will not come.
+        self.refused: str | None = None
         self.connections = 0
         # MQTT 5's No Local: what this client publishes on `filters` is not sent back to it
         # (its copy is updated at the PUBACK instead); retained messages still come at each
@@ -218,8 +221,18 @@ class RetainedView:
     def synced(self) -> bool:
         return self._synced.is_set()
 
-    def wait_synced(self, timeout: float | None) -> bool:
-        return self._synced.wait(timeout)
+    def wait_synced(self, timeout: float | None, *, or_refused: bool = False) -> bool:
+        """True once the retained messages are known; with `or_refused`, False as soon as the
+        broker refuses the connection (a one-shot command has nothing to wait for then)."""
+        if not or_refused:
+            return self._synced.wait(timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self._synced.is_set():
+            left = None if deadline is None else deadline - time.monotonic()
+            if self.refused is not None or (left is not None and left <= 0):
+                return False
+            self._synced.wait(0.05 if left is None else min(0.05, left))
+        return True
 
     def snapshot(self) -> dict[str, bytes]:
         with self._lock:
@@ -311,8 +324,10 @@ class RetainedView:
         self, client: paho.Client, userdata: Any, flags: Any, reason: Any, properties: Any
     ) -> None:
         if getattr(reason, "is_failure", False):
-            self.last_error = f"broker refused the connection: {reason}"
-            log.warning("%s", self.last_error)
+            error = f"broker refused the connection: {reason}"
+            if error != self.last_error:  # said once, not at every retry
+                log.warning("%s", error)
+            self.last_error, self.refused = error, str(reason)
             return
         with self._lock:
             self._generation += 1
@@ -320,7 +335,7 @@ class RetainedView:
             self._synced.clear()
             self._connected = True
             self.connections += 1
-        self.last_error = None
+        self.last_error = self.refused = None
         # QoS 0: a snapshot is taken anew at every connection, so redelivery buys nothing,
         # while a broker may drop queued QoS 1 messages beyond its per-client queue limit
         # (Mosquitto: max_queued_messages 1000) and a large fleet's snapshot would be lossy.

@@ -74,6 +74,14 @@ _BROKER_FIELDS = (
 )
 
 
+def refused(url: str, reason: str) -> CliError:
+    """The broker turned this client away: waiting longer would not change that."""
+    return CliError(
+        f"the broker at {url} refused the connection ({reason}): check --username and "
+        "--password-file (`robotconf up` prints both for its broker)"
+    )
+
+
 def broker_options(command: F) -> F:
     """Declares the broker options and hands them to `command` as one `mqtt: BrokerOptions`."""
 

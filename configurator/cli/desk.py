@@ -3,6 +3,7 @@ or one line saying why it cannot be asked."""
 
 from __future__ import annotations
 
+from configurator.cli.broker_options import refused
 from configurator.cli.errors import CliError, ExitCode
 from reconciler.desk import RobotDesk
 from reconciler.observed import RobotSeen
@@ -13,6 +14,8 @@ def online_robot(desk: RobotDesk, wait: float, why_online: str) -> RobotSeen:
     when the broker does not answer, knows nothing of the robot, or has it offline."""
     url = desk.connection.address.url
     if not desk.wait_synced(wait):
+        if desk.view.refused is not None:
+            raise refused(url, desk.view.refused)
         raise CliError(
             f"no answer from the broker at {url} within {wait:g} s "
             f"({desk.view.last_error or 'no answer'}); is it running? (--broker URL)"

@@ -11,7 +11,7 @@ import click
 from rich.live import Live
 from rich.text import Text
 
-from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.broker_options import BrokerOptions, broker_options, refused
 from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.fleet_view import fleet_status_view
 from configurator.cli.options import repo_option, rev_option
@@ -66,7 +66,9 @@ def status(
     view = open_view(connection, mqtt.prefix, changed.set)
     view.start()
     try:
-        if not view.wait_synced(wait):
+        if not view.wait_synced(wait, or_refused=True):
+            if view.refused is not None:
+                raise refused(connection.address.url, view.refused)
             reason = view.last_error or "no answer"
             raise CliError(
                 f"no retained messages from {connection.address.url} within {wait:g} s "

@@ -315,3 +315,26 @@ def test_only_operators_and_the_reconciler_ask_a_robot_for_restarts_and_logs(
     finally:
         for session in sessions:
             session.close()
+
+
+@pytest.mark.parametrize(
+    "command", [["status", "--repo", str(ROOT)], ["logs", "tb3-01"], ["restart", "tb3-01"]]
+)
+def test_a_refused_login_is_said_once_and_at_once(
+    broker: Secured, tmp_path: Path, command: list[str]
+) -> None:
+    wrong = tmp_path / "wrong.password"
+    wrong.write_text("not the password\n")
+    wrong.chmod(0o600)
+    done = subprocess.run(
+        [
+            ROBOTCONF, *command, "--broker", broker.service_url,
+            "--username", "operator", "--password-file", str(wrong),
+            "--ca-file", str(broker.pki.ca_cert), "--wait", "600",
+        ],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "refused the connection" in lines[0], done.stderr
+    assert "is it running" not in done.stderr and "not the password" not in done.stderr

@@ -101,7 +101,7 @@ def test_a_command_without_logging_of_its_own_escapes_stray_records(
     try:
         escape_stray_records()
         record = logging.makeLogRecord(
-            {"msg": "from %s", "args": ("tb3-01\nERROR forged\x1b[2J",), "levelno": 30}
+            {"msg": "from %s", "args": ("tb3-01\nERROR forged\x1b[2J",), "levelno": 40}
         )
         assert logging.lastResort is not None
         logging.lastResort.handle(record)  # what logging does when no handler is set up
