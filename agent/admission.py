@@ -6,7 +6,7 @@ Pure: validated with the shared request types, checked against the robot's descr
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Any
@@ -75,42 +75,54 @@ class RestartMemory:
 
     `watermark`: restarts issued at or before it are refused. It is the issue time of the last
     one carried out, but never later than this robot's clock was then: a desk whose clock runs
-    fast must not lock out the restarts of correct clocks that follow. `ahead`: the issue times
-    of those carried out that were dated after the robot's clock (and so after the watermark),
-    refused again by name while they are within RESTART_MAX_AGE."""
+    fast must not lock out the restarts of correct clocks that follow. `ahead`: the restarts
+    carried out that were dated after the robot's clock (and so after the watermark), refused
+    again as themselves (who asked, and when: both signed) while within RESTART_MAX_AGE."""
 
     watermark: float | None = None
-    ahead: frozenset[float] = frozenset()
+    ahead: frozenset[Restart] = frozenset()
 
-    def refusal(self, issued_at: float) -> str | None:
-        """Why a restart issued at `issued_at` was carried out already; None if it was not."""
-        if self.watermark is not None and issued_at <= self.watermark:
+    @classmethod
+    def of(cls, watermark: float | None, ahead: Iterable[tuple[float, str]]) -> RestartMemory:
+        """From what the work directory keeps (RestartLedger): `(issued_at, requested_by)`."""
+        return cls(watermark, frozenset(Restart(by, issued) for issued, by in ahead))
+
+    def ahead_entries(self) -> frozenset[tuple[float, str]]:
+        """`ahead` as the work directory keeps it."""
+        return frozenset((r.issued_at, r.requested_by) for r in self.ahead)
+
+    def refusal(self, restart: Restart) -> str | None:
+        """Why `restart` counts as carried out already; None if it does not."""
+        issued = restart.issued_at
+        if self.watermark is not None and issued <= self.watermark:
             return (
-                f"restart issued at {_iso(issued_at)} is not newer than the last one carried "
+                f"restart issued at {_iso(issued)} is not newer than the last one carried "
                 f"out ({_iso(self.watermark)}): a duplicate or a replay"
             )
-        if issued_at in self.ahead:
+        if restart in self.ahead:
             return (
-                f"restart issued at {_iso(issued_at)} was carried out already: a duplicate or "
-                "a replay"
+                f"restart issued at {_iso(issued)} by {restart.requested_by} was carried out "
+                "already: a duplicate or a replay"
             )
         return None
 
-    def carried_out(self, issued_at: float, now: float) -> RestartMemory:
-        """The memory once the restart issued at `issued_at` is carried out at `now` (wall)."""
-        watermark = min(issued_at, now)
+    def carried_out(self, restart: Restart, now: float) -> RestartMemory:
+        """The memory once `restart` is carried out at `now` (wall time)."""
+        watermark = min(restart.issued_at, now)
         if self.watermark is not None:
             watermark = max(watermark, self.watermark)
         ahead = set(self.ahead)
-        if issued_at > watermark:
-            ahead.add(issued_at)
+        if restart.issued_at > watermark:
+            ahead.add(restart)
         return RestartMemory(watermark, frozenset(ahead)).pruned(now)
 
     def pruned(self, now: float) -> RestartMemory:
         """Without what the watermark or the age limit refuses anyway."""
         floor = now - RESTART_MAX_AGE
         kept = frozenset(
-            t for t in self.ahead if t >= floor and (self.watermark is None or t > self.watermark)
+            r
+            for r in self.ahead
+            if r.issued_at >= floor and (self.watermark is None or r.issued_at > self.watermark)
         )
         return self if kept == self.ahead else RestartMemory(self.watermark, kept)
 
@@ -268,7 +280,8 @@ def interpret_restart(
             f"than {RESTART_MAX_AGE:g} s apart (an old restart replayed, or a clock is wrong: "
             "check NTP)"
         )
-    problem = memory.refusal(issued)
+    restart = Restart(request.requested_by, issued)
+    problem = memory.refusal(restart)
     if problem is not None:
         return Reject(problem)
     if issued > now and len(memory.pruned(now).ahead) >= MAX_RESTARTS_AHEAD:
@@ -277,7 +290,7 @@ def interpret_restart(
             f"and {MAX_RESTARTS_AHEAD} such restarts were carried out in the last "
             f"{RESTART_MAX_AGE:g} s: a desk's clock is wrong (check NTP)"
         )
-    return Restart(request.requested_by, issued)
+    return restart
 
 
 def interpret_logs_request(payload: bytes) -> LogsRequest | Reject:

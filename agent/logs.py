@@ -12,6 +12,7 @@ from collections import OrderedDict, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 from agent.redact import MIN_SECRET_CHARS, REDACTED, Pem, Redactor, pem_state_after
 from configurator.wire import (
@@ -77,14 +78,10 @@ def _older(path: Path) -> Path:
     return path.with_name(path.name + ".1")
 
 
-def pem_state_before(path: Path, offset: int, copies: bool = True, budget: int = LOOKBACK) -> Pem:
+def pem_state_before(path: Path, offset: int, backups: int = 3, budget: int = LOOKBACK) -> Pem:
     """Whether the byte at `offset` of the log file `path` is inside a private-key PEM block,
-    by looking back (at most `budget` bytes, into the rotated copy before it if need be).
-
-    At a file's start, lines may have been lost between the copy and the truncation of a
-    rotation: only an open block in the copy before it says INSIDE; else UNKNOWN. The start of
-    the current log with no copy before it is the log's own start (OUTSIDE) when rotation
-    keeps `copies`, and UNKNOWN when it only truncates."""
+    by looking back (at most `budget` bytes, into the rotated copy before it if need be);
+    rotation keeps `backups` copies."""
     start = max(0, offset - budget)
     try:
         with open(path, "rb") as log:
@@ -92,32 +89,55 @@ def pem_state_before(path: Path, offset: int, copies: bool = True, budget: int =
             data = log.read(offset - start)
     except OSError:
         data = b""
-    found = pem_state_after(data.decode("utf-8", errors="replace"))
+    text = data.decode("utf-8", errors="replace")
+    found = pem_state_after(text)
     if found is not None:
         return found
     if start > 0:
         return Pem.OUTSIDE  # no key is that long: not inside one
+    at_start = _state_at_start(path, backups, budget - offset)
+    if at_start is not Pem.UNKNOWN:
+        return at_start
+    # Unknown at the file's start: what its lines up to `offset` say (see Redactor).
+    tracker = Redactor((), (), Pem.UNKNOWN)
+    for line in text.split("\n")[:-1]:
+        tracker.track(line.rstrip("\r"))
+    return tracker.state
+
+
+def _state_at_start(path: Path, backups: int, budget: int) -> Pem:
+    """The PEM state at the start of a log file. Lines may have been lost between the copy and
+    the truncation of the rotation that began it: only a block open at the end of the copy
+    before it says INSIDE, anything else UNKNOWN. Without a copy before it, the file is the
+    log's own start (OUTSIDE) when rotation would have kept that copy, else UNKNOWN (a copy
+    was deleted, or rotation only truncates: `backups` 0)."""
     older = _older(path)
     try:
         size = older.stat().st_size
     except OSError:
-        if older.name != path.name + ".1":
-            return Pem.UNKNOWN  # the oldest copy begins where a deleted one ended
-        return Pem.OUTSIDE if copies else Pem.UNKNOWN
-    before = pem_state_before(older, size, copies, budget - offset)
+        number = int(older.name.rpartition(".")[2])
+        return Pem.OUTSIDE if number <= backups else Pem.UNKNOWN
+    before = pem_state_before(older, size, backups, budget)
     return Pem.INSIDE if before is Pem.INSIDE else Pem.UNKNOWN
 
 
 @dataclass
-class _FileTail:
-    path: Path
-    lines: list[str]
-    offset: int  # of the first line
+class _Line:
+    path: Path  # the file it was read from
+    offset: int  # where it begins there
+    raw: bytes
+
+    @property
+    def text(self) -> str:
+        return _decode(self.raw)
 
 
-def _file_tail(path: Path, count: int, window: int, end: int | None = None) -> _FileTail | None:
+def _file_tail(
+    path: Path, count: int, window: int, end: int | None = None
+) -> tuple[list[_Line], bool] | None:
     """The last `count` lines of one file (as of `end` bytes, else its size), read back at most
-    `window` bytes, a block at a time; None when it cannot be read."""
+    `window` bytes, a block at a time, and whether the file ends with a line break; None when
+    it cannot be read."""
     try:
         with open(path, "rb") as log:
             size = os.fstat(log.fileno()).st_size if end is None else end
@@ -132,66 +152,70 @@ def _file_tail(path: Path, count: int, window: int, end: int | None = None) -> _
     except OSError:
         return None
     data = data[: size - start]  # the file may have grown since `end`
-    pieces = data.split(b"\n")
-    if pieces and pieces[-1] == b"":
-        pieces.pop()  # the line break that ends the file
-    if start > 0 and pieces:
-        pieces.pop(0)  # begun before what was read
-    kept = pieces[-count:] if count > 0 else []
+    if not data:
+        return [], True  # an empty file has no line, not an empty one
     ends_in_break = data.endswith(b"\n")
-    offset = size - sum(len(p) + 1 for p in kept) + (0 if ends_in_break or not kept else 1)
-    return _FileTail(path, [_decode(p) for p in kept], offset)
+    pieces = data.split(b"\n")
+    if ends_in_break:
+        pieces.pop()  # the line break that ends the file
+    lines: list[_Line] = []
+    at = start
+    for piece in pieces:
+        lines.append(_Line(path, at, piece))
+        at += len(piece) + 1
+    if start > 0 and lines:
+        lines.pop(0)  # begun before what was read
+    return (lines[-count:] if count > 0 else []), ends_in_break
 
 
-def _tail_files(
+def _tail_lines(
     path: Path, count: int, window: int = TAIL_WINDOW, end: int | None = None
-) -> list[_FileTail]:
+) -> list[_Line]:
     """The last `count` lines of the log, from the rotated copy before it when the current
-    file holds fewer, oldest file first."""
-    found: list[_FileTail] = []
-    have = 0
-    for candidate, upto in ((path, end), (_older(path), None)):
-        if have >= count:
-            break
-        part = _file_tail(candidate, count - have, window, upto)
-        if part is None:
-            continue
-        found.insert(0, part)
-        have += len(part.lines)
-    return found
+    file holds fewer. Rotation copies, then truncates: a line the brain was writing then has
+    its beginning at the copy's end and its rest at the file's start; it is joined again."""
+    if count <= 0:
+        return []
+    current = _file_tail(path, count, window, end)
+    newest = [] if current is None else current[0]
+    if newest and newest[0].offset > 0:
+        return newest
+    # One more line of the copy: it may be the beginning of the current file's first line.
+    older = _file_tail(_older(path), count - len(newest) + 1, window)
+    if older is None:
+        return newest
+    lines, ends_in_break = older
+    if lines and newest and not ends_in_break:
+        lines[-1].raw += newest.pop(0).raw  # as bytes: the cut may split a character
+    return (lines + newest)[-count:]
 
 
 def read_tail(path: Path, count: int, window: int = TAIL_WINDOW) -> list[str]:
     """The last `count` lines of the log, as written (not redacted)."""
-    if count <= 0:
-        return []
-    return [line for part in _tail_files(path, count, window) for line in part.lines]
+    return [line.text for line in _tail_lines(path, count, window)]
 
 
 def redacted_tail(
     path: Path,
     count: int,
     redactor: Redactor,
-    copies: bool = True,
+    backups: int = 3,
     end: int | None = None,
     window: int = TAIL_WINDOW,
 ) -> list[str]:
     """The last `count` lines of the log as they may leave the robot: redacted from the PEM
     state found by looking back before the first of them, each cut to fit a message."""
-    if count <= 0:
+    lines = _tail_lines(path, count, window, end)
+    if not lines:
         return []
-    parts = _tail_files(path, count, window, end)
-    if not parts:
-        return []
-    first = parts[0]
-    reader = redactor.fresh(pem_state_before(first.path, first.offset, copies))
-    lines: list[str] = []
-    for n, part in enumerate(parts):
-        if n > 0 and reader.state is not Pem.INSIDE:
+    reader = redactor.fresh(pem_state_before(lines[0].path, lines[0].offset, backups))
+    shown: list[str] = []
+    for n, line in enumerate(lines):
+        if n > 0 and line.path != lines[n - 1].path and reader.state is not Pem.INSIDE:
             # A rotation lies between: lines may have been lost at it (see pem_state_before).
             reader.state = Pem.UNKNOWN
-        lines += [fit_line(reader.line(line)) for line in part.lines]
-    return lines
+        shown.append(fit_line(reader.line(line.text)))
+    return shown
 
 
 class _Budget:
@@ -233,11 +257,11 @@ class LogStream:
     out in turns of QUANTUM between the answers waiting (each session's, and the stream), so a
     short tail goes out promptly however much another asker has waiting."""
 
-    def __init__(self, path: Path, robot_id: str, redactor: Redactor, copies: bool = True) -> None:
+    def __init__(self, path: Path, robot_id: str, redactor: Redactor, backups: int = 3) -> None:
         self.path = path
         self.robot_id = robot_id
         self._rules = redactor
-        self._copies = copies  # rotation keeps copies (log.backups > 0)
+        self._backups = backups  # rotated copies kept (agent.yaml's log.backups)
         self._redactor = redactor.fresh()  # the followed stream's
         self._waiting: dict[str, _Waiting] = {}
         self._waiting_lines = 0
@@ -273,7 +297,7 @@ class LogStream:
         if request.follow and self._follow_until is None:
             # The stream starts where the tail ends: nothing twice, nothing missed.
             end = self._start_following()
-        lines = redacted_tail(self.path, request.lines, self._rules, self._copies, end)
+        lines = redacted_tail(self.path, request.lines, self._rules, self._backups, end)
         self._enqueue(request.session, lines)
         if request.follow:
             self._follow_until = now + LOG_FOLLOW_TTL
@@ -342,11 +366,8 @@ class LogStream:
         else:
             self._offset, self._inode = stat.st_size, stat.st_ino
         self._next_poll = 0.0
-        self._redactor = self._rules.fresh(self._state_at(self._offset))
+        self._redactor = self._rules.fresh(pem_state_before(self.path, self._offset, self._backups))
         return self._offset
-
-    def _state_at(self, offset: int) -> Pem:
-        return pem_state_before(self.path, offset, self._copies)
 
     def poll(self, now: float) -> None:
         """Reads what the brain wrote since the last look, while followed."""
@@ -361,37 +382,73 @@ class LogStream:
             with open(self.path, "rb") as log:
                 stat = os.fstat(log.fileno())
                 if stat.st_ino != self._inode or stat.st_size < self._offset:
-                    # Rotated (copy-then-truncate) or replaced: read the new file from its
-                    # start, in the state that the copy before it ends in.
-                    self._offset, self._inode, self._partial = 0, stat.st_ino, b""
-                    self._discarding = False
-                    self._redactor.state = self._state_at(0)
-                skipped = max(0, stat.st_size - self._offset - READ_LIMIT)
-                if skipped:
-                    self._offset += skipped
-                    self._partial = b""
-                    self._discarding = True  # begun mid-line
-                log.seek(self._offset)
-                raw = log.read(READ_LIMIT)
+                    # Rotated by someone else than this agent (which says so: `rotated`),
+                    # or replaced by another file: read it from its start.
+                    self._restart_at_rotation(stat.st_ino, copied=stat.st_ino == self._inode)
+                found = self._read(log, stat.st_size)
         except OSError:
             return
-        at = self._offset  # where `raw` starts in the file
+        self._take_in(self.path, *found)
+
+    def rotated(self) -> None:
+        """The agent has just rotated the log (copied, then truncated it): the stream goes on
+        at the file's start. Said rather than guessed from the size: by the next look, the
+        brain may have written more than the stream had read."""
+        if self._follow_until is not None:
+            self._restart_at_rotation(self._inode, copied=True)
+
+    def _restart_at_rotation(self, inode: int | None, copied: bool) -> None:
+        # What the brain wrote since the last look is at the copy's end, and a line it was
+        # writing goes on at the file's start: both are read, in order.
+        copy = self._read_copy() if copied else None
+        if copy is None:
+            self._partial, self._discarding = b"", False
+        else:
+            self._take_in(_older(self.path), *copy)
+        # Lines may have been lost between the copy and the truncation.
+        if self._redactor.state is not Pem.INSIDE:
+            self._redactor.state = Pem.UNKNOWN
+        self._offset, self._inode = 0, inode
+
+    def _read(self, log: BinaryIO, size: int) -> tuple[bytes, int, int]:
+        """What follows `_offset` in `log` (at most READ_LIMIT bytes, the newest: the rest is
+        skipped), where it begins, and how many bytes were skipped."""
+        skipped = max(0, size - self._offset - READ_LIMIT)
+        self._offset += skipped
+        at = self._offset
+        log.seek(at)
+        raw = log.read(READ_LIMIT)
         self._offset += len(raw)
-        lines: list[str] = []
+        return raw, at, skipped
+
+    def _read_copy(self) -> tuple[bytes, int, int] | None:
+        """The rest of the rotated copy after `_offset`; None without a copy of what was read."""
+        try:
+            with open(_older(self.path), "rb") as copy:
+                size = os.fstat(copy.fileno()).st_size
+                return None if size < self._offset else self._read(copy, size)
+        except OSError:
+            return None
+
+    def _take_in(self, path: Path, raw: bytes, at: int, skipped: int) -> None:
+        """Queues the complete lines of what was read (`raw`, from `at` in `path`)."""
+        notices: list[str] = []
         if skipped:
-            lines.append(
+            notices.append(
                 f"[robotconf: skipped {skipped:,} bytes: the brain writes faster than "
                 "the log stream carries]"
             )
+            self._partial = b""
+            self._discarding = True  # begun mid-line
         if self._discarding:
             newline = raw.find(b"\n")
             if newline < 0:
-                self._queue_stream(lines)
+                self._queue_stream(notices)
                 return
             self._discarding = False
             raw, at = raw[newline + 1 :], at + newline + 1
             # What was left out may have opened or closed a key: look back from here.
-            self._redactor.state = self._state_at(at)
+            self._redactor.state = pem_state_before(path, at, self._backups)
             data = raw
         else:
             data = self._partial + raw
@@ -402,7 +459,7 @@ class LogStream:
             pieces.append(self._partial)
             self._partial = b""
             self._discarding = True
-        self._queue_stream(lines, [_decode(piece) for piece in pieces])
+        self._queue_stream(notices, [_decode(piece) for piece in pieces])
 
     def _queue_stream(self, notices: list[str], lines: Sequence[str] = ()) -> None:
         was_empty = not self._stream

@@ -101,7 +101,9 @@ def secret_forms(secrets: Iterable[str]) -> set[str]:
             continue
         forms |= encodings(secret)
         if "\n" in secret:
-            forms |= {p for p in (s.rstrip("\r") for s in secret.split("\n"))}
+            for piece in secret.split("\n"):
+                if len(piece.strip()) >= MIN_SECRET_CHARS:  # not a blank or a short line
+                    forms |= {piece.rstrip("\r"), piece.strip()}
     return {f for f in forms if len(f) >= MIN_SECRET_CHARS}
 
 

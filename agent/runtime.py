@@ -109,7 +109,7 @@ class Agent:
             self.workdir / LOG_FILE,
             config.robot_id,
             redactor_of(config),
-            copies=config.log.backups > 0,
+            backups=config.log.backups,
         )
         self.link = BrokerLink(
             config.connection(),
@@ -367,7 +367,7 @@ class Agent:
                 "every reconnect; publish it without the retain flag"
             )
             return
-        memory = admission.RestartMemory(self.restarts.watermark, self.restarts.ahead)
+        memory = admission.RestartMemory.of(self.restarts.watermark, self.restarts.ahead)
         wall = now_wall()
         outcome = admission.interpret_restart(
             event.payload, self.config.robot_id, self.verify, memory, wall
@@ -376,8 +376,8 @@ class Agent:
             self._refused(f"restart refused: {outcome.reason}")
             return
         # Remembered before it is carried out: whatever follows, it is not carried out twice.
-        done = memory.carried_out(outcome.issued_at, wall)
-        self.restarts.record(done.watermark, done.ahead)
+        done = memory.carried_out(outcome, wall)
+        self.restarts.record(done.watermark, done.ahead_entries())
         effects, problem = self.supervisor.restart(outcome.requested_by, outcome.issued_at, now)
         if problem is not None:
             self._refused(f"restart requested by {outcome.requested_by} not carried out: {problem}")
@@ -526,6 +526,7 @@ class Agent:
         self._next_log_check = now + LOG_CHECK_INTERVAL
         if self.brain_log.rotate_if_needed():
             log.info("rotated %s", self.brain_log.path)
+            self.logs.rotated()
 
     def _remove(self, name: str) -> None:
         try:

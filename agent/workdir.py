@@ -88,17 +88,19 @@ class IssuedStore:
 
 class RestartLedger:
     """The restarts carried out, as replay protection needs them across agent restarts: the
-    watermark (one number, in the file older agents wrote) and the issue times of those dated
-    ahead of the robot's clock (one a line). Both fsynced."""
+    watermark (one number, in the file older agents wrote) and those dated ahead of the robot's
+    clock (`issued_at requested_by`, one a line). Both fsynced."""
 
     def __init__(self, workdir: Path) -> None:
         self._watermark_path = workdir / RESTART_ISSUED_FILE
         self._ahead_path = workdir / RESTARTS_AHEAD_FILE
-        numbers = _read_floats(self._watermark_path)
+        numbers = [n for n, _ in _read_entries(self._watermark_path)]
         self.watermark: float | None = numbers[0] if numbers else None
-        self.ahead = frozenset(_read_floats(self._ahead_path))
+        self.ahead: frozenset[tuple[float, str]] = frozenset(
+            (issued, by) for issued, by in _read_entries(self._ahead_path) if by
+        )
 
-    def record(self, watermark: float | None, ahead: frozenset[float]) -> None:
+    def record(self, watermark: float | None, ahead: frozenset[tuple[float, str]]) -> None:
         """Remembers a new state, in an order that leaves the files refusing more, never less,
         should the agent die between two writes: what is added first, what is forgotten last."""
         union = self.ahead | ahead
@@ -110,9 +112,10 @@ class RestartLedger:
         if ahead != union:
             self._write_ahead(ahead)  # what the watermark or the age limit refuses anyway
 
-    def _write_ahead(self, ahead: frozenset[float]) -> None:
+    def _write_ahead(self, ahead: frozenset[tuple[float, str]]) -> None:
         self.ahead = ahead
-        _write_quietly(self._ahead_path, "".join(f"{t!r}\n" for t in sorted(ahead)))
+        text = "".join(f"{issued!r} {by}\n" for issued, by in sorted(ahead))
+        _write_quietly(self._ahead_path, text)
 
 
 def _write_quietly(path: Path, text: str) -> None:
@@ -121,13 +124,20 @@ def _write_quietly(path: Path, text: str) -> None:
         write_atomic(path, text.encode("ascii"), mode=0o600)
 
 
-def _read_floats(path: Path) -> list[float]:
-    """The finite numbers of a file, one a line; none when it is missing or damaged."""
+def _read_entries(path: Path) -> list[tuple[float, str]]:
+    """`number [word]` lines of a file (a finite number); none when it is missing or damaged."""
     try:
-        numbers = [float(line) for line in path.read_text(encoding="ascii").split()]
-    except (OSError, ValueError):
+        entries = [
+            (float(number), rest.strip())
+            for number, _, rest in (
+                line.strip().partition(" ")
+                for line in path.read_text(encoding="ascii").splitlines()
+                if line.strip()
+            )
+        ]
+    except (OSError, ValueError, UnicodeDecodeError):
         return []
-    return [n for n in numbers if math.isfinite(n)]
+    return [(n, word) for n, word in entries if math.isfinite(n)]
 
 
 class WorkdirLock:

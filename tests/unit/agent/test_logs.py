@@ -25,9 +25,9 @@ from configurator.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, LogsChunk, 
 
 
 def stream(
-    path: Path, secrets: tuple[str, ...] = (), names: tuple[str, ...] = (), copies: bool = True
+    path: Path, secrets: tuple[str, ...] = (), names: tuple[str, ...] = (), backups: int = 3
 ) -> LogStream:
-    return LogStream(path, "tb3-01", Redactor(secrets, names), copies=copies)
+    return LogStream(path, "tb3-01", Redactor(secrets, names), backups=backups)
 
 
 def ask(session: str = "s1", lines: int = 50, follow: bool = False) -> LogsRequest:
@@ -333,8 +333,8 @@ def leaked(text: str) -> list[str]:
     return [b for b in BODY if b[:12] in text]
 
 
-def tail_text(log: Path, lines: int, secrets: tuple[str, ...] = (), copies: bool = True) -> str:
-    logs = stream(log, secrets=secrets, copies=copies)
+def tail_text(log: Path, lines: int, secrets: tuple[str, ...] = (), backups: int = 3) -> str:
+    logs = stream(log, secrets=secrets, backups=backups)
     assert logs.ask(ask(lines=lines), 0.0) is None
     return "\n".join(lines_of(logs.take(0.0)))
 
@@ -375,10 +375,16 @@ def test_a_key_whose_beginning_a_rotation_lost_stays_hidden(tmp_path: Path) -> N
 def test_the_start_of_a_log_that_is_only_truncated_is_treated_as_unknown(tmp_path: Path) -> None:
     log = tmp_path / "brain.log"
     write(log, *KEY[5:], "after")
-    assert not leaked(tail_text(log, 100, copies=False))
+    assert not leaked(tail_text(log, 100, backups=0))
     # With copies kept and none there, the file's start is the log's own start.
     write(tmp_path / "young.log", "Starting", "after")
     assert tail_text(tmp_path / "young.log", 5) == "Starting\nafter"
+    # The oldest copy kept begins where a deleted one ended: unknown too; a younger one not.
+    (tmp_path / "old").mkdir()
+    write(tmp_path / "old" / "brain.log.1", *KEY[5:], "after")
+    write(tmp_path / "old" / "brain.log", "now")
+    assert not leaked(tail_text(tmp_path / "old" / "brain.log", 100, backups=1))
+    assert leaked(tail_text(tmp_path / "old" / "brain.log", 100, backups=2))
 
 
 def test_following_from_inside_a_key_shows_none_of_it(tmp_path: Path) -> None:
@@ -452,3 +458,42 @@ def test_colours_cannot_split_a_secret_and_never_leave(tmp_path: Path) -> None:
     write(log, "token \x1b[1;31ms3cr\x1b[0m3t-\x1b]8;;http://x\x07token\x1b[m ok")
     text = tail_text(log, 1, secrets=("s3cr3t-token",))
     assert text == f"token {REDACTED} ok"
+
+
+def rotate(log: Path) -> None:
+    """As BrainLog rotates: copy, then truncate (the brain's descriptor stays open)."""
+    (log.parent / (log.name + ".1")).write_bytes(log.read_bytes())
+    with log.open("r+b") as f:
+        f.truncate(0)
+
+
+def test_a_line_a_rotation_cut_in_two_is_whole_again_in_a_tail(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    with log.open("a") as f:
+        f.write("a line before\ntoken s3cr")
+    rotate(log)
+    with log.open("a") as f:
+        f.write("3t-token end\n")
+    logs_of = {n: tail_text(log, n, secrets=("s3cr3t-token",)) for n in (1, 2, 5)}
+    assert logs_of[1] == f"token {REDACTED} end"
+    assert logs_of[2] == logs_of[5] == f"a line before\ntoken {REDACTED} end"
+    write(log, "next")
+    assert tail_text(log, 1) == "next"
+    assert read_tail(log, 2) == ["token s3cr3t-token end", "next"]
+
+
+def test_following_across_a_rotation_misses_nothing_and_joins_a_cut_line(tmp_path: Path) -> None:
+    log = tmp_path / "brain.log"
+    write(log, "start")
+    logs = stream(log, secrets=("s3cr3t-token",))
+    logs.ask(ask(lines=0, follow=True), 0.0)
+    write(log, "a")
+    logs.poll(0.5)
+    with log.open("a") as f:
+        f.write("b\nhalf s3c")
+    rotate(log)  # before the stream looked again
+    logs.rotated()  # as the agent says once it has rotated the log
+    with log.open("a") as f:
+        f.write("r3t-token\nc\n")  # more than the stream had read: its size says nothing
+    logs.poll(1.0)
+    assert lines_of(sent(logs, 0.0, 3.0), None) == ["a", "b", f"half {REDACTED}", "c"]

@@ -18,7 +18,7 @@ from agent.admission import (
     Verifier,
     interpret_restart,
 )
-from agent.workdir import RESTART_ISSUED_FILE, RestartLedger
+from agent.workdir import RESTART_ISSUED_FILE, RESTARTS_AHEAD_FILE, RestartLedger
 from configurator.launch import RestartRequest
 from configurator.signing import (
     generate_keys,
@@ -111,33 +111,33 @@ def test_each_restart_is_carried_out_once() -> None:
 
 def test_a_restart_dated_ahead_locks_out_no_restart_from_a_correct_clock() -> None:
     ahead = restart(at=NOW + 240, by="fastdesk").payload()
-    assert outcome(ahead) == Restart("fastdesk", NOW + 240)
-    memory = RestartMemory().carried_out(NOW + 240, NOW)
-    # The watermark stops at the robot's clock; the one dated ahead is remembered by itself.
-    assert memory == RestartMemory(NOW, frozenset({NOW + 240}))
-    assert outcome(restart(at=NOW + 1, by="ops").payload(), memory=memory, now=NOW + 1.5) == (
-        Restart("ops", NOW + 1)
-    )
+    fast = Restart("fastdesk", NOW + 240)
+    assert outcome(ahead) == fast
+    memory = RestartMemory().carried_out(fast, NOW)
+    # The watermark stops at the robot's clock; the one dated ahead is remembered as itself.
+    assert memory == RestartMemory(NOW, frozenset({fast}))
+    genuine = restart(at=NOW + 1, by="ops").payload()
+    assert outcome(genuine, memory=memory, now=NOW + 1.5) == Restart("ops", NOW + 1)
     assert "carried out already" in reason(ahead, memory=memory, now=NOW + 2)
-    after = memory.carried_out(NOW + 1, NOW + 1.5)
-    assert after == RestartMemory(NOW + 1, frozenset({NOW + 240}))
+    after = memory.carried_out(Restart("ops", NOW + 1), NOW + 1.5)
+    assert after == RestartMemory(NOW + 1, frozenset({fast}))
     assert "carried out already" in reason(ahead, memory=after, now=NOW + 2)
-    assert "not newer than the last one" in reason(
-        restart(at=NOW + 1, by="ops").payload(), memory=after, now=NOW + 2
-    )
-    # Another fast desk, later: carried out too, and remembered beside the first.
+    assert "not newer than the last one" in reason(genuine, memory=after, now=NOW + 2)
+    # Another desk, dated the same instant ahead, is another restart; and so is a later one.
+    other = restart(at=NOW + 240, by="ops").payload()
+    assert outcome(other, memory=after, now=NOW + 3) == Restart("ops", NOW + 240)
     assert isinstance(outcome(restart(at=NOW + 250).payload(), memory=after, now=NOW + 3), Restart)
     # Once its time has come, the watermark covers it, and it is forgotten by itself.
-    late = after.carried_out(NOW + 241, NOW + 241)
+    late = after.carried_out(Restart("ops", NOW + 241), NOW + 241)
     assert late == RestartMemory(NOW + 241, frozenset())
 
 
 def test_restarts_dated_ahead_are_remembered_up_to_a_bound() -> None:
     memory = RestartMemory()
     for n in range(MAX_RESTARTS_AHEAD):
-        payload = restart(at=NOW + 10 + n).payload()
-        assert isinstance(outcome(payload, memory=memory), Restart)
-        memory = memory.carried_out(NOW + 10 + n, NOW)
+        found = outcome(restart(at=NOW + 10 + n).payload(), memory=memory)
+        assert isinstance(found, Restart)
+        memory = memory.carried_out(found, NOW)
     assert "a desk's clock is wrong" in reason(restart(at=NOW + 100).payload(), memory=memory)
     # A correct clock is never refused for it; and the age limit forgets the ones ahead.
     assert isinstance(outcome(restart(at=NOW + 0.5).payload(), memory=memory, now=NOW + 1), Restart)
@@ -149,11 +149,17 @@ def test_restarts_dated_ahead_are_remembered_up_to_a_bound() -> None:
 def test_the_restart_ledger_survives_an_agent_restart(tmp_path: Path) -> None:
     ledger = RestartLedger(tmp_path)
     assert (ledger.watermark, ledger.ahead) == (None, frozenset())
-    ledger.record(NOW, frozenset({NOW + 240, NOW + 250}))
+    ahead = frozenset({(NOW + 240, "fastdesk"), (NOW + 250, "alice@lab")})
+    ledger.record(NOW, ahead)
     again = RestartLedger(tmp_path)
-    assert (again.watermark, again.ahead) == (NOW, frozenset({NOW + 240, NOW + 250}))
-    again.record(NOW + 245, frozenset({NOW + 250}))
-    assert RestartLedger(tmp_path).ahead == frozenset({NOW + 250})
+    assert (again.watermark, again.ahead) == (NOW, ahead)
+    memory = RestartMemory.of(again.watermark, again.ahead)
+    assert memory.ahead == frozenset(
+        {Restart("fastdesk", NOW + 240), Restart("alice@lab", NOW + 250)}
+    )
+    assert memory.ahead_entries() == ahead
+    again.record(NOW + 245, frozenset({(NOW + 250, "alice@lab")}))
+    assert RestartLedger(tmp_path).ahead == frozenset({(NOW + 250, "alice@lab")})
     for path in tmp_path.iterdir():
         assert path.stat().st_mode & 0o777 == 0o600
     # An older agent's watermark (one number) is read as such; a damaged file as nothing.
@@ -161,6 +167,8 @@ def test_the_restart_ledger_survives_an_agent_restart(tmp_path: Path) -> None:
     assert RestartLedger(tmp_path).watermark == 1800000000.25
     (tmp_path / RESTART_ISSUED_FILE).write_text("nan\n")
     assert RestartLedger(tmp_path).watermark is None
+    (tmp_path / RESTARTS_AHEAD_FILE).write_bytes(b"\xff garbage\n")
+    assert RestartLedger(tmp_path).ahead == frozenset()
 
 
 def test_with_a_key_only_a_signed_restart_is_carried_out(keyed: tuple[Any, Verifier]) -> None:
