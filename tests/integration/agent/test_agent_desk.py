@@ -617,3 +617,90 @@ def test_a_restart_dated_ahead_locks_out_no_later_restart_and_replays_stay_refus
     )
     assert done.returncode == 0, (done.stderr, agent.log_tail(40))
     assert new_brain(watch, agent, fourth.pid).restart_requested_by == "ops2"
+
+
+# Prints a private key's first lines, waits for a file named `go` (the test makes it once a
+# follower listens), then the rest of the key, the API token in the forms programs print
+# secrets in, and a tick a second.
+KEY_BODY = [
+    f"MIIEv{n:02d}QIBADANBgkqhkiG9w0BAQEFAASCBKcwggSjAgEAAoIBAQC7{n:02d}" for n in range(20)
+]
+KEYED = [
+    sys.executable,
+    "-u",
+    "-c",
+    "import base64, json, os, time, urllib.parse\n"
+    f"body = {KEY_BODY!r}\n"
+    "print('-----BEGIN PRIVATE KEY-----')\n"
+    "print('\\n'.join(body[:5]))\n"
+    "while not os.path.exists('go'):\n"
+    "    time.sleep(0.05)\n"
+    "print('\\n'.join(body[5:]))\n"
+    "print('-----END PRIVATE KEY-----')\n"
+    "print('after the key')\n"
+    "token = os.environ['API_TOKEN']\n"
+    "print('url', urllib.parse.quote(token, safe=''))\n"
+    "print('json', json.dumps({'token': token}))\n"
+    "print('b64', base64.b64encode(token.encode()).decode())\n"
+    "print('colour', token[:5] + '\\x1b[31m' + token[5:] + '\\x1b[0m')\n"
+    "n = 0\n"
+    "while True:\n"
+    "    print('tick', n)\n"
+    "    n += 1\n"
+    "    time.sleep(1)\n",
+    "{launch_request}",
+]
+TRICKY = 'p@ss/w0rd+"quoted" &more'
+
+
+def test_no_window_of_the_log_shows_a_key_or_an_encoded_secret(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
+) -> None:
+    import base64
+    import urllib.parse
+
+    agent, request = run_brain(make_agent, watch, mosquitto, KEYED, env={"API_TOKEN": TRICKY})
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    wait_for(lambda: KEY_BODY[4] in agent.brain_log(), "the key's first lines")
+    forms = [
+        TRICKY,
+        urllib.parse.quote(TRICKY, safe=""),
+        json.dumps(TRICKY)[1:-1],
+        base64.b64encode(TRICKY.encode()).decode(),
+    ]
+    follower = subprocess.Popen(
+        [str(ROBOTCONF), "logs", ROBOT, "-f", "-n", "0", "--broker", mosquitto.url],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        # The stream starts inside the key: the agent knows it, and shows none of the rest.
+        wait_for(lambda: "streaming the brain's log" in agent.log_tail(200), "the follower")
+        (agent.workdir / "go").touch()
+        assert follower.stdout is not None
+        streamed: list[str] = []
+        deadline = time.monotonic() + TIMEOUT
+        while not any(line.startswith("tick") for line in streamed):
+            assert time.monotonic() < deadline and follower.poll() is None, streamed
+            streamed.append(follower.stdout.readline().rstrip("\n"))
+        follower.send_signal(signal.SIGINT)
+        assert follower.wait(TIMEOUT) == 0
+    finally:
+        if follower.poll() is None:
+            follower.kill()
+        follower.communicate()
+    assert "after the key" in streamed and "[redacted]" in streamed
+    shown = "\n".join(streamed)
+    assert not [b for b in KEY_BODY if b in shown], shown
+    assert not [f for f in forms if f in shown] and "\x1b" not in shown, shown
+    assert [line.split()[0] for line in streamed[-5:-1]] == ["url", "json", "b64", "colour"]
+    assert all("[redacted]" in line for line in streamed[-5:-1]), streamed
+    # Tails of every length, begun anywhere inside the key or after it.
+    log_lines = len(agent.brain_log().splitlines())
+    for count in (1, 3, 8, 14, 20, 26, 30, log_lines):
+        done = robotconf("logs", ROBOT, "-n", str(count), broker=mosquitto)
+        assert done.returncode == 0, done.stderr
+        assert not [b for b in KEY_BODY if b in done.stdout], (count, done.stdout)
+        assert not [f for f in forms if f in done.stdout], (count, done.stdout)
+    assert all(b in agent.brain_log() for b in KEY_BODY)  # the file keeps everything
