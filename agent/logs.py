@@ -276,6 +276,7 @@ class LogStream:
         self._inode: int | None = None
         self._partial = b""
         self._discarding = False  # the rest of a line that was cut or skipped is not shown
+        self._copy_seen: tuple[int, int, int] | None = None  # the rotated copy, as last seen
         self._next_poll = 0.0
         self._dropped = 0  # followed lines not sent, told in the next stream chunk
         self._budgets: OrderedDict[str, _Budget] = OrderedDict()
@@ -366,6 +367,7 @@ class LogStream:
         else:
             self._offset, self._inode = stat.st_size, stat.st_ino
         self._next_poll = 0.0
+        self._copy_seen = self._copy_signature()
         self._redactor = self._rules.fresh(pem_state_before(self.path, self._offset, self._backups))
         return self._offset
 
@@ -381,10 +383,16 @@ class LogStream:
         try:
             with open(self.path, "rb") as log:
                 stat = os.fstat(log.fileno())
-                if stat.st_ino != self._inode or stat.st_size < self._offset:
-                    # Rotated by someone else than this agent (which says so: `rotated`),
-                    # or replaced by another file: read it from its start.
-                    self._restart_at_rotation(stat.st_ino, copied=stat.st_ino == self._inode)
+                copy = self._copy_signature()
+                if stat.st_ino != self._inode:
+                    # Replaced by another file: read it from its start.
+                    self._restart_at_rotation(stat.st_ino, copied=False)
+                elif copy != self._copy_seen or stat.st_size < self._offset:
+                    # Rotated by someone else than this agent (which says so: `rotated`): a
+                    # new copy, or a shorter file. The size alone may not tell: by now the
+                    # brain may have written more than the stream had read.
+                    self._restart_at_rotation(stat.st_ino, copied=True)
+                self._copy_seen = copy
                 found = self._read(log, stat.st_size)
         except OSError:
             return
@@ -396,6 +404,15 @@ class LogStream:
         brain may have written more than the stream had read."""
         if self._follow_until is not None:
             self._restart_at_rotation(self._inode, copied=True)
+            self._copy_seen = self._copy_signature()
+
+    def _copy_signature(self) -> tuple[int, int, int] | None:
+        """What changes when a rotation writes the copy before the log."""
+        try:
+            stat = _older(self.path).stat()
+        except OSError:
+            return None
+        return stat.st_ino, stat.st_size, stat.st_mtime_ns
 
     def _restart_at_rotation(self, inode: int | None, copied: bool) -> None:
         # What the brain wrote since the last look is at the copy's end, and a line it was

@@ -30,6 +30,8 @@ _ESCAPES = re.compile(
 _PEM = re.compile(r"-----(BEGIN|END) [A-Z0-9 ]*PRIVATE KEY[A-Z0-9 ]*-----")
 # A line of a PEM body: base64 only (the last line may be short, and padded).
 _PEM_BODY = re.compile(r"[A-Za-z0-9+/=]+")
+# What a BEGIN line may have left when a rotation lost its beginning: `ATE KEY-----`.
+_PEM_REMAINDER = re.compile(r"[A-Z0-9 -]*-")
 _URL_PASSWORD = re.compile(r"(?i)\b([a-z][a-z0-9+.-]*://[^\s/:@]*):[^\s/@]+@")
 _PERCENT = re.compile(r"%[0-9A-F]{2}")
 
@@ -40,7 +42,7 @@ class Pem(Enum):
     OUTSIDE = "outside"
     INSIDE = "inside"  # after a BEGIN line and before its END: every line is key material
     # Cannot tell (a log file that begins where a rotation may have lost lines): lines that
-    # look like a PEM body are redacted until one does not.
+    # look like a PEM body (or the end of a BEGIN line) are redacted until one does not.
     UNKNOWN = "unknown"
 
 
@@ -150,9 +152,9 @@ class Redactor:
             body = text.strip()
             if not body:
                 return text
-            if _PEM_BODY.fullmatch(body):
-                return REDACTED
             first = _PEM.search(text)
+            if first is None and (_PEM_BODY.fullmatch(body) or _PEM_REMAINDER.fullmatch(body)):
+                return REDACTED
             # An END before any BEGIN: what precedes it on this line is the key's end.
             inside = first is not None and first.group(1) == "END"
         else:

@@ -370,6 +370,10 @@ def test_a_key_whose_beginning_a_rotation_lost_stays_hidden(tmp_path: Path) -> N
         # After a line that is not base64, lines are shown.
         assert text.endswith("after\nZZZZ" if count > 1 else "ZZZZ")
     assert tail_text(log, 100).startswith("old 1\nold 2\n")
+    # Lost in the middle of the BEGIN line: what is left of it says as much.
+    write(tmp_path / "cut.log", "RSA PRIVATE KEY-----", *KEY[1:], "after")
+    assert not leaked(tail_text(tmp_path / "cut.log", 100, backups=0))
+    assert tail_text(tmp_path / "cut.log", 100, backups=0).endswith("after")
 
 
 def test_the_start_of_a_log_that_is_only_truncated_is_treated_as_unknown(tmp_path: Path) -> None:

@@ -41,6 +41,8 @@ secrets = st.one_of(one_line_secrets, pem_secrets, multi_line_secrets)
 # Log text around them: words and spaces, nothing any rule redacts by itself.
 _word = st.text("abcdefghijklmnopqrstuvwxyz0123456789.,;!()_", min_size=1, max_size=8)
 filler = st.lists(_word, min_size=2, max_size=6).map(" ".join)
+# Each example writes and reads log files: half the profile's examples (`deep` explores more).
+FILE_EXAMPLES = max(50, settings().max_examples // 2)
 _SGR = ["\x1b[31m", "\x1b[0m", "\x1b[1;32m", "\x1b[m", "\x1b[38;5;208m"]
 
 
@@ -156,7 +158,7 @@ def tail(folder: Path, log: Log, count: int) -> list[str]:
     return got
 
 
-@settings(max_examples=150)
+@settings(max_examples=FILE_EXAMPLES)
 @given(
     log=logs(),
     counts=st.lists(st.integers(1, 80), min_size=1, max_size=4),
@@ -192,7 +194,7 @@ def test_no_tail_shows_a_secret_or_a_key(
         shutil.rmtree(folder)
 
 
-@settings(max_examples=150)
+@settings(max_examples=FILE_EXAMPLES)
 @given(
     log=logs(),
     start=st.floats(0, 1),
