@@ -250,15 +250,17 @@ def test_a_broker_restarted_mid_wave_rolls_nothing_back(tmp_path: Path, persiste
     broker = Mosquitto(tmp_path / "broker", persistence=persistent)
     (tmp_path / "broker").mkdir()
     broker.start()
-    with fleet_on(tmp_path, broker) as fleet:
-        stable = start(fleet, healthy_after=3, wave_timeout=60)
-        head = rename_all(fleet, "v2")
-        new = fleet.requests(head)
-        wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
-        broker.restart()
-        fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
-        fleet.watch.wait_running(new)
-        # A forgetful broker lost every request: the robots of waves not begun were given the
-        # stable one again, as a robot that holds nothing readable is. The canary never was.
-        never_rolled_back(fleet, stable if persistent else {CANARY: stable[CANARY]})
-    broker.kill()
+    try:
+        with fleet_on(tmp_path, broker) as fleet:
+            stable = start(fleet, healthy_after=3, wave_timeout=60)
+            head = rename_all(fleet, "v2")
+            new = fleet.requests(head)
+            wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
+            broker.restart()
+            fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
+            fleet.watch.wait_running(new)
+            # A forgetful broker lost every request: the robots of waves not begun were given
+            # the stable one again, as a robot that holds nothing readable is. Not the canary.
+            never_rolled_back(fleet, stable if persistent else {CANARY: stable[CANARY]})
+    finally:
+        broker.kill()
