@@ -406,8 +406,8 @@ def _health(
         return Health.FAILED
     if robot in memory.healthy:
         return Health.HEALTHY
-    running = status.state is AgentState.RUNNING and running_since is not None
-    if running and running_since is not None and now - running_since >= healthy_after:
+    settled = running_since is not None and now - running_since >= healthy_after
+    if status.state is AgentState.RUNNING and settled:
         memory.healthy.add(robot)
         return Health.HEALTHY
     return Health.PENDING
