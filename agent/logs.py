@@ -14,7 +14,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from agent.redact import MIN_SECRET_CHARS, REDACTED, Pem, Redactor, pem_state_after
+from agent.redact import (
+    MIN_SECRET_CHARS,
+    REDACTED,
+    Pem,
+    Redactor,
+    key_fragment,
+    pem_state_after,
+)
 from configurator.wire import (
     LOG_FOLLOW_TTL,
     MAX_LOG_MESSAGE_BYTES,
@@ -126,6 +133,7 @@ class _Line:
     path: Path  # the file it was read from
     offset: int  # where it begins there
     raw: bytes
+    seam: int | None = None  # where the rest of it begins, in the file after (see _tail_lines)
 
     @property
     def text(self) -> str:
@@ -186,6 +194,7 @@ def _tail_lines(
         return newest
     lines, ends_in_break = older
     if lines and newest and not ends_in_break:
+        lines[-1].seam = len(lines[-1].raw)
         lines[-1].raw += newest.pop(0).raw  # as bytes: the cut may split a character
     return (lines + newest)[-count:]
 
@@ -211,11 +220,29 @@ def redacted_tail(
     reader = redactor.fresh(pem_state_before(lines[0].path, lines[0].offset, backups))
     shown: list[str] = []
     for n, line in enumerate(lines):
-        if n > 0 and line.path != lines[n - 1].path and reader.state is not Pem.INSIDE:
-            # A rotation lies between: lines may have been lost at it (see pem_state_before).
+        before = lines[n - 1] if n > 0 else None
+        # A rotation lies between: lines may have been lost at it (see pem_state_before; a
+        # line it cut says what the ground is itself, see _across_seam).
+        seam = before is not None and line.path != before.path and before.seam is None
+        if seam and reader.state is not Pem.INSIDE:
             reader.state = Pem.UNKNOWN
-        shown.append(fit_line(reader.line(line.text)))
+        if line.seam is None:
+            shown.append(fit_line(reader.line(line.text)))
+        else:
+            shown.append(fit_line(_across_seam(reader, line.raw, line.seam)))
     return shown
+
+
+def _across_seam(reader: Redactor, raw: bytes, seam: int) -> str:
+    """A line that a rotation cut in two at `seam`, joined again (a secret it cut is whole
+    again). Bytes may have been lost at the cut (see pem_state_before), and with them a key's
+    END or BEGIN: inside a key, or when what follows the cut may be part of one, the whole
+    line is redacted, and the ground is what the part after the cut says, else unknown."""
+    rest = _decode(raw[seam:])
+    if reader.state is Pem.INSIDE or key_fragment(rest):
+        reader.state = pem_state_after(rest) or Pem.UNKNOWN
+        return REDACTED
+    return reader.line(_decode(raw))
 
 
 class _Budget:
@@ -277,6 +304,7 @@ class LogStream:
         self._partial = b""
         self._discarding = False  # the rest of a line that was cut or skipped is not shown
         self._copy_seen: tuple[int, int, int] | None = None  # the rotated copy, as last seen
+        self._seam: int | None = None  # where a rotation cut the line in `_partial`
         self._next_poll = 0.0
         self._dropped = 0  # followed lines not sent, told in the next stream chunk
         self._budgets: OrderedDict[str, _Budget] = OrderedDict()
@@ -422,6 +450,7 @@ class LogStream:
             self._partial, self._discarding = b"", False
         else:
             self._take_in(_older(self.path), *copy)
+        self._seam = len(self._partial) if self._partial else None
         # Lines may have been lost between the copy and the truncation.
         if self._redactor.state is not Pem.INSIDE:
             self._redactor.state = Pem.UNKNOWN
@@ -458,6 +487,7 @@ class LogStream:
             self._partial = b""
             self._discarding = True  # begun mid-line
         if self._discarding:
+            self._seam = None
             newline = raw.find(b"\n")
             if newline < 0:
                 self._queue_stream(notices)
@@ -476,18 +506,30 @@ class LogStream:
             pieces.append(self._partial)
             self._partial = b""
             self._discarding = True
-        self._queue_stream(notices, [_decode(piece) for piece in pieces])
+        seam = None
+        if pieces:
+            seam, self._seam = self._seam, None  # the first line is the one a rotation cut
+        self._queue_stream(notices, pieces, seam)
 
-    def _queue_stream(self, notices: list[str], lines: Sequence[str] = ()) -> None:
+    def _queue_stream(
+        self, notices: list[str], pieces: Sequence[bytes] = (), seam: int | None = None
+    ) -> None:
+        """Queues notices, then lines (redacted; the first cut by a rotation at `seam`)."""
         was_empty = not self._stream
         for notice in notices:
             self._stream.append(notice)
-        for line in lines:
-            if len(self._stream) >= QUEUE_LIMIT:
+        for n, piece in enumerate(pieces):
+            shown: str | None = None
+            if n == 0 and seam is not None:
+                shown = _across_seam(self._redactor, piece, seam)
+            elif len(self._stream) >= QUEUE_LIMIT:
+                self._redactor.track(_decode(piece))  # not sent, but it may open or close a key
+            else:
+                shown = self._redactor.line(_decode(piece))
+            if shown is None or len(self._stream) >= QUEUE_LIMIT:
                 self._dropped += 1
-                self._redactor.track(line)  # not sent, but it may open or close a key
                 continue
-            self._stream.append(fit_line(self._redactor.line(line)))
+            self._stream.append(fit_line(shown))
         if was_empty and self._stream:
             self._turns.append(None)
 
@@ -579,6 +621,7 @@ class LogStream:
         self._follow_until = None
         self._partial = b""
         self._discarding = False
+        self._seam = None
 
 
 class _Chunks:

@@ -30,8 +30,9 @@ _ESCAPES = re.compile(
 _PEM = re.compile(r"-----(BEGIN|END) [A-Z0-9 ]*PRIVATE KEY[A-Z0-9 ]*-----")
 # A line of a PEM body: base64 only (the last line may be short, and padded).
 _PEM_BODY = re.compile(r"[A-Za-z0-9+/=]+")
-# What a BEGIN line may have left when a rotation lost its beginning: `ATE KEY-----`.
-_PEM_REMAINDER = re.compile(r"[A-Z0-9 -]*-")
+# What a BEGIN line may have left when a rotation lost its beginning (`ATE KEY-----`, or
+# `[31mIN PRIVATE KEY-----` when the loss cut a colour code before it): ending in a dash.
+_PEM_REMAINDER = re.compile(r".*-")
 _URL_PASSWORD = re.compile(r"(?i)\b([a-z][a-z0-9+.-]*://[^\s/:@]*):[^\s/@]+@")
 _PERCENT = re.compile(r"%[0-9A-F]{2}")
 
@@ -57,6 +58,15 @@ def pem_state_after(text: str) -> Pem | None:
     if not markers:
         return None
     return Pem.INSIDE if markers[-1] == "BEGIN" else Pem.OUTSIDE
+
+
+def key_fragment(text: str) -> bool:
+    """Whether a line, without any PEM marker, may be part of a key: base64 alone, or what a
+    BEGIN line leaves when its start is lost."""
+    body = text.strip()
+    if not body or _PEM.search(text):
+        return False
+    return bool(_PEM_BODY.fullmatch(body) or _PEM_REMAINDER.fullmatch(body))
 
 
 def encodings(value: str) -> set[str]:
@@ -152,9 +162,9 @@ class Redactor:
             body = text.strip()
             if not body:
                 return text
-            first = _PEM.search(text)
-            if first is None and (_PEM_BODY.fullmatch(body) or _PEM_REMAINDER.fullmatch(body)):
+            if key_fragment(text):
                 return REDACTED
+            first = _PEM.search(text)
             # An END before any BEGIN: what precedes it on this line is the key's end.
             inside = first is not None and first.group(1) == "END"
         else:

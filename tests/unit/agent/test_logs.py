@@ -483,7 +483,36 @@ def test_a_line_a_rotation_cut_in_two_is_whole_again_in_a_tail(tmp_path: Path) -
     assert logs_of[2] == logs_of[5] == f"a line before\ntoken {REDACTED} end"
     write(log, "next")
     assert tail_text(log, 1) == "next"
+    assert tail_text(log, 3, secrets=("s3cr3t-token",)).endswith(f"token {REDACTED} end\nnext")
     assert read_tail(log, 2) == ["token s3cr3t-token end", "next"]
+
+
+def test_a_line_a_rotation_cut_where_bytes_were_lost_hides_what_may_be_a_key(
+    tmp_path: Path,
+) -> None:
+    # The copy ends in the middle of a line; a BEGIN line and the start of a body line were
+    # written between the copy and the truncation: the rest of that body line is all there is.
+    log = tmp_path / "brain.log"
+    with log.open("a") as f:
+        f.write("a line before\n0 0 ")
+    rotate(log)
+    write(log, BODY[0][10:], *BODY[1:], KEY[-1], "after")
+    for count in range(1, len(BODY) + 4):
+        text = tail_text(log, count)
+        assert not leaked(text) and BODY[0][10:] not in text, count
+        assert text.endswith("after")
+    logs = stream(log)
+    logs.ask(ask(lines=0, follow=True), 0.0)
+    with log.open("a") as f:
+        f.write("0 0 ")
+    logs.poll(0.5)
+    rotate(log)
+    logs.rotated()
+    write(log, BODY[0][10:], *BODY[1:], KEY[-1], "after")
+    logs.poll(1.0)
+    streamed = lines_of(sent(logs, 0.0, 3.0), None)
+    assert streamed[-1] == "after" and not leaked("\n".join(streamed))
+    assert BODY[0][10:] not in "\n".join(streamed)
 
 
 def test_following_across_a_rotation_misses_nothing_and_joins_a_cut_line(tmp_path: Path) -> None:
