@@ -242,7 +242,10 @@ def _across_seam(reader: Redactor, raw: bytes, seam: int) -> str:
     if reader.state is Pem.INSIDE or key_fragment(rest):
         reader.state = pem_state_after(rest) or Pem.UNKNOWN
         return REDACTED
-    return reader.line(_decode(raw))
+    shown = reader.line(_decode(raw))
+    if not rest.strip() and reader.state is not Pem.INSIDE:
+        reader.state = Pem.UNKNOWN  # nothing after the cut: the next line is the first one
+    return shown
 
 
 class _Budget:
