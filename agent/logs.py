@@ -243,7 +243,7 @@ def _across_seam(reader: Redactor, raw: bytes, seam: int) -> str:
         reader.state = pem_state_after(rest) or Pem.UNKNOWN
         return REDACTED
     shown = reader.line(_decode(raw))
-    if not rest.strip() and reader.state is not Pem.INSIDE:
+    if not rest.strip() and not reader.inside:
         reader.state = Pem.UNKNOWN  # nothing after the cut: the next line is the first one
     return shown
 

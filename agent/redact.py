@@ -148,6 +148,11 @@ class Redactor:
         other.state = state
         return other
 
+    @property
+    def inside(self) -> bool:
+        """Inside a PEM block, as far as the lines read so far say."""
+        return self.state is Pem.INSIDE
+
     def line(self, text: str) -> str:
         """`text` as it may leave the robot; advances the PEM state."""
         return self._advance(text, emit=True)
