@@ -247,7 +247,11 @@ class LogsChunk(_Message):
     robot_id: str
     session: str | None = None
     lines: list[str] = Field(default_factory=list)
-    dropped: int = Field(0, description="lines left out before these: over the rate limit")
+    dropped: int = Field(
+        0,
+        description="lines left out before these: over the rate limit, or the queue's bound "
+        "shared between askers",
+    )
     end: bool = Field(False, description="the last chunk of the tail for `session`")
     following: bool = Field(False, description="the agent streams new lines after this")
 

@@ -93,8 +93,9 @@ def logs(robot_id: str, mqtt: BrokerOptions, lines: int, follow: bool, wait: flo
     The request goes through the broker to the robot's agent, which answers on
     <prefix>/robots/ROBOT/logs only while someone asks: with --follow this command asks again
     every 10 s, and the agent stops streaming 30 s after the last ask. Lines are redacted on
-    the robot (agent.yaml's env: values, the broker password, private keys), cut at 64 KiB, and
-    sent at about 100 lines a second. Needs the broker's `operator` user (robotconf
+    the robot (agent.yaml's env: values and their encodings, the broker password, private
+    keys), cut at 64 KiB, and sent at about 100 lines a second, shared fairly between who asks.
+    Needs the broker's `operator` user (robotconf
     broker-config) where the broker has an ACL. Exit 0 when the log was shown, 1 when the robot
     is unknown, offline or does not answer, 2 when the broker cannot be reached.
     """
