@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -59,17 +60,18 @@ class Fleet:
         return done
 
 
-@pytest.fixture
-def fleet(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Fleet]:
-    """Six agents with the stand-in brain and a reconciler on `main`, all running (converged)."""
+@contextlib.contextmanager
+def fleet_on(tmp_path: Path, broker: Mosquitto) -> Iterator[Fleet]:
+    """Six agents with the stand-in brain and a reconciler on `main` on `broker`, all running
+    (converged); stopped on the way out."""
     lab = GitLab(tmp_path / "lab")
     lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
     lab.commit("a sixth robot")
-    watch = FleetWatch(mosquitto.url)
-    state = Fleet(lab, mosquitto, watch, tmp_path)
+    watch = FleetWatch(broker.url)
+    state = Fleet(lab, broker, watch, tmp_path)
     try:
         for robot_id in lab.robots():
-            state.agents[robot_id] = start_agent(lab, robot_id, mosquitto.url, tmp_path / "agents")
+            state.agents[robot_id] = start_agent(lab, robot_id, broker.url, tmp_path / "agents")
         state.start_reconciler("--interval", "5")
         state.converged = watch.wait_running(state.requests())
         yield state
@@ -79,3 +81,10 @@ def fleet(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Fleet]:
             state.reconciler.stop()
         for proc in state.agents.values():
             proc.stop()
+
+
+@pytest.fixture
+def fleet(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Fleet]:
+    """The whole fleet on the test session's broker."""
+    with fleet_on(tmp_path, mosquitto) as state:
+        yield state

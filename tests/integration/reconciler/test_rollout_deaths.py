@@ -10,14 +10,13 @@ import json
 import os
 import signal
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from configurator.rendered import RenderedRequest
 from configurator.wire import AgentState, ReconcilerStatus
-from tests.integration.reconciler.conftest import EXTRA_ROBOT, Fleet
+from tests.integration.reconciler.conftest import Fleet, fleet_on
 from tests.integration.reconciler.test_rollout import (
     CANARY,
     complete,
@@ -25,9 +24,9 @@ from tests.integration.reconciler.test_rollout import (
     running_digest,
     with_policy,
 )
-from tests.support.fleet import GitLab, start_agent
+from tests.support.fleet import start_agent
 from tests.support.mosquitto import Mosquitto
-from tests.support.watch import FleetWatch, wait_for
+from tests.support.watch import wait_for
 
 LAST = "tb3-06"  # in the last wave, with the canary's scenario
 
@@ -64,28 +63,6 @@ def kill_robot(fleet: Fleet, robot: str) -> None:
         with contextlib.suppress(ProcessLookupError):
             os.kill(status.pid, signal.SIGKILL)
     fleet.watch.wait_for(robot, lambda s: s.state is AgentState.OFFLINE, "its Last Will")
-
-
-@contextlib.contextmanager
-def fleet_on(tmp_path: Path, broker: Mosquitto) -> Iterator[Fleet]:
-    """The `fleet` fixture's six robots and reconciler, on a broker of the test's own."""
-    lab = GitLab(tmp_path / "lab")
-    lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
-    lab.commit("a sixth robot")
-    watch = FleetWatch(broker.url)
-    fleet = Fleet(lab, broker, watch, tmp_path)
-    try:
-        for robot_id in lab.robots():
-            fleet.agents[robot_id] = start_agent(lab, robot_id, broker.url, tmp_path / "agents")
-        fleet.start_reconciler("--interval", "5")
-        fleet.converged = watch.wait_running(fleet.requests())
-        yield fleet
-    finally:
-        watch.close()
-        if fleet.reconciler is not None:
-            fleet.reconciler.stop()
-        for proc in fleet.agents.values():
-            proc.stop()
 
 
 def kill_reconciler(fleet: Fleet) -> None:
