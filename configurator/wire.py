@@ -219,6 +219,12 @@ class AgentStatus(_Message):
     restart_requested_at: float | None = None
 
 
+def is_online(status: AgentStatus | None) -> bool:
+    """The one test of a robot being online: its agent has reported, and its last status is
+    not `offline` (its Last Will, or said on a clean stop)."""
+    return status is not None and status.state is not AgentState.OFFLINE
+
+
 # Logs from the desk (`robotconf logs`): the operator asks on `logs_request`, the agent answers
 # on `logs`, only while asked. Bounds for both sides of that exchange:
 MAX_LOG_MESSAGE_BYTES = 64 * 1024  # one answer message; a longer line is cut, with a marker

@@ -33,6 +33,7 @@ from configurator.wire import (
     ReconcilerStatus,
     StatusDiagnostic,
     Topics,
+    is_online,
     short_rev,
 )
 from reconciler import heap
@@ -395,7 +396,7 @@ class Controller:
         statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
         self._had_status |= statuses.keys()
         for robot in self._had_status:
-            if robot in statuses and statuses[robot].state is not AgentState.OFFLINE:
+            if is_online(statuses.get(robot)):
                 self._dark_since.pop(robot, None)
             else:  # its Last Will, or its status gone
                 self._dark_since.setdefault(robot, now)

@@ -16,11 +16,11 @@ from configurator.launch import LaunchRequest, StopRequest, canonical_json
 from configurator.safejson import PayloadError
 from configurator.wire import (
     ACTIVE_STATES,
-    AgentState,
     AgentStatus,
     ReconcilerStatus,
     RobotDescription,
     Topics,
+    is_online,
 )
 from reconciler.retained import Ignored, read_object
 
@@ -43,7 +43,7 @@ class RobotSeen:
     @property
     def online(self) -> bool:
         """Its agent has reported, and its last status is not `offline` (its Last Will)."""
-        return self.status is not None and self.status.state is not AgentState.OFFLINE
+        return is_online(self.status)
 
     @property
     def brain_active(self) -> bool:

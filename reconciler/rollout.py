@@ -24,6 +24,7 @@ from configurator.wire import (
     AgentStatus,
     RolloutState,
     RolloutStatus,
+    is_online,
     short_rev,
 )
 from reconciler.wave_memory import WaveMemory, WaveRecord, memory_of
@@ -282,7 +283,7 @@ class _Rollout:
                 policy.healthy_after,
                 memory,
             )
-            dark = robot in memory.seen and not _online(statuses.get(robot))
+            dark = robot in memory.seen and not is_online(statuses.get(robot))
             if health is Health.PENDING and dark and now < dark_at and robot not in memory.doubted:
                 soon(dark_at)  # dark a moment ago: gone once it has lasted
             if health is Health.PENDING and since is not None:
@@ -313,12 +314,12 @@ class _Rollout:
                 r for r in members if (s := statuses.get(r)) and s.state is AgentState.REJECTED
             }
             if begins:  # published in this step: those online now are sent it at once
-                memory.seen = {r for r in members if _online(statuses.get(r))}
+                memory.seen = {r for r in members if is_online(statuses.get(r))}
         elif memory.watching_since != watching_since:
             # The statuses were learned anew (a restart, a reconnection): a robot dark now may
             # have died meanwhile, or only be one whose broker restarted (which publishes every
             # Last Will as it stops, or forgets them all): it has until the deadline to be back.
-            memory.doubted = {r for r in memory.seen if not _online(statuses.get(r))}
+            memory.doubted = {r for r in memory.seen if not is_online(statuses.get(r))}
             memory.watching_since = watching_since
         return memory
 
@@ -358,10 +359,6 @@ class _Rollout:
         )
 
 
-def _online(status: AgentStatus | None) -> bool:
-    return status is not None and status.state is not AgentState.OFFLINE
-
-
 def _health(
     robot: str,
     status: AgentStatus | None,
@@ -378,7 +375,7 @@ def _health(
     judging a wave by robots still reporting the previous request)."""
     if robot in memory.failed:
         return Health.FAILED  # a failure is not undone by what comes after, in this wave
-    if not _online(status):
+    if not is_online(status):
         if robot not in memory.seen:
             return Health.ABSENT
         if gone and robot not in memory.doubted:
