@@ -37,6 +37,10 @@ class Topics:
     def description(self, robot_id: str) -> str:
         return f"{self.prefix}/robots/{robot_id}/description"
 
+    def interfaces(self, robot_id: str) -> str:
+        """The ROS interfaces the robot really has (agent -> everyone; retained)."""
+        return f"{self.prefix}/robots/{robot_id}/interfaces"
+
     def logs(self, robot_id: str) -> str:
         """The brain's log while someone asks for it (agent -> operators; not retained)."""
         return f"{self.prefix}/robots/{robot_id}/logs"
@@ -69,6 +73,10 @@ class Topics:
     @property
     def all_description(self) -> str:
         return f"{self.prefix}/robots/+/description"
+
+    @property
+    def all_interfaces(self) -> str:
+        return f"{self.prefix}/robots/+/interfaces"
 
     def robot_of(self, topic: str) -> tuple[str, str] | None:
         """(robot id, leaf) for a topic under `<prefix>/robots/`, else None."""
