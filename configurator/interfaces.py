@@ -61,3 +61,25 @@ class RobotInterfaces(BaseModel):
 def interfaces_verdict(found: RobotInterfaces | None) -> InterfacesVerdict:
     """`unknown` when the robot reported nothing (reporting off, a ROS 1 robot, an old agent)."""
     return "unknown" if found is None else found.verdict
+
+
+def _short(type_name: str) -> str:
+    """`pkg/msg/Type` -> `pkg/Type`: ROS 1 and older tools leave out the middle part."""
+    parts = type_name.strip().split("/")
+    return f"{parts[0]}/{parts[-1]}" if len(parts) == 3 else type_name.strip()
+
+
+def same_type(expected: str, found: str) -> bool:
+    """A scheme's type and a reported one name the same interface type (`geometry_msgs/Twist`
+    is `geometry_msgs/msg/Twist`)."""
+    return expected.strip() == found.strip() or _short(expected) == _short(found)
+
+
+def index(found: RobotInterfaces) -> dict[tuple[InterfaceKind, str], list[str]]:
+    """(kind, name) -> the types the robot reports under it (a topic may carry several)."""
+    table: dict[tuple[InterfaceKind, str], list[str]] = {}
+    kinds: tuple[InterfaceKind, ...] = ("topic", "service", "action")
+    for kind in kinds:
+        for entry in found.of_kind(kind):
+            table.setdefault((kind, entry.name), []).append(entry.type)
+    return table
