@@ -380,3 +380,33 @@ def _first_line(stderr: bytes) -> str:
 
 def open_source(root: Path, rev: str | None) -> Source:
     return WorkTreeSource(root) if rev is None else GitSource(root, rev)
+
+
+class OverlaySource:
+    """Another source with some files added or replaced: a file a command would write,
+    validated with the repository before it is written."""
+
+    def __init__(self, base: Source, files: dict[str, bytes]) -> None:
+        self._base = base
+        self._files = dict(files)
+
+    def files(self) -> list[str]:
+        return sorted({*self._base.files(), *self._files})
+
+    def refused(self) -> dict[str, str]:
+        return {p: why for p, why in self._base.refused().items() if p not in self._files}
+
+    def read(self, path: str) -> bytes:
+        return self._files[path] if path in self._files else self._base.read(path)
+
+    def read_each(self, paths: Sequence[str]) -> Iterator[tuple[str, bytes | OSError]]:
+        theirs = iter(self._base.read_each([p for p in paths if p not in self._files]))
+        for path in paths:
+            yield (path, self._files[path]) if path in self._files else next(theirs)
+
+    def blob_id(self, path: str) -> str | None:
+        return None if path in self._files else self._base.blob_id(path)
+
+    @property
+    def revision(self) -> str:
+        return self._base.revision

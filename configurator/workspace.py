@@ -11,7 +11,7 @@ from configurator.gcpause import collector_paused
 from configurator.loader import load_repository
 from configurator.repository import Repository
 from configurator.rules import check_repository
-from configurator.source import Source, open_source
+from configurator.source import OverlaySource, Source, open_source
 
 
 @dataclass
@@ -49,3 +49,9 @@ def check(
         close = getattr(source, "close", None)
         if close is not None:
             close()
+
+
+def check_with(root: Path, files: dict[str, bytes]) -> Checked:
+    """The work tree at `root` checked as if `files` (repository-relative paths) were written:
+    what a command writes is proved valid before it is."""
+    return check(root, build=lambda source: check_source(OverlaySource(source, files)))

@@ -24,6 +24,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "configurator.cli.authoring:autofill",
         "write a capability configuration that fits a template",
     ),
+    "draft": (
+        "configurator.cli.draft:draft_command",
+        "write a robot template and mapping scheme from a robot's interfaces",
+    ),
     "render": ("configurator.cli.views:render", "print a robot's Launch Request as JSON"),
     "plan": (
         "configurator.cli.views:plan",

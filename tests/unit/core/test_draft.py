@@ -3,6 +3,7 @@ against the example lab's catalogue."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import pytest
@@ -33,11 +34,11 @@ def lab_catalogue() -> list[Bound]:
 
 
 def report(
-    topics: list[tuple[str, str]] = (),  # type: ignore[assignment]
-    services: list[tuple[str, str]] = (),  # type: ignore[assignment]
-    actions: list[tuple[str, str]] = (),  # type: ignore[assignment]
+    topics: Sequence[tuple[str, str]] = (),
+    services: Sequence[tuple[str, str]] = (),
+    actions: Sequence[tuple[str, str]] = (),
 ) -> RobotInterfaces:
-    def entries(pairs: list[tuple[str, str]]) -> list[dict[str, str]]:
+    def entries(pairs: Sequence[tuple[str, str]]) -> list[dict[str, str]]:
         return [{"name": name, "type": type_} for name, type_ in pairs]
 
     return RobotInterfaces.model_validate(
