@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import sys
 from collections import Counter
@@ -32,7 +33,10 @@ from configurator.textsafe import printable
 from configurator.types import SettingDefinition, is_robot_id
 from configurator.wire import Topics
 from configurator.workspace import check, check_with
+from configurator.yamlio import MAX_FILE_BYTES
 from reconciler.retained import RetainedView, read_object
+
+SHOWN = 20  # interfaces left out for a reason, listed one by one (a hostile report has 4,096)
 
 
 def from_file(path: Path) -> RobotInterfaces:
@@ -183,10 +187,28 @@ def write_validated(
     added = new_findings(before, check_with(repo, overlay).diagnostics)
     if any(d.is_error for d in added):
         return [d for d in added if d.is_error]
-    for path, text in texts.items():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, text.encode("utf-8"), mode=0o644)
+    _write_all(texts)
     return added
+
+
+def _write_all(texts: dict[Path, str]) -> None:
+    """Each file atomically; when one cannot be written, the ones before it are put back: a
+    template without its scheme is no draft."""
+    done: list[tuple[Path, bytes | None]] = []
+    for path, text in texts.items():
+        try:
+            before = read_regular(path, MAX_FILE_BYTES) if path.is_file() else None
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(path, text.encode("utf-8"), mode=0o644)
+        except OSError as exc:
+            for written, old in reversed(done):
+                with contextlib.suppress(OSError):
+                    if old is None:
+                        written.unlink()
+                    else:
+                        write_atomic(written, old, mode=0o644)
+            raise CliError(f"cannot write {path}: {exc.strerror or exc}; nothing written") from None
+        done.append((path, before))
 
 
 def _report(result: Draft, origin: str, found: RobotInterfaces) -> None:
@@ -204,8 +226,10 @@ def _report(result: Draft, origin: str, found: RobotInterfaces) -> None:
             f"left out {result.infrastructure} interface(s) of the ROS graph itself (/rosout, "
             "/parameter_events, parameter and lifecycle services, hidden names)"
         )
-    for out in result.left_out:
+    for out in result.left_out[:SHOWN]:
         print(printable(f"left out {out.kind} {out.name!r} ({out.type}): {out.reason}"))
+    if len(result.left_out) > SHOWN:
+        print(f"left out {len(result.left_out) - SHOWN} more interface(s) the same way")
     if found.truncated:
         print(f"the report left out {found.truncated} interface(s) by its bounds: add them by hand")
 

@@ -10,7 +10,7 @@ from typing import Any
 
 from configurator.cli.draft import write_validated
 from configurator.wire import Topics
-from configurator.workspace import check
+from configurator.workspace import check, check_with
 from configurator.yamlio import parse_document
 from tests.support.agents import publish
 from tests.support.lab import ROOT, Lab
@@ -254,3 +254,40 @@ def test_the_readme_example_drafts_the_lab_robot(lab: Lab) -> None:
     )
     assert filled.returncode == 0, filled.stderr
     assert "Follow: follow_with_poses" in filled.stdout
+
+
+def test_a_file_that_cannot_be_written_takes_the_other_back(lab: Lab) -> None:
+    """The scheme's path is a folder: the template written before it is removed again."""
+    lab.path(SCHEME.format("blocked")).mkdir(parents=True)
+    done = from_file(lab, TB3_01, "tb3-01", "--template", "blocked", "--force")
+    assert (
+        done.returncode == 2 and "cannot write" in done.stderr and "nothing written" in done.stderr
+    )
+    assert not lab.path(TEMPLATE.format("blocked")).exists()
+    # Overwriting: the template's old text is put back.
+    lab.write(TEMPLATE.format("blocked"), "mappings: [scan]\n")
+    again = from_file(lab, TB3_01, "tb3-01", "--template", "blocked", "--force")
+    assert again.returncode == 2
+    assert lab.read(TEMPLATE.format("blocked")) == "mappings: [scan]\n"
+
+
+def test_check_with_sees_the_files_as_if_written(lab: Lab) -> None:
+    broken = "mappings:\n  scan: {kind: topic, name: 'a b', type: sensor_msgs/msg/LaserScan}\n"
+    before = lab.read(SCHEME.format("gazebo"))
+    found = check_with(lab.root, {SCHEME.format("gazebo"): broken.encode()})
+    assert [d.code for d in found.errors if d.path == SCHEME.format("gazebo")] == ["RC609"]
+    assert lab.read(SCHEME.format("gazebo")) == before and lab.check().ok
+    added = check_with(lab.root, {TEMPLATE.format("new"): b"mappings: [scan]\n"})
+    assert "new" in added.repo.platforms["ROS2"].templates
+
+
+def test_a_hostile_report_is_listed_within_bounds(lab: Lab) -> None:
+    odd = [(f"/bad name {i}\x1b[31m", "std_msgs/msg/String") for i in range(30)]
+    done = from_file(
+        lab, message([*odd, ("/fine", "std_msgs/msg/String")]), "tb3-04", "--template", "t"
+    )
+    assert done.returncode == 0, done.stderr
+    left = [line for line in done.stdout.splitlines() if line.startswith("left out topic")]
+    assert len(left) == 20 and "left out 10 more interface(s) the same way" in done.stdout
+    assert "\x1b" not in done.stdout and "\\x1b" in done.stdout
+    assert data(lab, TEMPLATE.format("t"))["mappings"] == ["fine"]
