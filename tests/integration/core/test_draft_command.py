@@ -291,3 +291,13 @@ def test_a_hostile_report_is_listed_within_bounds(lab: Lab) -> None:
     assert len(left) == 20 and "left out 10 more interface(s) the same way" in done.stdout
     assert "\x1b" not in done.stdout and "\\x1b" in done.stdout
     assert data(lab, TEMPLATE.format("t"))["mappings"] == ["fine"]
+
+
+def test_drafting_again_keeps_a_renamed_mapping(lab: Lab) -> None:
+    assert from_file(lab, TB3_01, "tb3-01", "--template", "again").returncode == 0
+    for rel in (TEMPLATE.format("again"), SCHEME.format("again")):
+        lab.write(rel, lab.read(rel).replace("front_scan", "rear_lidar"))
+    done = from_file(lab, TB3_01, "tb3-01", "--template", "again", "--force")
+    assert done.returncode == 0, done.stderr
+    assert "rear_lidar" in data(lab, TEMPLATE.format("again"))["mappings"]
+    assert "front_scan" not in lab.read(SCHEME.format("again"))
