@@ -105,6 +105,13 @@ def robot_namespace(repo: Repository, robot_id: str, given: str | None) -> tuple
             raise CliError(f"--namespace {given!r} {problem}", ExitCode.FINDINGS)
         return given, "--namespace"
     if assigned is not None:
+        problem = namespace_problem(assigned)
+        if problem is not None:
+            raise CliError(
+                f"configs/fleet.yaml gives {robot_id} namespace {assigned!r}, which {problem}; "
+                "fix it there, or pass --namespace",
+                ExitCode.FINDINGS,
+            )
         return assigned, "configs/fleet.yaml"
     if robot_id in fleet:
         return None, "configs/fleet.yaml gives it none"

@@ -170,6 +170,9 @@ def test_bad_arguments_and_reports_are_one_line_errors(lab: Lab) -> None:
         str(lab.root / "none.json"),
     )
     assert missing.returncode == 2 and "cannot read --from" in missing.stderr
+    lab.replace("configs/fleet.yaml", "namespace: tb3_01", "namespace: 1tb3")
+    bad_fleet = from_file(lab, TB3_01, "tb3-01", "--template", "t")
+    assert bad_fleet.returncode == 1 and "gives tb3-01 namespace '1tb3'" in bad_fleet.stderr
     assert not lab.path(TEMPLATE.format("t")).exists()
 
 
