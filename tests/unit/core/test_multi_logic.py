@@ -77,6 +77,14 @@ def test_an_empty_list_or_a_logic_named_twice_is_refused_at_its_line(
     assert words in d.message
 
 
+def test_a_list_item_that_is_no_name_is_reported_once_at_the_item(lab: Lab) -> None:
+    """Not also "must be text" for the list: it is a list, of which one item is wrong."""
+    lab.replace(EITHER, BOTH, "Follow: [follow_with_poses, 1]")
+    d = lab.only("RC103")
+    assert d.message == "actions.Follow[1] must be text, got 1"
+    assert lab.read(EITHER).splitlines()[d.line - 1][d.col - 1 :].startswith("1]")
+
+
 def test_each_unknown_logic_is_reported_at_its_item(lab: Lab) -> None:
     block_list(lab, "follow_with_pose", "follow_with_bluetooth", "follow_by_smell")
     found = lab.diagnostics("RC205")
