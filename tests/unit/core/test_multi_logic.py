@@ -10,7 +10,7 @@ import jsonschema
 import pytest
 
 from configurator.autofill import select_logics, template_fit, to_yaml
-from configurator.plan import format_plan_text, make_plan, plan_as_json
+from configurator.plan import format_plan_markdown, format_plan_text, make_plan, plan_as_json
 from configurator.render import bound_mappings, render_fleet
 from configurator.resolve import resolve_capability
 from configurator.schemas import generate
@@ -223,6 +223,10 @@ def test_plan_shows_an_action_s_logics_before_and_after(lab: Lab) -> None:
         "logics of Follow: follow_with_poses -> follow_with_poses + follow_with_bluetooth" in line
     )
     assert line.endswith("[restart]")
+    markdown = format_plan_markdown(plan)
+    assert "logics of Follow: follow_with_poses -> follow_with_poses + follow_with_bluetooth" in (
+        markdown
+    )
     data = next(c for c in plan_as_json(plan)["changes"] if c["robot_id"] == "tb3-01")
     assert data["logics"] == {
         "Follow": {
