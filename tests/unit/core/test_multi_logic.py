@@ -349,3 +349,20 @@ def test_the_capability_schema_takes_a_logic_or_a_list_of_them(follow: Any, vali
     document = {"platform": "ROS2", "mapping_scheme": "gazebo", "actions": {"Follow": follow}}
     validator = jsonschema.Draft202012Validator(_capability_schema())
     assert (list(validator.iter_errors(document)) == []) is valid
+
+
+def test_the_scenario_schema_takes_settings_of_every_selected_logic() -> None:
+    schema = generate(check(ROOT).repo)["scenario.schema.json"]
+    validator = jsonschema.Draft202012Validator(schema)
+    scenario = {
+        "capability": "turtlebot3-follow-either",
+        "logic_settings": {
+            "follow_with_poses": {"move_speed": 0.1},
+            "follow_with_bluetooth": {"rssi_threshold": -55},
+        },
+    }
+    assert list(validator.iter_errors(scenario)) == []
+    scenario["logic_settings"]["follow_with_bluetooth"] = {"rssi_threshold": 5}
+    assert [e.message for e in validator.iter_errors(scenario)] == [
+        "5 is greater than the maximum of -30"
+    ]
