@@ -364,5 +364,5 @@ def test_the_scenario_schema_takes_settings_of_every_selected_logic() -> None:
     assert list(validator.iter_errors(scenario)) == []
     scenario["logic_settings"]["follow_with_bluetooth"] = {"rssi_threshold": 5}
     assert [e.message for e in validator.iter_errors(scenario)] == [
-        "5 is greater than the maximum of -30"
+        "5 is greater than the maximum of -30.0"
     ]
