@@ -29,7 +29,11 @@ def describe(request: LaunchRequest) -> list[str]:
         f"robot template {capability.robot_template or '-'})",
         "logic modules:",
     ]
-    lines += [f"  {action}: {logic}" for action, logic in sorted(capability.logics.items())]
+    # An action selects one logic (its name) or several (a list, in the capability's order).
+    lines += [
+        f"  {action}: {logic if isinstance(logic, str) else ', '.join(logic)}"
+        for action, logic in sorted(capability.logics.items())
+    ]
     lines.append("mappings:")
     lines += [
         f"  {name}: {b.kind} {b.name} ({b.type})" for name, b in sorted(capability.mappings.items())

@@ -1,15 +1,85 @@
-"""Autofill: a capability configuration that picks, per action, a logic the robot can run."""
+"""Autofill: a capability configuration that picks, per action, the logics the robot can run.
+
+The selection is pure and takes "does this logic fit" as a parameter: a robot template and
+mapping scheme answer it here (`template_fit`); a robot's reported interfaces may as well.
+"""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import yaml
 
 from configurator.composition import missing_requires, why_unavailable
 from configurator.repository import Repository
-from configurator.types import CapabilityConfiguration
+from configurator.types import (
+    Action,
+    CapabilityConfiguration,
+    Logic,
+    MappingScheme,
+    RobotTemplate,
+    logic_choice,
+    logic_names,
+)
+
+# (action name, action, logic name, logic) -> why the logic cannot run; empty: it fits.
+LogicFit = Callable[[str, Action, str, Logic], list[str]]
+
+
+@dataclass
+class FittingLogics:
+    """What autofill selects: action -> its fitting logics (in the action's order), and why
+    each action left out was left out."""
+
+    chosen: dict[str, list[str]] = field(default_factory=dict)
+    skipped: dict[str, list[str]] = field(default_factory=dict)  # action -> why not
+
+
+def select_logics(
+    actions: Mapping[str, Action], platform: str, fits: LogicFit, *, every: bool = False
+) -> FittingLogics:
+    """Per action of the platform, the first logic (in the action's order) that `fits`, or
+    with `every` each one that does (the thesis' autofill: an action is lit when any of its
+    logics is); then drop, until none is left, actions whose `requires` are not selected."""
+    found = FittingLogics()
+    for name, action in sorted(actions.items()):
+        if platform not in action.platforms:
+            continue
+        fitting: list[str] = []
+        reasons: list[str] = []
+        for logic_name, logic in action.logics.items():
+            why = fits(name, action, logic_name, logic)
+            if why:
+                reasons.append(f"{logic_name}: {'; '.join(why)}")
+                continue
+            fitting.append(logic_name)
+            if not every:
+                break
+        if fitting:
+            found.chosen[name] = fitting
+        else:
+            found.skipped[name] = reasons
+    changed = True
+    while changed:
+        changed = False
+        for name in list(found.chosen):
+            missing = missing_requires(actions[name], found.chosen)
+            if missing:
+                del found.chosen[name]
+                found.skipped[name] = [f"requires {', '.join(missing)}, which cannot be selected"]
+                changed = True
+    return found
+
+
+def template_fit(platform: str, template: RobotTemplate, scheme: MappingScheme) -> LogicFit:
+    """A logic fits when the template has, and the scheme binds, every mapping it needs."""
+
+    def fits(_name: str, action: Action, _logic_name: str, logic: Logic) -> list[str]:
+        return why_unavailable(action, logic, platform, template, scheme)
+
+    return fits
 
 
 @dataclass
@@ -19,50 +89,36 @@ class AutofillResult:
 
 
 def autofill(
-    repo: Repository, platform_name: str, scheme_name: str, template_name: str
+    repo: Repository,
+    platform_name: str,
+    scheme_name: str,
+    template_name: str,
+    *,
+    every: bool = False,
 ) -> AutofillResult:
-    """Per action of the platform, the first logic (in the action's order) the template and
-    scheme serve; then drop, until none is left, actions whose `requires` are not selected.
-    The caller has checked that platform, scheme and template exist."""
+    """The capability configuration of what the template and scheme can run: per action the
+    first fitting logic, or with `every` each fitting logic. The caller has checked that
+    platform, scheme and template exist."""
     platform = repo.platforms[platform_name]
     template = platform.templates[template_name].model
     scheme = platform.schemes[scheme_name].model
-    chosen: dict[str, str] = {}
-    skipped: dict[str, list[str]] = {}
-    for name, entry in sorted(repo.actions.items()):
-        action = entry.model
-        if platform_name not in action.platforms:
-            continue
-        reasons: list[str] = []
-        for logic_name, logic in action.logics.items():
-            why = why_unavailable(action, logic, platform_name, template, scheme)
-            if not why:
-                chosen[name] = logic_name
-                break
-            reasons.append(f"{logic_name}: {'; '.join(why)}")
-        else:
-            skipped[name] = reasons
-    changed = True
-    while changed:
-        changed = False
-        for name in list(chosen):
-            missing = missing_requires(repo.actions[name].model, chosen)
-            if missing:
-                del chosen[name]
-                skipped[name] = [f"requires {', '.join(missing)}, which cannot be selected"]
-                changed = True
+    actions = {name: entry.model for name, entry in repo.actions.items()}
+    found = select_logics(
+        actions, platform_name, template_fit(platform_name, template, scheme), every=every
+    )
     config = CapabilityConfiguration(
         name=None,
         platform=platform_name,
         mapping_scheme=scheme_name,
         robot_template=template_name,
-        actions=chosen,
+        actions={name: logic_choice(logics) for name, logics in found.chosen.items()},
     )
-    return AutofillResult(config, skipped)
+    return AutofillResult(config, found.skipped)
 
 
 def to_yaml(config: CapabilityConfiguration, schema_ref: str, comment: str) -> str:
-    """The file text, with the editor modeline; names are quoted only where YAML needs it."""
+    """The file text, with the editor modeline; names are quoted only where YAML needs it, and
+    an action's logics are a list only when it selects several."""
     lines = [
         f"# yaml-language-server: $schema={schema_ref}",
         f"# {comment}",
@@ -73,7 +129,13 @@ def to_yaml(config: CapabilityConfiguration, schema_ref: str, comment: str) -> s
         lines.append(f"robot_template: {_scalar(config.robot_template)}")
     if config.actions:
         lines.append("actions:")
-        lines.extend(f"  {_scalar(a)}: {_scalar(lg)}" for a, lg in config.actions.items())
+        for action, choice in config.actions.items():
+            names = logic_names(choice)
+            if len(names) == 1:
+                lines.append(f"  {_scalar(action)}: {_scalar(names[0])}")
+            else:
+                lines.append(f"  {_scalar(action)}:")
+                lines.extend(f"    - {_scalar(name)}" for name in names)
     else:
         lines.append("actions: {}")
     return "\n".join(lines) + "\n"

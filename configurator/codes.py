@@ -84,7 +84,12 @@ RULES: dict[str, Rule] = {
             Severity.ERROR,
             "capability: unknown action, or an action not available on the platform",
         ),
-        Rule("RC205", Severity.ERROR, "capability: the action has no such logic"),
+        Rule(
+            "RC205",
+            Severity.ERROR,
+            "capability: the action has no such logic (each unknown logic of an action's list, "
+            "at its item)",
+        ),
         Rule("RC206", Severity.ERROR, "scenario: unknown capability configuration"),
         Rule("RC207", Severity.ERROR, "scenario: unknown environment"),
         Rule(

@@ -40,7 +40,11 @@ class LaunchCapability(StrictModel):
     mapping_scheme: str
     tasks: list[str] = Field(description="tasks the selected actions achieve")
     actions: list[str]
-    logics: dict[str, str] = Field(description="action -> logic module")
+    # One logic is its name (every request before multi-logic actions, byte for byte), several
+    # a list in the order the capability writes them.
+    logics: dict[str, str | list[str]] = Field(
+        description="action -> logic module, or a list of the logic modules it selects"
+    )
     mappings: dict[str, MappingBinding] = Field(description="mappings the logics need, bound")
 
 

@@ -35,6 +35,8 @@ class RobotChange:
     # What its agent will do: start, stop, restart the brain, or reload it (the capability is
     # unchanged: an agent with `reload:` signals the running brain, any other restarts it).
     action: Action = "none"
+    # action -> (logics before, logics after), for each action whose logics changed
+    logics: dict[str, tuple[list[str], list[str]]] = field(default_factory=dict)
 
 
 @dataclass
@@ -70,6 +72,37 @@ def changed_fields(before: Any, after: Any, path: str = "") -> list[str]:
     return [] if before == after else [path or "(whole request)"]
 
 
+_LOGICS = "scenario.capability.logics."
+
+
+def _logic_changes(before: Any, after: Any) -> dict[str, tuple[list[str], list[str]]]:
+    """action -> (its logics before, after), for the actions whose logics differ; one logic
+    is its name in a request, several a list."""
+
+    def logics(content: Any) -> dict[str, list[str]]:
+        found = content.get("scenario", {}).get("capability", {}).get("logics", {})
+        return {a: [c] if isinstance(c, str) else list(c) for a, c in found.items()}
+
+    old, new = logics(before), logics(after)
+    return {
+        a: (old.get(a, []), new.get(a, []))
+        for a in sorted(set(old) | set(new))
+        if old.get(a) != new.get(a)
+    }
+
+
+def _whole_logic_lists(fields: list[str]) -> list[str]:
+    """An action's logics as one field: `logics.Follow`, not `logics.Follow[1]` (the
+    position of a logic in the list says nothing)."""
+    found: list[str] = []
+    for name in fields:
+        if name.startswith(_LOGICS) and name.endswith("]"):
+            name = name[: name.index("[", len(_LOGICS))]
+        if name not in found:
+            found.append(name)
+    return found
+
+
 def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | None = None) -> Plan:
     """What changes per robot from `base` to `head`; with the head's `rollout` policy, which
     wave each robot of the head falls in, the changes in wave order."""
@@ -87,9 +120,17 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
             changes.append(RobotChange(robot_id, "removed", before, None, action="stop"))
         elif old.digest != new.digest:
             kind = "held" if robot_id in head.suspended else "changed"
-            fields = changed_fields(old.content(), new.content())
+            old_content, new_content = old.content(), new.content()
+            fields = _whole_logic_lists(changed_fields(old_content, new_content))
             action = "none" if kind == "held" else action_of(old, new)
-            changes.append(RobotChange(robot_id, kind, before, after, fields, action=action))
+            logics = (
+                _logic_changes(old_content, new_content)
+                if any(f.startswith(_LOGICS) for f in fields)
+                else {}
+            )
+            changes.append(
+                RobotChange(robot_id, kind, before, after, fields, action=action, logics=logics)
+            )
         else:
             unchanged += 1
     if rollout is None:
@@ -133,12 +174,23 @@ def _change_line(c: RobotChange) -> str:
             if c.scenario_before != c.scenario_after
             else scenario
         )
-        detail = f"{moved}: {', '.join(c.fields)}"
+        detail = f"{moved}: {', '.join(_field_text(c, f) for f in c.fields)}"
         if c.kind == "held":
             detail += " (suspended: left as it is)"
         else:
             detail += f" [{c.action}]"
     return f"  {_SIGN[c.kind]} {c.robot_id}  {detail}"
+
+
+def _field_text(c: RobotChange, name: str) -> str:
+    """A changed field as the plan shows it: an action's logics with what they were and are."""
+    action = name.removeprefix(_LOGICS)
+    if action == name or action not in c.logics:
+        return name
+    before, after = c.logics[action]
+    return (
+        f"logics of {action}: {' + '.join(before) or '(none)'} -> {' + '.join(after) or '(none)'}"
+    )
 
 
 def _wave_heading(waves: list[str], wave: str | None) -> str:
@@ -183,7 +235,7 @@ def format_plan_markdown(plan: Plan) -> str:
             if c.scenario_before and c.scenario_after and c.scenario_before != c.scenario_after
             else markdown_text(c.scenario_after or c.scenario_before or "")
         )
-        fields = "<br>".join(markdown_code(f) for f in c.fields[:20])
+        fields = "<br>".join(markdown_code(_field_text(c, f)) for f in c.fields[:20])
         if len(c.fields) > 20:
             fields += f"<br>… {len(c.fields) - 20} more"
         kind: str = "held (suspended)" if c.kind == "held" else c.kind
@@ -205,6 +257,10 @@ def _change_json(c: RobotChange, waves: bool) -> dict[str, Any]:
     }
     if waves:
         found["wave"] = c.wave
+    if c.logics:
+        found["logics"] = {
+            a: {"before": before, "after": after} for a, (before, after) in c.logics.items()
+        }
     return found
 
 

@@ -23,6 +23,8 @@ from configurator.types import (
     RobotAssignment,
     RolloutPolicy,
     SettingDefinition,
+    logic_choice,
+    logic_names,
 )
 
 
@@ -68,7 +70,7 @@ def bound_mappings(resolved: ResolvedCapability) -> dict[str, MappingBinding]:
     one the scheme does not bind is left out (validation reports it)."""
     if resolved.scheme is None:
         return {}
-    needed = sorted({m for s in resolved.selections.values() for m in s.logic.mappings})
+    needed = sorted({m for s in resolved.all_selections() for m in s.logic.mappings})
     bindings = resolved.scheme.mappings
     return {m: bindings[m] for m in needed if m in bindings}
 
@@ -106,7 +108,7 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
     tasks = {name: entry.model for name, entry in repo.tasks.items()}
     logic_settings = {
         s.logic_name: _settings(s.logic.settings, scenario.logic_settings.get(s.logic_name, {}))
-        for s in resolved.selections.values()
+        for s in resolved.all_selections()
         if s.logic.settings or s.logic_name in scenario.logic_settings
     }
     robot_settings = (
@@ -137,7 +139,7 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
             mapping_scheme=capability.mapping_scheme,
             tasks=achievable_tasks(tasks, capability.actions),
             actions=sorted(capability.actions),
-            logics=dict(capability.actions),
+            logics={a: logic_choice(logic_names(c)) for a, c in capability.actions.items()},
             mappings=bound_mappings(resolved),
         ),
         environment_name=scenario.environment,

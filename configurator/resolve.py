@@ -5,11 +5,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from configurator.repository import Platform, Repository
-from configurator.types import Action, CapabilityConfiguration, Logic, MappingScheme, RobotTemplate
+from configurator.types import (
+    Action,
+    CapabilityConfiguration,
+    Logic,
+    MappingScheme,
+    RobotTemplate,
+    logic_names,
+)
 
 
 @dataclass(frozen=True)
 class Selection:
+    """One selected logic of an action (an action may select several)."""
+
     action_name: str
     action: Action
     logic_name: str
@@ -24,7 +33,13 @@ class ResolvedCapability:
     platform: Platform | None
     template: RobotTemplate | None
     scheme: MappingScheme | None
-    selections: dict[str, Selection] = field(default_factory=dict)
+    # action -> its selected logics that exist, in the order written (an unknown one is left
+    # out: validation reports it); an action with none of them known is absent.
+    selections: dict[str, list[Selection]] = field(default_factory=dict)
+
+    def all_selections(self) -> list[Selection]:
+        """Every selected logic that exists, action by action."""
+        return [s for found in self.selections.values() for s in found]
 
 
 def resolve_capability(repo: Repository, config: CapabilityConfiguration) -> ResolvedCapability:
@@ -37,13 +52,16 @@ def resolve_capability(repo: Repository, config: CapabilityConfiguration) -> Res
         scheme_entry = platform.schemes.get(config.mapping_scheme)
         scheme = scheme_entry.model if scheme_entry else None
     resolved = ResolvedCapability(config, platform, template, scheme)
-    for action_name, logic_name in config.actions.items():
+    for action_name, choice in config.actions.items():
         action_entry = repo.actions.get(action_name)
         if action_entry is None:
             continue
-        logic = action_entry.model.logics.get(logic_name)
-        if logic is not None:
-            resolved.selections[action_name] = Selection(
-                action_name, action_entry.model, logic_name, logic
-            )
+        action = action_entry.model
+        found = [
+            Selection(action_name, action, logic_name, action.logics[logic_name])
+            for logic_name in logic_names(choice)
+            if logic_name in action.logics
+        ]
+        if found:
+            resolved.selections[action_name] = found
     return resolved

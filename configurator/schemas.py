@@ -66,6 +66,18 @@ def _enum_or_nothing(values: dict[str, str], description: str) -> dict[str, Any]
     return {"description": description, "anyOf": _choices(values)}
 
 
+def _logic_choice(about: str, logics: dict[str, str]) -> dict[str, Any]:
+    """One logic, or a list of distinct ones (the action is lit when any of them is)."""
+    several = {
+        "type": "array",
+        "description": "several logics, each once",
+        "items": {"enum": sorted(logics)},
+        "minItems": 1,
+        "uniqueItems": True,
+    }
+    return {"description": about, "anyOf": [*_choices(logics), several]}
+
+
 def _capability_schema(repo: Repository) -> dict[str, Any]:
     schema = _base(KIND_BY_NAME["capability"].model, "Capability configuration")
     props = schema["properties"]
@@ -97,9 +109,9 @@ def _capability_schema(repo: Repository) -> dict[str, Any]:
         about = f"{action.description} [platforms: {', '.join(action.platforms)}]"
         if action.requires:
             about += f" [requires: {', '.join(action.requires)}]"
-        action_props[name] = {"description": about.strip(), "anyOf": _choices(logics)}
+        action_props[name] = _logic_choice(about.strip(), logics)
     props["actions"] = {
-        "description": "action -> chosen logic",
+        "description": "action -> chosen logic, or a list of several logics",
         "type": "object",
         "properties": action_props,
         "additionalProperties": False,
@@ -240,8 +252,10 @@ def _settings_per_capability(repo: Repository, schema: dict[str, Any]) -> None:
             defs.setdefault(key, _settings_object(resolved.template.settings))
             robot = {"$ref": _ref(key)}
         logics: dict[str, Any] = {}
-        for action, selection in sorted(resolved.selections.items()):
-            key = f"logic-settings.{action}.{selection.logic_name}"
+        for selection in sorted(
+            resolved.all_selections(), key=lambda s: (s.action_name, s.logic_name)
+        ):
+            key = f"logic-settings.{selection.action_name}.{selection.logic_name}"
             defs.setdefault(key, _settings_object(selection.logic.settings))
             logics[selection.logic_name] = {"$ref": _ref(key)}
         rules.append(

@@ -58,8 +58,9 @@ def _action_node(repo: Repository, resolved: ResolvedCapability, name: str) -> A
     if missing:
         reasons.append(f"requires {', '.join(missing)} (not selected)")
     node = ActionNode(name, selected, reasons)
+    chosen_logics = config.logics_of(name)
     for logic_name, logic in action.logics.items():
-        chosen = config.actions.get(name) == logic_name
+        chosen = logic_name in chosen_logics
         why = why_unavailable(action, logic, config.platform, resolved.template, resolved.scheme)
         # The platform reason is the action's, not each logic's.
         why = [r for r in why if not r.startswith("action is for")]
@@ -108,6 +109,9 @@ def alternative_label(index: int, actions: list[ActionNode]) -> str:
 def action_label(node: ActionNode) -> str:
     mark = "✔" if node.selected and not node.reasons else ("✗" if node.reasons else "○")
     state = "selected" if node.selected else "not selected"
+    chosen = sum(logic.chosen for logic in node.logics)
+    if chosen > 1:
+        state += f", {chosen} logics"
     why = f"; {'; '.join(node.reasons)}" if node.reasons else ""
     return f"{mark} action {node.name} ({state}{why})"
 

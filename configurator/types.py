@@ -6,9 +6,9 @@ Pure pydantic; imported by the robot-side agent too, so nothing heavier than pyd
 from __future__ import annotations
 
 import re
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 # `$` ends the text in pydantic's and JSON Schema's regexes; Python's `re` also lets it match
 # before a final newline, so Python code matches robot ids in full with `is_robot_id`.
@@ -147,15 +147,59 @@ class Environment(StrictModel):
 # ---------------------------------------------------------------- configurations: configs/
 
 
+def _distinct(names: list[str]) -> list[str]:
+    if not names:
+        raise ValueError("a list of one or more logic names")
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise ValueError(f"a list of distinct logic names ('{name}' is named twice)")
+        seen.add(name)
+    return names
+
+
+# One logic name, or several (the thesis' autofill lights every logic that fits): a list that
+# names each logic once. Both spellings of one logic are the same selection.
+LogicChoice = (
+    str
+    | Annotated[
+        list[str],
+        Field(json_schema_extra={"minItems": 1, "uniqueItems": True}),
+        AfterValidator(_distinct),
+    ]
+)
+
+
+def logic_names(choice: LogicChoice) -> list[str]:
+    """The logics an action's entry selects, in the order written."""
+    return [choice] if isinstance(choice, str) else list(choice)
+
+
+def logic_choice(names: list[str]) -> LogicChoice:
+    """The entry that selects `names`: one name as itself, several as a list."""
+    return names[0] if len(names) == 1 else list(names)
+
+
 class CapabilityConfiguration(StrictModel):
-    """A robot's composition: platform, scheme, optional template, one logic per action."""
+    """A robot's composition: platform, scheme, optional template, the logics of each action."""
 
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
     platform: str
     mapping_scheme: str
     robot_template: str | None = Field(None, description="when set, the config must fit it")
-    actions: dict[str, str] = Field(description="action -> chosen logic")
+    actions: dict[str, LogicChoice] = Field(
+        description="action -> chosen logic, or a list of several logics"
+    )
+
+    def logics_of(self, action: str) -> list[str]:
+        """The logics selected for `action` (none when it is not selected)."""
+        choice = self.actions.get(action)
+        return [] if choice is None else logic_names(choice)
+
+    def selected_logics(self) -> list[tuple[str, str]]:
+        """(action, logic) for every selected logic, in the order written."""
+        return [(a, name) for a, choice in self.actions.items() for name in logic_names(choice)]
 
 
 class Goal(StrictModel):

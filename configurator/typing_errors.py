@@ -121,6 +121,18 @@ def _dotted(loc: Sequence[str | int]) -> str:
     return error_path(loc, "the file")
 
 
+def _another_member_went_deeper(
+    loc: tuple[str | int, ...],
+    errs: list[ErrorDetails],
+    grouped: dict[tuple[str | int, ...], list[ErrorDetails]],
+) -> bool:
+    """Whether the errors at `loc` are only union members the value is not (`text` for a
+    list) while a member it is failed inside it: `[1]` for `str | list[str]` is "item 0 must
+    be text", not also "must be text"."""
+    tagged = all(len(err["loc"]) > len(loc) for err in errs)
+    return tagged and any(len(other) > len(loc) and other[: len(loc)] == loc for other in grouped)
+
+
 def typing_diagnostics(
     doc: YamlDocument, model: type[BaseModel], error: ValidationError, what: str
 ) -> list[Diagnostic]:
@@ -154,6 +166,8 @@ def typing_diagnostics(
             grouped.setdefault(_data_loc(doc.data, loc), []).append(err)
 
     for loc, errs in grouped.items():
+        if _another_member_went_deeper(loc, errs, grouped):
+            continue
         expected: list[str] = []
         for err in errs:
             text = _EXPECTED.get(err["type"])

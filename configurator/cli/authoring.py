@@ -23,11 +23,24 @@ from configurator.workspace import check
 @click.option("--template", required=True, help="robot template")
 @click.option("--name", default=None, help="configuration name (default: TEMPLATE-SCHEME)")
 @click.option("--force", is_flag=True, help="overwrite an existing file")
+@click.option(
+    "--all",
+    "every",
+    is_flag=True,
+    help="select every logic the template and scheme serve (an action then lists several)",
+)
 def autofill(
-    repo: Path, platform_name: str, scheme: str, template: str, name: str | None, force: bool
+    repo: Path,
+    platform_name: str,
+    scheme: str,
+    template: str,
+    name: str | None,
+    force: bool,
+    every: bool,
 ) -> ExitCode:
     """Write a capability configuration that fits a template: per action, the first logic the
-    template and the mapping scheme serve; the file validates."""
+    template and the mapping scheme serve, or with --all every such logic (the action then
+    lists them: `Follow: [follow_with_poses, follow_with_bluetooth]`); the file validates."""
     found = check(repo).repo
     platform = found.platforms.get(platform_name)
     problems = []
@@ -52,7 +65,7 @@ def autofill(
     target = repo / "configs" / "capabilities" / f"{name}.yaml"
     if target.exists() and not force:
         raise CliError(f"{target} exists; choose another --name or pass --force", ExitCode.FINDINGS)
-    result = fill_capability(found, platform_name, scheme, template)
+    result = fill_capability(found, platform_name, scheme, template, every=every)
     if not result.config.actions:
         raise CliError(
             f"no action of {platform_name} has a logic that {template} "
@@ -67,8 +80,8 @@ def autofill(
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(text, encoding="utf-8")
     print(f"wrote {target}")
-    for action, logic in result.config.actions.items():
-        print(f"  {action}: {logic}")
+    for action in result.config.actions:
+        print(f"  {action}: {', '.join(result.config.logics_of(action))}")
     for action, reasons in sorted(result.skipped.items()):
         print(f"  skipped {action}: {'; '.join(reasons)}")
     # The promise of autofill is a file that validates: prove it.

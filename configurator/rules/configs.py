@@ -64,53 +64,75 @@ def check_capability(
             unreadable=repo.is_broken("robot-template", f"{platform.name}/{template_name}"),
         )
 
-    for action_name, logic_name in config.actions.items():
-        action_entry = repo.actions.get(action_name)
-        if action_entry is None:
+    for action_name in config.actions:
+        _check_action(repo, entry, resolved, action_name, report)
+
+    _check_mappings(entry, resolved, report)
+    return resolved
+
+
+def logic_loc(config: CapabilityConfiguration, action: str, index: int) -> list[str | int]:
+    """Where the capability names the action's `index`-th logic: its list item, or the value
+    itself when it names one logic."""
+    if isinstance(config.actions.get(action), list):
+        return ["actions", action, index]
+    return ["actions", action]
+
+
+def _check_action(
+    repo: Repository,
+    entry: Entry[CapabilityConfiguration],
+    resolved: ResolvedCapability,
+    action_name: str,
+    report: Reporter,
+) -> None:
+    """One action of the capability: known, for its platform, each of its logics known, and
+    the actions it requires selected."""
+    config = entry.model
+    action_entry = repo.actions.get(action_name)
+    if action_entry is None:
+        report.unknown(
+            entry,
+            ["actions", action_name],
+            "RC204",
+            f"unknown action '{action_name}'",
+            action_name,
+            repo.actions,
+            unreadable=repo.is_broken("action", action_name),
+            key=True,
+        )
+        return
+    action = action_entry.model
+    if config.platform not in action.platforms:
+        report.add(
+            entry,
+            ["actions", action_name],
+            "RC204",
+            f"action '{action_name}' is for {', '.join(action.platforms)}, "
+            f"not platform {config.platform}",
+            key=True,
+        )
+    for index, logic_name in enumerate(config.logics_of(action_name)):
+        if logic_name not in action.logics:
             report.unknown(
                 entry,
-                ["actions", action_name],
-                "RC204",
-                f"unknown action '{action_name}'",
-                action_name,
-                repo.actions,
-                unreadable=repo.is_broken("action", action_name),
-                key=True,
-            )
-            continue
-        action = action_entry.model
-        if platform.name not in action.platforms:
-            report.add(
-                entry,
-                ["actions", action_name],
-                "RC204",
-                f"action '{action_name}' is for {', '.join(action.platforms)}, "
-                f"not platform {platform.name}",
-                key=True,
-            )
-        selection = resolved.selections.get(action_name)
-        if selection is None:
-            report.unknown(
-                entry,
-                ["actions", action_name],
+                logic_loc(config, action_name, index),
                 "RC205",
                 f"action '{action_name}' has no logic '{logic_name}'",
                 logic_name,
                 action.logics,
             )
-            continue
-        for required in missing_requires(action, config.actions):
-            report.add(
-                entry,
-                ["actions", action_name],
-                "RC303",
-                f"action '{action_name}' requires action '{required}', which is not selected; "
-                f"add it under actions",
-                key=True,
-            )
-
-    _check_mappings(entry, resolved, report)
-    return resolved
+    if action_name not in resolved.selections:
+        return
+    for required in missing_requires(action, config.actions):
+        report.add(
+            entry,
+            ["actions", action_name],
+            "RC303",
+            f"action '{action_name}' requires action '{required}', which is not selected; "
+            f"add it under actions",
+            key=True,
+        )
 
 
 def _check_mappings(
@@ -120,7 +142,7 @@ def _check_mappings(
     config = entry.model
     if resolved.template is not None:
         needers: dict[str, list[str]] = {}
-        for selection in resolved.selections.values():
+        for selection in resolved.all_selections():
             for mapping in template_gaps(selection.logic, resolved.template):
                 needers.setdefault(mapping, []).append(selection.logic_name)
         if needers:
@@ -133,12 +155,13 @@ def _check_mappings(
                 f"need: {listing}",
             )
     if resolved.scheme is not None:
-        for action_name, selection in resolved.selections.items():
+        for selection in resolved.all_selections():
             unbound = scheme_gaps(selection.logic, resolved.scheme)
             if unbound:
+                index = config.logics_of(selection.action_name).index(selection.logic_name)
                 report.add(
                     entry,
-                    ["actions", action_name],
+                    logic_loc(config, selection.action_name, index),
                     "RC302",
                     f"logic '{selection.logic_name}' needs {', '.join(unbound)}, which mapping "
                     f"scheme '{config.mapping_scheme}' does not bind",
@@ -206,10 +229,11 @@ def check_scenario(
                     template.settings,
                     f"robot template '{resolved.config.robot_template}'",
                 )
-        selected_logics = {s.logic_name: s for s in resolved.selections.values()}
+        selected_logics = {s.logic_name: s for s in resolved.all_selections()}
+        named = {logic for _, logic in resolved.config.selected_logics()}
         for logic_name, values in scenario.logic_settings.items():
             selection = selected_logics.get(logic_name)
-            if selection is None and logic_name in resolved.config.actions.values():
+            if selection is None and logic_name in named:
                 continue  # its action is unknown or unreadable: reported at the capability
             if selection is None:
                 report.unknown(

@@ -43,7 +43,7 @@ def make_request(
     revision: str = "rev-1",
     platform: str = "ROS2",
     template: str | None = "turtlebot3-camera",
-    logic: str = "follow_with_poses",
+    logic: str | list[str] = "follow_with_poses",
     knowledge: dict[str, Any] | None = None,
 ) -> LaunchRequest:
     """A valid request; a different `variant` gives a different digest, `revision` does not.

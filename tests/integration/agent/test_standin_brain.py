@@ -35,6 +35,24 @@ def test_prints_what_it_would_load_and_stops_on_sigterm(tmp_path: Path) -> None:
     assert proc.returncode == 0
 
 
+def test_an_action_with_several_logics_names_each(tmp_path: Path) -> None:
+    """A multi-logic action arrives as a list (the agent validates it with the same models)."""
+    request_file = tmp_path / "launch-request.json"
+    logics = ["follow_with_poses", "follow_with_bluetooth"]
+    request_file.write_bytes(make_request(logic=logics).payload())
+    proc = subprocess.Popen([*STANDIN, str(request_file)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        lines = [proc.stdout.readline().rstrip("\n") for _ in range(4)]
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert lines[2:] == ["logic modules:", "  Follow: follow_with_poses, follow_with_bluetooth"]
+
+
 def test_malformed_request_exits_non_zero(tmp_path: Path) -> None:
     for content in (b"{not json", b'{"apiVersion": "robotconf/v1"}'):
         request_file = tmp_path / "bad.json"

@@ -168,6 +168,52 @@ def test_autofill_honours_requires(lab: Lab) -> None:
     assert [d for d in lab.check().errors if "auto.yaml" in d.path] == []
 
 
+def test_autofill_all_selects_every_fitting_logic_and_the_file_validates(lab: Lab) -> None:
+    args = ["autofill", "--platform", "ROS2", "--scheme", "gazebo"]
+    done = lab.run(*args, "--template", "turtlebot3-waffle-pi", "--name", "every", "--all")
+    assert done.returncode == 0, done.stderr
+    path = "configs/capabilities/every.yaml"
+    data = parse_document(path, lab.path(path).read_bytes()).data
+    # The Waffle Pi has a camera and Bluetooth: both Follow logics; the rest has one each.
+    assert data["actions"]["Follow"] == ["follow_with_poses", "follow_with_bluetooth"]
+    assert data["actions"]["NavigateToLocation"] == "navigate_with_nav2"
+    assert "  Follow: follow_with_poses, follow_with_bluetooth" in done.stdout
+    assert "  Follow:\n    - follow_with_poses\n    - follow_with_bluetooth\n" in lab.read(path)
+    # Without --all, the first fitting logic, as before.
+    first = lab.run(*args, "--template", "turtlebot3-waffle-pi", "--name", "first")
+    assert first.returncode == 0, first.stderr
+    one = parse_document("x", lab.path("configs/capabilities/first.yaml").read_bytes()).data
+    assert one["actions"]["Follow"] == "follow_with_poses"
+    # One fitting logic is written as a name even with --all.
+    burger = lab.run(*args, "--template", "turtlebot3-burger", "--name", "burger", "--all")
+    assert burger.returncode == 0, burger.stderr
+    assert "  Follow: follow_with_bluetooth\n" in lab.read("configs/capabilities/burger.yaml")
+    assert lab.run("validate").returncode == 0
+
+
+def test_validate_a_multi_logic_repository_and_its_errors(lab: Lab) -> None:
+    either = "configs/capabilities/turtlebot3-follow-either.yaml"
+    delivery = "configs/scenarios/delivery-gazebo.yaml"
+    lab.replace(delivery, "capability: turtlebot3-camera", "capability: turtlebot3-follow-either")
+    lab.replace(delivery, "logic_settings:\n", "logic_settings:\n  follow_with_bluetooth: {}\n")
+    done = lab.run("validate")
+    assert done.returncode == 0, done.stdout + done.stderr
+    rendered = json.loads(lab.run("render", "tb3-01").stdout)
+    logics = rendered["scenario"]["capability"]["logics"]
+    assert logics["Follow"] == ["follow_with_poses", "follow_with_bluetooth"]
+    lab.replace(
+        either,
+        "Follow: [follow_with_poses, follow_with_bluetooth]",
+        "Follow: [follow_with_poses, follow_with_poses]",
+    )
+    done = lab.run("validate")
+    line = lab.line_of(either, "Follow: [")
+    assert done.returncode == 1
+    assert f"{either}:{line}:" in done.stdout and "RC103" in done.stdout
+    assert "'follow_with_poses' is named twice" in done.stdout
+    assert "Traceback" not in done.stdout + done.stderr
+
+
 def test_autofill_unknown_template(lab: Lab) -> None:
     done = lab.run(
         "autofill", "--platform", "ROS2", "--scheme", "gazebo", "--template", "turtlebot3-burgr"
@@ -229,7 +275,9 @@ def test_schemas_go_stale_when_the_catalogue_changes(lab: Lab) -> None:
     lab.run("schemas")
     schema = json.loads(lab.read("schemas/capability.schema.json"))
     wave = schema["properties"]["actions"]["properties"]["Wave"]
-    assert wave["anyOf"] == [{"const": "wave_arm", "description": "(needs mappings: arm)"}]
+    assert wave["anyOf"][0] == {"const": "wave_arm", "description": "(needs mappings: arm)"}
+    several = wave["anyOf"][1]  # or a list of its logics, each once
+    assert several["items"] == {"enum": ["wave_arm"]} and several["uniqueItems"] is True
 
 
 def _schema_for(rel: str) -> dict[str, object]:

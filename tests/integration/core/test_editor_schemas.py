@@ -152,3 +152,24 @@ def test_the_editor_flags_bad_setting_values_for_the_scenario_s_capability(
     unknown = good.replace("move_speed: 0.1", "move_sped: 0.1")
     found = server.check(path, unknown, 3)
     assert any("move_sped" in d["message"] for d in found), found
+
+
+def test_the_editor_takes_one_logic_or_a_list_of_distinct_ones(
+    lab: Lab, server: LanguageServer
+) -> None:
+    path = lab.path("configs/capabilities/turtlebot3-follow-either.yaml")
+    good = lab.read("configs/capabilities/turtlebot3-follow-either.yaml")
+    both = "Follow: [follow_with_poses, follow_with_bluetooth]"
+    assert both in good
+    assert server.check(path, good, 1) == []
+    one = good.replace(both, "Follow: follow_with_bluetooth")
+    assert server.check(path, one, 2) == []
+    twice = good.replace(both, "Follow: [follow_with_poses, follow_with_poses]")
+    found = server.check(path, twice, 3)
+    assert any("duplicate" in d["message"].lower() for d in found), found
+    unknown = good.replace(both, "Follow: [follow_with_poses, follow_by_smell]")
+    found = server.check(path, unknown, 4)
+    line = next(n for n, text in enumerate(unknown.splitlines()) if "follow_by_smell" in text)
+    assert found and {d["range"]["start"]["line"] for d in found} == {line}, found
+    empty = good.replace(both, "Follow: []")
+    assert server.check(path, empty, 5) != []

@@ -37,6 +37,18 @@ def test_valid_request_is_accepted_without_warnings() -> None:
     assert outcome == Accept(request, [])
 
 
+def test_a_request_whose_action_selects_several_logics_is_accepted() -> None:
+    """Multi-logic actions arrive as a list of logic names; the agent's models take both forms."""
+    request = make_request(logic=["follow_with_poses", "follow_with_bluetooth"])
+    outcome = interpret(request.payload(), ROBOT)
+    assert outcome == Accept(request, [])
+    assert isinstance(outcome, Accept)
+    assert outcome.request.scenario.capability.logics["Follow"] == [
+        "follow_with_poses",
+        "follow_with_bluetooth",
+    ]
+
+
 def reason(payload: bytes, robot: RobotDescription = ROBOT) -> str:
     outcome = interpret(payload, robot)
     assert isinstance(outcome, Reject), outcome

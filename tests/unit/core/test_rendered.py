@@ -138,6 +138,38 @@ def test_a_scenario_without_mappings() -> None:
     _assert_same(scenario, ("tb3-09", "x", "r", "/tb3_09"))
 
 
+def _with_logics(logics: dict[str, str | list[str]]) -> LaunchScenario:
+    shared = _shared()
+    capability = shared.capability.model_copy(update={"logics": logics})
+    return shared.model_copy(update={"capability": capability})
+
+
+@pytest.mark.parametrize(
+    "logics",
+    [
+        {"Follow": ["follow_with_poses", "follow_with_bluetooth"]},
+        {"Follow": ["follow_with_bluetooth", "follow_with_poses"], "AskHelp": "ask_help"},
+        {"Follow": ["\x00robotconf0:namespace\x00", 'é"\\'], "Z": ["z"]},
+    ],
+)
+def test_actions_with_several_logics(logics: dict[str, str | list[str]]) -> None:
+    """A list of logics is serialised in its order, with and without a namespace, and the
+    agent reads it back as it was."""
+    scenario = _with_logics(_marked(logics))
+    for namespace in (None, "/tb3_09"):
+        _assert_same(scenario, ("tb3-09", "bot", "r", namespace))
+        made = ScenarioRequests(scenario).request("tb3-09", "bot", "r", namespace)
+        received = LaunchRequest.model_validate_json(made.payload())
+        assert received.scenario.capability.logics == _marked(logics)
+
+
+def test_several_logics_and_their_order_are_restart_content() -> None:
+    one = ScenarioRequests(_with_logics({"Follow": "a"})).request("r", "b", "r", None)
+    both = ScenarioRequests(_with_logics({"Follow": ["a", "b"]})).request("r", "b", "r", None)
+    turned = ScenarioRequests(_with_logics({"Follow": ["b", "a"]})).request("r", "b", "r", None)
+    assert len({one.restart_digest, both.restart_digest, turned.restart_digest}) == 3
+
+
 def _with_names(names: list[str]) -> LaunchScenario:
     shared = _shared()
     mappings = {

@@ -8,6 +8,7 @@ from tests.support.lab import Lab
 
 CAMERA = "configs/capabilities/turtlebot3-camera.yaml"
 BLUETOOTH = "configs/capabilities/turtlebot3-bluetooth.yaml"
+EITHER = "configs/capabilities/turtlebot3-follow-either.yaml"
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
 FLEET = "configs/fleet.yaml"
 FOLLOW = "models/actions/Follow.yaml"
@@ -139,8 +140,9 @@ def test_logic_needs_mapping_the_scheme_does_not_bind(lab: Lab) -> None:
     lab.write(GAZEBO, "\n".join(kept) + "\n")
     found = lab.check().diagnostics
     rc302 = [d for d in found if d.code == "RC302"]
-    assert len(rc302) == 1 and rc302[0].path == BLUETOOTH
-    assert "follow_with_bluetooth' needs bluetooth_rssi" in rc302[0].message
+    # The Bluetooth robot's capability, and the one that selects both Follow logics.
+    assert sorted(d.path for d in rc302) == [BLUETOOTH, EITHER]
+    assert all("follow_with_bluetooth' needs bluetooth_rssi" in d.message for d in rc302)
     # The catalogue itself also warns that the scheme cannot serve the templates.
     assert any(d.code == "RC608" and d.severity.value == "warning" for d in found)
 
