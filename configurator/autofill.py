@@ -88,24 +88,40 @@ class AutofillResult:
     skipped: dict[str, list[str]] = field(default_factory=dict)  # action -> why not
 
 
+def both_fit(first: LogicFit, second: LogicFit) -> LogicFit:
+    """A logic fits when it fits both (a template, and a live robot's interfaces)."""
+
+    def fits(name: str, action: Action, logic_name: str, logic: Logic) -> list[str]:
+        return first(name, action, logic_name, logic) + second(name, action, logic_name, logic)
+
+    return fits
+
+
 def autofill(
     repo: Repository,
     platform_name: str,
     scheme_name: str,
-    template_name: str,
+    template_name: str | None,
     *,
     every: bool = False,
+    robot_fit: LogicFit | None = None,
 ) -> AutofillResult:
-    """The capability configuration of what the template and scheme can run: per action the
-    first fitting logic, or with `every` each fitting logic. The caller has checked that
-    platform, scheme and template exist."""
+    """The capability configuration of what the template and scheme can run (and, with
+    `robot_fit`, what a live robot's interfaces serve too): per action the first fitting
+    logic, or with `every` each fitting logic. The caller has checked that platform, scheme
+    and template exist, and gives a template or `robot_fit`."""
     platform = repo.platforms[platform_name]
-    template = platform.templates[template_name].model
     scheme = platform.schemes[scheme_name].model
     actions = {name: entry.model for name, entry in repo.actions.items()}
-    found = select_logics(
-        actions, platform_name, template_fit(platform_name, template, scheme), every=every
-    )
+    fit = robot_fit
+    if template_name is not None:
+        template = platform.templates[template_name].model
+        fit = template_fit(platform_name, template, scheme)
+        if robot_fit is not None:
+            fit = both_fit(fit, robot_fit)
+    if fit is None:
+        raise ValueError("autofill needs a robot template or a robot's interfaces")
+    found = select_logics(actions, platform_name, fit, every=every)
     config = CapabilityConfiguration(
         name=None,
         platform=platform_name,

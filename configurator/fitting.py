@@ -3,9 +3,11 @@ interfaces, with its kind and type (pure; autofill takes it to select from a liv
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from configurator.interfaces import KIND_OF_MAPPING, RobotInterfaces, index, same_type
 from configurator.rosnames import UnresolvableName, resolve_name
-from configurator.types import Logic, MappingScheme
+from configurator.types import Action, Logic, MappingScheme
 
 
 def logic_fits_interfaces(
@@ -43,3 +45,14 @@ def logic_fits_interfaces(
                 f"(mapping {mapping})"
             )
     return reasons
+
+
+def interfaces_fit(
+    scheme: MappingScheme, namespace: str | None, interfaces: RobotInterfaces
+) -> Callable[[str, Action, str, Logic], list[str]]:
+    """Autofill's "does this logic fit" from a live robot (`autofill.LogicFit`)."""
+
+    def fits(_name: str, _action: Action, _logic_name: str, logic: Logic) -> list[str]:
+        return logic_fits_interfaces(logic, scheme, namespace, interfaces)
+
+    return fits
