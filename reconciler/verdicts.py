@@ -213,10 +213,15 @@ def build_rows(
     its interfaces stay the same."""
     rows = []
     robots = sorted(set(desired) | set(retained.robots))
+    reconciler = retained.reconciler
+    held = {h.robot: h.reason for h in reconciler.held} if reconciler is not None else {}
     for robot_id in robots:
         want = desired.get(robot_id)
         robot = retained.robots.get(robot_id, RobotSeen())
         found, reason = verdict(want, robot)
+        if robot_id in held and found not in SETTLED:
+            why = f"held by the reconciler for drift (drift: hold): {held[robot_id]}"
+            reason = why if found is Verdict.PROGRESSING else f"{reason}; {why}"
         status = robot.status
         warnings = [w for w in [template_warning(want, robot)] if w]
         if status is not None:

@@ -3,6 +3,8 @@ policy keeping a robot's last good request until its interfaces fit."""
 
 from __future__ import annotations
 
+import json
+import subprocess
 from collections.abc import Iterator
 
 import pytest
@@ -13,11 +15,12 @@ from reconciler.notify import Notifier, parse_receiver
 from reconciler.source import LocalBranch
 from reconciler.telemetry import Telemetry
 from tests.integration.reconciler.test_alerts import Receiver, free_port, scrape, value
-from tests.support.fleet import GitLab, Running
+from tests.support.fleet import GitLab, Running, robotconf_argv
 from tests.support.interfaces import publish_interfaces, report
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
 
+FLEET = "configs/fleet.yaml"
 # tb3-04 runs patrol-real: navigate_with_nav2 needs the /navigate_to_pose action and /odom.
 ODOM = ("/odom", "nav_msgs/msg/Odometry")
 NAV2 = ("/navigate_to_pose", "nav2_msgs/action/NavigateToPose")
@@ -82,3 +85,45 @@ def test_drift_is_told_once_each_way_and_scraped(
     finally:
         running.stop()
         telemetry.stop()
+
+
+def test_hold_keeps_the_old_request_until_the_robot_s_interfaces_fit(
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
+) -> None:
+    lab.write(FLEET, lab.read(FLEET) + "drift: hold\n")
+    lab.commit("hold on drift")
+    running = Running(LocalBranch(lab.root, "main"), mosquitto.url)
+    try:
+        first = lab.head()
+        watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == first, "applied")
+        old = lab.requests()["tb3-04"].digest
+        assert watch.digest("tb3-04") == old  # unknown interfaces: delivered, never held
+        publish_interfaces(mosquitto.url, "tb3-04", report(ODOM))  # no Nav2
+
+        lab.replace(FLEET, "name: Lab patrol,", "name: Lab patrol 2,")
+        second = lab.commit("rename the patrol robot: a new request for tb3-04")
+        new = lab.requests()["tb3-04"].digest
+        status = watch.wait_reconciler(
+            lambda s: s.last_applied_revision == second and bool(s.held), "tb3-04 held"
+        )
+        assert [h.robot for h in status.held] == ["tb3-04"]
+        assert "lacks /navigate_to_pose" in status.held[0].reason
+        assert "held for drift" in status.message
+        assert watch.digest("tb3-04") == old  # its last good request stays
+
+        # `robotconf status` says why it is not in sync.
+        done = subprocess.run(
+            robotconf_argv("status", "--repo", str(lab.root), "--broker", mosquitto.url, "--json"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        rows = {r["robot_id"]: r for r in json.loads(done.stdout)["robots"]}
+        assert "held by the reconciler for drift" in rows["tb3-04"]["reason"]
+        assert rows["tb3-04"]["drift"][0]["mapping"] == "navigate_to_pose"
+
+        publish_interfaces(mosquitto.url, "tb3-04", report(ODOM, actions=(NAV2,)))
+        wait_for(lambda: watch.digest("tb3-04") == new, "tb3-04 released when it fits")
+        watch.wait_reconciler(lambda s: not s.held and s.ready, "nothing held")
+    finally:
+        running.stop()
