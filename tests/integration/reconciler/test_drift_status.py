@@ -9,7 +9,7 @@ from typing import Any
 from configurator.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.interfaces import publish_interfaces, report
-from tests.support.mosquitto import Mosquitto
+from tests.support.mosquitto import Mosquitto, free_port
 
 # tb3-04 runs patrol-real: navigate_with_nav2 needs /navigate_to_pose and /odom.
 PATROL_ACTION = ("/navigate_to_pose", "nav2_msgs/action/NavigateToPose")
@@ -93,3 +93,45 @@ def test_status_shows_each_robot_s_drift_and_whether_it_reports(
     found = rows(lab, url)
     assert (found["tb3-04"]["interfaces"], found["tb3-04"]["drift"]) == ("reported", [])
     assert (found["tb3-02"]["interfaces"], found["tb3-02"]["drift"]) == ("unknown", [])
+
+
+def test_plan_shows_the_drift_of_the_robots_a_change_would_affect(
+    lab: GitLab, mosquitto: Mosquitto
+) -> None:
+    url = mosquitto.url
+    publish_interfaces(url, "tb3-04", report(("/odom", "nav_msgs/msg/Odometry")))  # no Nav2
+    publish_interfaces(url, "tb3-05", report(("/odom", "nav_msgs/msg/Odometry")))  # unchanged
+    lab.replace("configs/fleet.yaml", "name: Lab patrol,", "name: Lab patrol 2,")
+    lab.replace("configs/fleet.yaml", "name: Guide bot,", "name: Guide bot 2,")
+
+    offline = lab.run("plan", "--base", "HEAD")
+    assert offline.returncode == 1 and "drift" not in offline.stdout  # nothing said without
+
+    text = lab.run("plan", "--base", "HEAD", "--broker", url)
+    assert text.returncode == 1, text.stderr
+    assert (
+        "drift: tb3-04 lacks /navigate_to_pose (nav2_msgs/action/NavigateToPose), needed by "
+        "navigate_with_nav2 via action client mapping navigate_to_pose"
+    ) in text.stdout
+    assert "drift not judged (no interfaces reported): tb3-02" in text.stdout
+    assert "tb3-05" not in text.stdout  # not affected: not judged
+
+    found = json.loads(
+        lab.run("plan", "--base", "HEAD", "--broker", url, "--format", "json").stdout
+    )
+    changes = {c["robot_id"]: c for c in found["changes"]}
+    assert changes["tb3-04"]["interfaces"] == "reported"
+    assert [d["mapping"] for d in changes["tb3-04"]["drift"]] == ["navigate_to_pose"]
+    assert (changes["tb3-02"]["interfaces"], changes["tb3-02"]["drift"]) == ("unknown", [])
+
+    markdown = lab.run("plan", "--base", "HEAD", "--broker", url, "--format", "markdown")
+    assert "- drift: tb3-04 lacks" in markdown.stdout.replace("\\", "")
+
+
+def test_plan_without_an_answer_from_the_broker_stands_without_drift(lab: GitLab) -> None:
+    lab.replace("configs/fleet.yaml", "name: Lab patrol,", "name: Lab patrol 2,")
+    url = f"mqtt://127.0.0.1:{free_port()}"
+    done = lab.run("plan", "--base", "HEAD", "--broker", url, "--wait", "1")
+    assert done.returncode == 1 and "tb3-04" in done.stdout and "drift" not in done.stdout
+    assert "Traceback" not in done.stderr
+    assert f"no answer from {url} within 1 s: drift is not judged" in done.stderr
