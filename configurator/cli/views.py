@@ -194,8 +194,9 @@ def plan(
     repo: Path, base: str, head: str | None, fmt: str, mqtt: BrokerOptions, wait: float
 ) -> ExitCode:
     """What would change per robot between two revisions (exit 1 when something would).
-    With --broker, also the drift of each robot that would change: what its new request needs
-    that the interfaces it reports lack."""
+    With --broker (or $ROBOTCONF_BROKER; without either no broker is read), also the drift of
+    each robot that would change: what its new request needs that the interfaces it reports
+    lack."""
     # Both revisions are checked before either is reported: each names its own problems.
     found: dict[str, tuple[FleetRender, RolloutPolicy | None]] = {}
     problems: list[str] = []
