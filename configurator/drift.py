@@ -92,15 +92,19 @@ class Drift:
     items: tuple[DriftItem, ...] = ()
     note: str | None = None
     unsure: tuple[Need, ...] = field(default=(), repr=False)  # not found, but maybe cut
+    judged: bool = True  # False: no request to judge against (unassigned, suspended)
 
     @property
     def drifted(self) -> bool:
         return bool(self.items)
 
     def summary(self) -> str:
-        """A few words for a table cell: `-`, `2 missing, 1 type`, `unknown`, `error`."""
+        """A few words for a table cell: `ok`, `2 missing, 1 type`, `unknown`, `error`; `-`
+        for a robot that reports but has no request to be judged against."""
         if self.interfaces != "reported":
             return self.interfaces
+        if not self.judged:
+            return "-"
         if not self.items:
             return "ok" if not self.unsure else "ok?"
         missing = sum(1 for item in self.items if item.missing)

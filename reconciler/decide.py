@@ -234,7 +234,9 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
         )
         condition = with_held(_rollout_condition(seen, step), held)
         return Decision(stable, actions, condition, stable=stable)
-    held = held_back(fleet, step.requests, seen)
+    # Robots whose wave has not come are left as they are anyway: not held, only waiting.
+    moving = {r: q for r, q in step.requests.items() if r not in step.keep}
+    held = held_back(fleet, moving, seen)
     keep = fleet.suspended | step.keep | held.keys()
     actions = diff(step.requests, seen.launches, keep, fleet.allow_empty, seen.active)
     if actions.refused:  # the head would unassign every robot: the stable revision stays

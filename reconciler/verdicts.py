@@ -199,7 +199,7 @@ def robot_drift(
     if want is None or want.suspended:
         if robot.interfaces_error is not None:
             return Drift("error", note=f"its interfaces cannot be read: {robot.interfaces_error}")
-        return Drift(interfaces_verdict(robot.interfaces))
+        return Drift(interfaces_verdict(robot.interfaces), judged=False)
     if memo is not None:
         return memo.get(robot_id, want.digest, want.needs, robot.interfaces, robot.interfaces_error)
     return drift_of(robot_id, want.needs, robot.interfaces, robot.interfaces_error)

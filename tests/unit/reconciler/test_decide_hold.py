@@ -152,3 +152,26 @@ def test_a_held_robot_is_absent_from_its_wave_never_failed(lab: Lab) -> None:
     assert [h.robot for h in decision.condition.held] == ["tb3-04"]
     assert decision.condition.rollout is not None
     assert "tb3-04" in decision.condition.rollout.pending
+
+
+def test_a_robot_whose_wave_has_not_come_is_waiting_not_held(lab: Lab) -> None:
+    policy = (
+        "rollout:\n  waves: [{name: canary, selector: {ring: canary}}, {name: all}]\n"
+        "  healthy_after: 1\n  wave_timeout: 10\n"
+    )
+    head = build(lab, "hold", policy)
+    fleet_of(head).revision = HEAD
+    old = {r: "sha256:" + "0" * 64 for r in ROBOTS}
+    online = {r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=old[r]) for r in ROBOTS}
+    decision = decide(
+        Observation(
+            head=HEAD,
+            build=head,
+            launches=old,
+            statuses=online,
+            now=0.0,
+            interfaces={"tb3-04": LACKING},
+        )
+    )
+    assert decision.actions is not None and "tb3-04" not in decision.actions.publish
+    assert decision.condition.held == ()  # tb3-04 (wave `all`) waits for its wave
