@@ -53,6 +53,7 @@ topic readwrite {prefix}/reconciler/status
 topic readwrite {prefix}/reconciler/rollout
 topic read {prefix}/robots/+/status
 topic read {prefix}/robots/+/description
+topic read {prefix}/robots/+/interfaces
 topic write {prefix}/robots/+/restart
 
 # `robotconf status` reads everything and writes nothing.
@@ -60,6 +61,7 @@ user {users.viewer}
 topic read {prefix}/robots/+/launch
 topic read {prefix}/robots/+/status
 topic read {prefix}/robots/+/description
+topic read {prefix}/robots/+/interfaces
 topic read {prefix}/reconciler/status
 
 # Operators (`robotconf logs`, `robotconf restart`) read everything `status` reads and the
@@ -68,6 +70,7 @@ user {users.operator}
 topic read {prefix}/robots/+/launch
 topic read {prefix}/robots/+/status
 topic read {prefix}/robots/+/description
+topic read {prefix}/robots/+/interfaces
 topic read {prefix}/reconciler/status
 topic read {prefix}/robots/+/logs
 topic write {prefix}/robots/+/logs/request

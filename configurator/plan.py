@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
+from configurator.interfaces import RobotInterfaces
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.textsafe import markdown_code, markdown_text, printable_lines
@@ -46,6 +49,9 @@ class Plan:
     changes: list[RobotChange]  # in robot id order; with waves, in wave order first
     unchanged: int
     waves: list[str] | None = None  # the head's rollout waves in order; None: all at once
+    # robot -> its drift against the head's request, for the robots that would get a new one,
+    # when the robots' interfaces were read (`plan --broker`); None: not read, nothing said
+    drift: dict[str, Drift] | None = None
 
     @property
     def restarts(self) -> list[str]:
@@ -145,6 +151,37 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
     return Plan(base.revision, head.revision, changes, unchanged, names)
 
 
+Reported = Mapping[str, tuple[RobotInterfaces | None, str | None]]  # robot -> (report, error)
+
+
+def with_drift(plan: Plan, head: FleetRender, reported: Reported) -> Plan:
+    """The plan with the drift of each robot that would get a new request (added or changed)
+    against the interfaces it reports: what it would lack, before it is told."""
+    drift: dict[str, Drift] = {}
+    for change in plan.changes:
+        request = head.requests.get(change.robot_id)
+        if change.kind not in ("added", "changed") or request is None:
+            continue
+        found, error = reported.get(change.robot_id, (None, None))
+        needs = needs_of_rendered(request, head.needed_by.get(request.capability_name))
+        drift[change.robot_id] = drift_of(change.robot_id, needs, found, error)
+    plan.drift = drift
+    return plan
+
+
+def _drift_lines(plan: Plan) -> list[str]:
+    if plan.drift is None:
+        return []
+    drifts = plan.drift
+    lines = [f"drift: {line}" for line in drift_lines(drifts)]
+    unknown = sorted(r for r, d in drifts.items() if d.interfaces == "unknown")
+    if unknown:
+        lines.append(f"drift not judged (no interfaces reported): {', '.join(unknown)}")
+    if not lines and drifts:
+        lines.append("drift: none — every robot that would change reports what it needs")
+    return lines
+
+
 def _counts(plan: Plan) -> str:
     count = {
         k: sum(c.kind == k for c in plan.changes) for k in ("changed", "added", "removed", "held")
@@ -209,7 +246,7 @@ def format_plan_text(plan: Plan) -> str:
             heading = _wave_heading(plan.waves, c.wave)
             lines.append(heading)
         lines.append(_change_line(c))
-    return printable_lines(lines)
+    return printable_lines(lines + _drift_lines(plan))
 
 
 def format_plan_markdown(plan: Plan) -> str:
@@ -243,10 +280,13 @@ def format_plan_markdown(plan: Plan) -> str:
             kind += f", {c.action}"
         wave = (f"| {markdown_text(c.wave or '—')} ") if waves else ""
         lines.append(f"{wave}| {markdown_code(c.robot_id)} | {kind} | {scenario} | {fields} |")
+    drift = _drift_lines(plan)
+    if drift:
+        lines += ["", *(f"- {markdown_text(line)}" for line in drift)]
     return "\n".join(lines) + "\n"
 
 
-def _change_json(c: RobotChange, waves: bool) -> dict[str, Any]:
+def _change_json(c: RobotChange, waves: bool, drift: dict[str, Drift] | None) -> dict[str, Any]:
     found: dict[str, Any] = {
         "robot_id": c.robot_id,
         "change": c.kind,
@@ -261,13 +301,18 @@ def _change_json(c: RobotChange, waves: bool) -> dict[str, Any]:
         found["logics"] = {
             a: {"before": before, "after": after} for a, (before, after) in c.logics.items()
         }
+    if drift is not None:
+        judged = drift.get(c.robot_id)
+        found["interfaces"] = judged.interfaces if judged is not None else None
+        found["drift"] = [i.as_json() for i in judged.items] if judged is not None else []
     return found
 
 
 def plan_as_json(plan: Plan) -> dict[str, Any]:
-    """For scripts; `waves` and each change's `wave` only when the head has a rollout policy."""
+    """For scripts; `waves` and each change's `wave` only when the head has a rollout policy;
+    each change's `interfaces` and `drift` only when the robots' interfaces were read."""
     found: dict[str, Any] = {"base": plan.base, "head": plan.head, "unchanged": plan.unchanged}
     if plan.waves is not None:
         found["waves"] = plan.waves
-    found["changes"] = [_change_json(c, plan.waves is not None) for c in plan.changes]
+    found["changes"] = [_change_json(c, plan.waves is not None, plan.drift) for c in plan.changes]
     return found

@@ -5,12 +5,13 @@ Pure: the caller has validated the repository; a request is never rendered from 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
 from configurator.composition import achievable_tasks, find_location
 from configurator.diagnostics import did_you_mean
+from configurator.drift import logics_needing
 from configurator.gcpause import collector_paused
 from configurator.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
 from configurator.rendered import RenderedRequest, ScenarioRequests
@@ -43,6 +44,9 @@ class FleetRender:
     labels: dict[str, dict[str, str]] = field(default_factory=dict)  # every robot's, maybe {}
     allow_empty: bool = False
     rollout: RolloutPolicy | None = None  # None: every robot at once
+    drift: str = "warn"  # fleet.yaml's drift policy: warn or hold
+    # capability -> mapping -> the selected logics that need it (drift messages name them)
+    needed_by: dict[str, dict[str, tuple[str, ...]]] = field(default_factory=dict)
 
 
 def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
@@ -171,7 +175,10 @@ def _render_fleet(
         raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
     fleet = repo.fleet.model
     result = FleetRender(
-        revision=repo.revision, allow_empty=fleet.allow_empty, rollout=fleet.rollout
+        revision=repo.revision,
+        allow_empty=fleet.allow_empty,
+        rollout=fleet.rollout,
+        drift=fleet.drift,
     )
     scenarios: dict[str, ScenarioRequests] = {}
 
@@ -194,7 +201,23 @@ def _render_fleet(
         labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
             result.suspended.add(robot_id)
+    result.needed_by = _needed_by(repo, requests.values())
     return result
+
+
+def _needed_by(
+    repo: Repository, requests: Iterable[RenderedRequest]
+) -> dict[str, dict[str, tuple[str, ...]]]:
+    """Per capability the fleet uses, which of its logics need each mapping: what drift
+    messages name (a request says which logics, not which needs what)."""
+    actions = {name: entry.model for name, entry in repo.actions.items()}
+    scenarios = {id(r.scenario_requests): r.scenario_requests for r in requests}
+    found: dict[str, dict[str, tuple[str, ...]]] = {}
+    for scenario in scenarios.values():
+        capability = scenario.scenario.capability
+        if capability.name not in found:
+            found[capability.name] = logics_needing(capability, actions)
+    return found
 
 
 def render_robot(repo: Repository, robot_id: str) -> LaunchRequest:

@@ -238,6 +238,10 @@ class RenderedRequest:
         return self.scenario_requests.scenario.name
 
     @property
+    def capability_name(self) -> str:
+        return self.scenario_requests.scenario.capability.name
+
+    @property
     def robot_template(self) -> str | None:
         return self.scenario_requests.scenario.capability.robot_template
 

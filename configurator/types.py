@@ -279,3 +279,8 @@ class Fleet(StrictModel):
     rollout: RolloutPolicy | None = Field(
         None, description="roll out in health-gated waves; absent: every robot at once"
     )
+    drift: Literal["warn", "hold"] = Field(
+        "warn",
+        description="what a robot's reported interfaces not fitting its request does: warn "
+        "(deliver, and report the drift) or hold (keep its last good request until they fit)",
+    )

@@ -350,6 +350,14 @@ class RolloutStatus(_Message):
     message: str = ""
 
 
+class HeldRobot(_Message):
+    """A robot whose new request the reconciler holds back (fleet.yaml `drift: hold`): its
+    reported interfaces do not fit it; it keeps its last good request until they do."""
+
+    robot: str
+    reason: str = Field(description="what it lacks, as drift words it")
+
+
 # A heartbeat older than this many intervals (and at least STALE_MIN seconds, which absorbs a
 # slow apply and some clock skew) means the reconciler is no longer working.
 STALE_INTERVALS, STALE_MIN = 3, 60.0
@@ -386,6 +394,11 @@ class ReconcilerStatus(_Message):
     rollout: RolloutStatus | None = Field(
         None, description="the rollout in progress or last done, when fleet.yaml has a policy"
     )
+    held: list[HeldRobot] = Field(
+        default_factory=list,
+        description=f"robots held back for drift (drift: hold), in id order; at most {MAX_LISTED}",
+    )
+    more_held: int = Field(0, description="held robots left out of `held`")
 
     @field_validator("diagnostics", mode="before")
     @classmethod

@@ -21,8 +21,10 @@ from typing import Protocol
 from pydantic import ValidationError
 
 from configurator.backoff import Backoff
+from configurator.interfaces import RobotInterfaces
 from configurator.launch import LaunchRequest, StopRequest
 from configurator.mqtt import Connection
+from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.signing import Signed
@@ -143,6 +145,9 @@ class Controller:
         # The robots' statuses, followed live only while the head has a rollout policy: the
         # waves are gated by them. Without one they are only sampled (`_sample_active`).
         self.health: RetainedView | None = None
+        # The robots' interfaces, followed only while fleet.yaml says `drift: hold`.
+        self.interfaces: RetainedView | None = None
+        self._interfaces_memo = ReadMemo()
         # robot -> (its run, first seen running so): a run is a digest in one brain process
         # entered at one time (the agent's, compared only with itself), so a brain that crashed
         # and runs again between two looks is a new run, not a settled one.
@@ -223,6 +228,7 @@ class Controller:
         finally:
             self.writer.go_offline()
             self._follow_health(False)
+            self._follow_interfaces(False)
             self.view.stop()
 
     def _watch_source(self) -> bool:
@@ -337,6 +343,16 @@ class Controller:
             return None
         self._waiting_logged = False
         self._recover_serving(head)
+        policy = build.fleet if build.fleet is not None else self._serving_fleet()
+        hold = policy is not None and policy.drift == "hold"
+        interfaces = self._follow_interfaces(hold)
+        if hold and interfaces is None:
+            # Holding needs the robots' reports: nothing is published before they are known
+            # (the view's sync wakes the loop), as no wave starts before the statuses are.
+            if not self._waiting_logged:
+                log.info("waiting for the robots' interfaces (drift: hold)")
+                self._waiting_logged = True
+            return None
         retained = parse_retained(
             self.view.snapshot(),
             self.topics,
@@ -362,7 +378,44 @@ class Controller:
             wave_record=self._wave_record,
             watching_since=self._watching_since,
             dark_since=dict(self._dark_since),
+            interfaces=interfaces,
         )
+
+    def _serving_fleet(self) -> FleetRender | None:
+        return self.serving.fleet if self.serving is not None else None
+
+    def _follow_interfaces(self, wanted: bool) -> dict[str, RobotInterfaces] | None:
+        """The robots' readable interfaces reports, followed only while fleet.yaml says
+        `drift: hold` (None until they are known, or when not followed)."""
+        if wanted and self.interfaces is None:
+            self.interfaces = RetainedView(
+                self.connection,
+                [self.topics.all_interfaces],
+                f"{self.topics.prefix}/sync",
+                role="reconciler-interfaces",
+                on_synced=self._wake.set,
+                on_change=self._on_interfaces,
+            )
+            self.interfaces.start()
+        elif not wanted and self.interfaces is not None:
+            self.interfaces.stop()
+            self.interfaces = None
+            self._interfaces_memo = ReadMemo()
+        if self.interfaces is None or not self.interfaces.synced:
+            return None
+        seen = parse_retained(
+            self.interfaces.snapshot(),
+            self.topics,
+            ignored=self.ignored,
+            memo=self._interfaces_memo,
+        )
+        return {r: robot.interfaces for r, robot in seen.robots.items() if robot.interfaces}
+
+    def _on_interfaces(self) -> None:
+        """Network thread: a robot's interfaces changed; a robot held for drift may fit now."""
+        status = self.writer.status
+        if status is not None and status.held and not self._stop.is_set():
+            self._wake.set()
 
     def _follow_health(self, wanted: bool, now: float = 0.0) -> dict[str, AgentStatus] | None:
         """The robots' statuses while a rollout policy is in force (None until they are

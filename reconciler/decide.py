@@ -10,9 +10,14 @@ from __future__ import annotations
 from collections.abc import Mapping, Set
 from dataclasses import dataclass, field, replace
 
+from configurator.drift import Drift, drift_of, needs_of_rendered
+from configurator.interfaces import RobotInterfaces
+from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.wire import (
+    MAX_LISTED,
     AgentStatus,
+    HeldRobot,
     ReconcilerReason,
     ReconcilerState,
     RolloutStatus,
@@ -60,6 +65,9 @@ class Observation:
     wave_record: WaveRecord | None = None
     watching_since: float = 0.0
     dark_since: Mapping[str, float] = field(default_factory=dict)  # robot -> first seen dark
+    # The robots' readable interfaces reports, followed while fleet.yaml says `drift: hold`
+    # (None: not followed; a robot absent reports nothing readable: never held).
+    interfaces: Mapping[str, RobotInterfaces] | None = None
 
 
 @dataclass(frozen=True)
@@ -72,6 +80,8 @@ class Condition:
     diagnostics: tuple[StatusDiagnostic, ...] = ()
     more_diagnostics: int = 0
     rollout: RolloutStatus | None = None
+    held: tuple[HeldRobot, ...] = ()  # robots held back for drift, at most MAX_LISTED
+    more_held: int = 0
 
     @property
     def state(self) -> ReconcilerState:
@@ -122,10 +132,16 @@ def decide(seen: Observation) -> Decision:
     problems = list(build.problems)
     reason = _failure(seen)
     actions: Actions[RenderedRequest] | None = None
+    held: dict[str, Drift] = {}
     if build.fleet is not None:
         fleet = build.fleet
+        held = held_back(fleet, fleet.requests, seen)
         actions = diff(
-            fleet.requests, seen.launches, fleet.suspended, fleet.allow_empty, seen.active
+            fleet.requests,
+            seen.launches,
+            fleet.suspended | held.keys(),
+            fleet.allow_empty,
+            seen.active,
         )
         if actions.refused:
             problems = [
@@ -140,9 +156,53 @@ def decide(seen: Observation) -> Decision:
     target = build if actions is not None else seen.serving
     if actions is None and target is not None and target.fleet is not None:
         fleet = target.fleet
-        actions = diff(fleet.requests, seen.launches, fleet.suspended, True, seen.active)
-    condition = _condition(seen, target, problems, reason, build.omitted)
+        held = held_back(fleet, fleet.requests, seen)
+        keep = fleet.suspended | held.keys()
+        actions = diff(fleet.requests, seen.launches, keep, True, seen.active)
+    condition = with_held(_condition(seen, target, problems, reason, build.omitted), held)
     return Decision(target, actions, condition, stable=target)
+
+
+def held_back(
+    fleet: FleetRender, requests: Mapping[str, RenderedRequest], seen: Observation
+) -> dict[str, Drift]:
+    """With `drift: hold`, the robots whose new request (one their launch topic does not hold)
+    does not fit the interfaces they report: each keeps what it holds until they fit. A robot
+    that reports nothing readable (unknown, error) is never held, nor a suspended one."""
+    if fleet.drift != "hold" or seen.interfaces is None:
+        return {}
+    held: dict[str, Drift] = {}
+    for robot_id, request in requests.items():
+        found = seen.interfaces.get(robot_id)
+        if found is None or robot_id in fleet.suspended:
+            continue
+        if seen.launches.get(robot_id) == request.digest:
+            continue  # delivered already: drift is reported, there is nothing to hold
+        needs = needs_of_rendered(request, fleet.needed_by.get(request.capability_name))
+        drift = drift_of(robot_id, needs, found)
+        if drift.drifted:
+            held[robot_id] = drift
+    return held
+
+
+def with_held(condition: Condition, held: Mapping[str, Drift]) -> Condition:
+    """The condition naming the robots held back for drift (bounded), and why each."""
+    if not held:
+        return condition
+    robots = sorted(held)
+    listed = tuple(
+        HeldRobot(robot=robot_id, reason=_held_reason(held[robot_id]))
+        for robot_id in robots[:MAX_LISTED]
+    )
+    names = ", ".join(robots[:5]) + (", ..." if len(robots) > 5 else "")
+    message = f"{condition.message}; {len(robots)} robot(s) held for drift (drift: hold): {names}"
+    return replace(condition, message=message, held=listed, more_held=len(robots) - len(listed))
+
+
+def _held_reason(drift: Drift) -> str:
+    shown = [item.reason() for item in drift.items[:3]]
+    more = len(drift.items) - len(shown)
+    return "; ".join(shown) + (f"; and {more} more" if more > 0 else "")
 
 
 def _decide_rollout(seen: Observation, build: Desired) -> Decision:
@@ -150,6 +210,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
     fleet = build.fleet
     assert fleet is not None
     stable = seen.serving if seen.serving is not None and seen.serving.fleet else None
+    waiting = held_back(fleet, fleet.requests, seen)
     step = roll_out(
         RolloutInput(
             head=fleet,
@@ -162,15 +223,22 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
             record=seen.wave_record,
             watching_since=seen.watching_since,
             dark_since=seen.dark_since,
+            held=frozenset(waiting),
         )
     )
     if step.serve_stable and stable is not None and stable.fleet is not None:
         back = stable.fleet
-        actions = diff(back.requests, seen.launches, back.suspended, True, seen.active)
-        return Decision(stable, actions, _rollout_condition(seen, step), stable=stable)
-    actions = diff(
-        step.requests, seen.launches, fleet.suspended | step.keep, fleet.allow_empty, seen.active
-    )
+        held = held_back(back, back.requests, seen)
+        actions = diff(
+            back.requests, seen.launches, back.suspended | held.keys(), True, seen.active
+        )
+        condition = with_held(_rollout_condition(seen, step), held)
+        return Decision(stable, actions, condition, stable=stable)
+    # Robots whose wave has not come are left as they are anyway: not held, only waiting.
+    moving = {r: q for r, q in step.requests.items() if r not in step.keep}
+    held = held_back(fleet, moving, seen)
+    keep = fleet.suspended | step.keep | held.keys()
+    actions = diff(step.requests, seen.launches, keep, fleet.allow_empty, seen.active)
     if actions.refused:  # the head would unassign every robot: the stable revision stays
         refused = decide(replace(seen, build=Desired(build.revision, None)))
         problem = StatusDiagnostic(
@@ -190,7 +258,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
     return Decision(
         build,
         actions,
-        _rollout_condition(seen, step),
+        with_held(_rollout_condition(seen, step), held),
         stable=new_stable,
         recheck_at=step.recheck_at,
         wave_record=step.record,

@@ -1,9 +1,10 @@
 """Alert events, pure: (what was told so far, what is seen now) -> the transitions to tell.
 
 Each event is told once per transition, never per resync: a refused commit once per revision,
-a halted or rolled back rollout once per revision, a robot once as it degrades or goes offline
-and once as it is back in sync (running the desired request for SETTLE seconds: a brain in a
-crash loop runs a moment before each crash, and that is no recovery).
+a halted or rolled back rollout once per revision, a robot once as it drifts and once as it
+fits again, a robot once as it degrades or goes offline and once as it is back in sync
+(running the desired request for SETTLE seconds: a brain in a crash loop runs a moment before
+each crash, and that is no recovery).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from configurator.drift import Drift
 from configurator.textsafe import chat_text
 from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
 
@@ -29,6 +31,8 @@ class Kind(str, enum.Enum):
     ROBOT_DEGRADED = "robot_degraded"
     ROBOT_OFFLINE = "robot_offline"
     ROBOT_IN_SYNC = "robot_in_sync"
+    ROBOT_DRIFTED = "robot_drifted"
+    ROBOT_DRIFT_CLEARED = "robot_drift_cleared"
 
 
 _ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLLED_BACK}
@@ -74,6 +78,8 @@ class Seen:
     desired: Mapping[str, str] = field(default_factory=dict)  # robot -> digest, unsuspended
     # robot -> when it was first seen running the digest it reports (the observer's clock)
     running_since: Mapping[str, float] = field(default_factory=dict)
+    # robot -> its drift against its desired request (None: interfaces not known yet)
+    drift: Mapping[str, Drift] | None = None
 
 
 @dataclass(frozen=True)
@@ -83,6 +89,7 @@ class Told:
     refused: tuple[str, ...] = ()  # revisions told refused, oldest first
     rollouts: tuple[tuple[str, str], ...] = ()  # (revision, state) told, oldest first
     alerting: Mapping[str, Kind] = field(default_factory=dict)  # robot -> degraded or offline
+    drifted: frozenset[str] = frozenset()  # robots told drifted, not yet told fitting again
 
 
 def _remember(items: tuple[Any, ...], item: Any) -> tuple[Any, ...]:
@@ -143,7 +150,54 @@ def transitions(
         settled = {r for r, since in seen.running_since.items() if at - since >= settle}
         told, robot_events = _robot_transitions(told, seen, settled, branch, at)
         events += robot_events
+    if seen.drift is not None:
+        told, drift_events = _drift_transitions(told, seen, branch, at)
+        events += drift_events
     return told, events
+
+
+DRIFT_ITEMS_TOLD = 5  # drift items an event's message names; the rest are counted
+
+
+def _drift_transitions(
+    told: Told, seen: Seen, branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """Into drift (its reported interfaces lack what its request needs), and out of it (they
+    fit again), once each. A robot whose interfaces become unknown or unreadable is neither:
+    nothing is claimed either way until it reports again; one no longer assigned is forgotten."""
+    assert seen.drift is not None
+    events: list[Event] = []
+    drifted: set[str] = set()
+    for robot_id in sorted(seen.desired):
+        drift = seen.drift.get(robot_id)
+        was = robot_id in told.drifted
+        if drift is None or drift.interfaces != "reported":
+            if was:
+                drifted.add(robot_id)
+            continue
+        if drift.drifted:
+            drifted.add(robot_id)
+            if not was:
+                texts = [item.reason() for item in drift.items[:DRIFT_ITEMS_TOLD]]
+                more = len(drift.items) - len(texts)
+                message = f"{robot_id} drifted: " + "; ".join(texts)
+                if more > 0:
+                    message += f"; and {more} more"
+                events.append(
+                    Event(Kind.ROBOT_DRIFTED, message, at, branch, robot=robot_id, reason="drift")
+                )
+        elif was:
+            events.append(
+                Event(
+                    Kind.ROBOT_DRIFT_CLEARED,
+                    f"{robot_id}'s interfaces fit its request again",
+                    at,
+                    branch,
+                    robot=robot_id,
+                    reason="fits",
+                )
+            )
+    return replace(told, drifted=frozenset(drifted)), events
 
 
 def _robot_transitions(

@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from configurator.drift import DriftMemo
 from configurator.mqtt import Connection
 from configurator.render import RenderError, render_fleet
 from configurator.source import SourceError
@@ -75,9 +76,11 @@ def fleet_status(
     topics: Topics,
     desired: DesiredCache,
     memos: dict[bool, ReadMemo] | None = None,
+    drift: DriftMemo | None = None,
 ) -> FleetStatus:
     """`memos` (one per way of reading requests, in full or not): what was read of each
-    payload, kept for the next call (`--watch` reads only what changed)."""
+    payload, kept for the next call (`--watch` reads only what changed); `drift`: each robot's
+    drift, worked out again only for a robot whose request or interfaces changed."""
     # With a repository to compare with, the requests' digests are all a row needs: 10,000
     # requests are validated in full only when they are the one account of what is desired.
     status = {t: m for t, m in messages.items() if t == topics.reconciler_status}
@@ -87,7 +90,7 @@ def fleet_status(
     retained = parse_retained(messages, topics, requests=full, memo=memo)
     if robots is None:
         robots = desired_from_retained(retained)
-    rows = build_rows(robots, retained)
+    rows = build_rows(robots, retained, drift)
     return FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
 
 
@@ -98,7 +101,13 @@ def open_view(
     topics = Topics(prefix)
     return RetainedView(
         connection,
-        [topics.all_launch, topics.all_status, topics.all_description, topics.reconciler_status],
+        [
+            topics.all_launch,
+            topics.all_status,
+            topics.all_description,
+            topics.all_interfaces,
+            topics.reconciler_status,
+        ],
         f"{prefix}/sync",
         role="status",
         on_change=on_change,
@@ -122,10 +131,11 @@ def watch(
     time). `changed` is set by the view (and by whoever sets `stop`)."""
     shown: str | None = None
     memos: dict[bool, ReadMemo] = {}
+    drift = DriftMemo()
     while not stop.is_set():
         changed.clear()
         if view.synced:
-            fleet = fleet_status(view.snapshot(), topics, desired, memos)
+            fleet = fleet_status(view.snapshot(), topics, desired, memos, drift)
             key = change_key(fleet)
             if key != shown:
                 shown = key

@@ -20,9 +20,11 @@ from prometheus_client import (
     generate_latest,
 )
 
+from configurator.drift import Drift
 from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
 from reconciler.verdicts import Verdict
 
+INTERFACES_VERDICTS = ("reported", "unknown", "error")
 # A scrape is a GET without a body, one or two Prometheus servers at a time; an idle connection
 # costs only a file descriptor.
 LIMITS = Limits(connections=64, per_client=8, head=5.0, silence=5.0, deadline=10.0)
@@ -72,8 +74,23 @@ class Metrics:
             ["server", "outcome"],
             registry=r,
         )
+        self.drifted = Gauge(
+            "robotconf_drifted_robots",
+            "Assigned robots whose reported interfaces lack what their request needs (a "
+            "missing interface or another type)",
+            registry=r,
+        )
+        self.interfaces = Gauge(
+            "robotconf_robot_interfaces",
+            "Assigned robots by what they report of their interfaces: reported, unknown "
+            "(nothing), error (the source failed, or the report cannot be read)",
+            ["interfaces"],
+            registry=r,
+        )
         for verdict in Verdict:
             self.robots.labels(verdict.value).set(0)
+        for kind in INTERFACES_VERDICTS:
+            self.interfaces.labels(kind).set(0)
         for action in ("publish", "clear"):
             self.publishes.labels(action)
         self._applied: str | None = None
@@ -125,6 +142,15 @@ class Metrics:
     def verdicts(self, counts: Mapping[Verdict, int]) -> None:
         for verdict in Verdict:
             self.robots.labels(verdict.value).set(counts.get(verdict, 0))
+
+    def drift(self, drifts: Mapping[str, Drift]) -> None:
+        """The assigned robots' drift: how many drifted, and what each reports."""
+        counts = dict.fromkeys(INTERFACES_VERDICTS, 0)
+        for found in drifts.values():
+            counts[found.interfaces] += 1
+        for kind, count in counts.items():
+            self.interfaces.labels(kind).set(count)
+        self.drifted.set(sum(1 for found in drifts.values() if found.drifted))
 
     def notified(self, receiver: str, outcome: str) -> None:
         self.notifications.labels(receiver, outcome).inc()

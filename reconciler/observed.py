@@ -12,8 +12,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from configurator.interfaces import MAX_INTERFACES, MAX_INTERFACES_BYTES, RobotInterfaces
 from configurator.launch import LaunchRequest, StopRequest, canonical_json
-from configurator.safejson import PayloadError
+from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.wire import (
     ACTIVE_STATES,
     AgentStatus,
@@ -26,7 +27,8 @@ from reconciler.retained import Ignored, read_object
 
 RECONCILER_STATUS = "reconciler-status"
 WAVE_RECORD = "rollout-record"  # reconciler.wave_memory, read by the reconciler alone
-_ROBOT_LEAVES = ("launch", "status", "description")
+INTERFACES = "interfaces"
+_ROBOT_LEAVES = ("launch", "status", "description", INTERFACES)
 
 
 @dataclass
@@ -39,6 +41,8 @@ class RobotSeen:
     stopped: bool = False  # the launch topic holds a Stop for this robot: nothing assigned
     status: AgentStatus | None = None
     description: RobotDescription | None = None
+    interfaces: RobotInterfaces | None = None  # what it reports of its ROS graph
+    interfaces_error: str | None = None  # why its interfaces payload cannot be read
 
     @property
     def online(self) -> bool:
@@ -192,18 +196,34 @@ def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _R
     # Unreadable is still retained: it is replaced (or cleared), never trusted.
     fields: dict[str, Any] = {"launch_retained": True} if kind == "launch" else {}
     try:
-        raw = read_object(payload)
+        # An interfaces report is bounded tighter than other payloads, before it is parsed.
+        raw = read_object(
+            payload, MAX_INTERFACES_BYTES if kind == INTERFACES else MAX_PAYLOAD_BYTES
+        )
         if robot_id is None:
             return _Reading(reconciler=ReconcilerStatus.model_validate(raw))
         if kind == "launch":
             _read_launch(robot_id, raw, requests, fields)
         elif kind == "status":
             fields["status"] = AgentStatus.model_validate(raw)
+        elif kind == INTERFACES:
+            fields["interfaces"] = _interfaces(raw)
         else:
             fields["description"] = RobotDescription.model_validate(raw)
     except (PayloadError, ValidationError, ValueError) as exc:
-        return _Reading(fields, error=" ".join(str(exc).split())[:300])
+        reason = " ".join(str(exc).split())[:300]
+        if kind == INTERFACES:  # the robot reported, unreadably: `error`, never `unknown`
+            fields["interfaces_error"] = reason
+        return _Reading(fields, error=reason)
     return _Reading(fields)
+
+
+def _interfaces(raw: dict[str, Any]) -> RobotInterfaces:
+    found = RobotInterfaces.model_validate(raw)
+    count = len(found.topics) + len(found.services) + len(found.actions)
+    if count > MAX_INTERFACES:
+        raise ValueError(f"{count:,} interfaces, over the limit of {MAX_INTERFACES:,}")
+    return found
 
 
 def _read_launch(robot_id: str, raw: dict[str, Any], full: bool, fields: dict[str, Any]) -> None:

@@ -76,6 +76,8 @@ def status_of(
         cleared=cleared,
         interval=followed.interval,
         rollout=condition.rollout,
+        held=list(condition.held),
+        more_held=condition.more_held,
     )
 
 

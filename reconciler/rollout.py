@@ -62,6 +62,9 @@ class RolloutInput:
     watching_since: float = 0.0
     # robot -> when the reconciler first saw it dark (offline, or its status gone) since then
     dark_since: Mapping[str, float] = field(default_factory=dict)
+    # Robots whose new request is held back for drift (drift: hold): not sent it, they count
+    # as absent — pending, never failed; the wave goes on without them at its timeout.
+    held: frozenset[str] = frozenset()
 
 
 @dataclass
@@ -272,16 +275,20 @@ class _Rollout:
             digest = head.requests[robot].digest
             since = self.seen.running_since.get(robot)
             dark_at = self.seen.dark_since.get(robot, memory.watching_since) + DARK_GRACE
-            health = _health(
-                robot,
-                statuses.get(robot),
-                digest,
-                self.seen.launches.get(robot) == digest,
-                since,
-                now >= dark_at,
-                now,
-                policy.healthy_after,
-                memory,
+            health = (
+                Health.ABSENT
+                if robot in self.seen.held
+                else _health(
+                    robot,
+                    statuses.get(robot),
+                    digest,
+                    self.seen.launches.get(robot) == digest,
+                    since,
+                    now >= dark_at,
+                    now,
+                    policy.healthy_after,
+                    memory,
+                )
             )
             dark = robot in memory.seen and not is_online(statuses.get(robot))
             if health is Health.PENDING and dark and now < dark_at and robot not in memory.doubted:

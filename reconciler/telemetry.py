@@ -14,14 +14,15 @@ import time
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
+from configurator.drift import Drift, DriftMemo
 from configurator.mqtt import Connection
 from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
 from reconciler.events import Seen, Told, transitions
-from reconciler.observed import RobotSeen, parse_retained
+from reconciler.observed import ReadMemo, Retained, RobotSeen, parse_retained
 from reconciler.retained import RetainedView
-from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, verdict
+from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
 
 if TYPE_CHECKING:
     from reconciler.metrics import Metrics
@@ -52,9 +53,11 @@ class Telemetry:
         # robot -> ((digest, the agent's since), first seen running it by our clock)
         self._running_since: dict[str, tuple[tuple[str, float], float]] = {}
         self._desired: tuple[str | None, dict[str, DesiredRobot]] = (None, {})
+        self._memo = ReadMemo()  # each payload read once while it stays the same
+        self._drift = DriftMemo()  # each robot's drift, again only when request or report move
         self.view = RetainedView(
             connection,
-            [self.topics.all_status],
+            [self.topics.all_status, self.topics.all_interfaces],
             f"{prefix}/sync",
             role="reconciler-alerts",
             on_change=self._wake.set,
@@ -111,23 +114,35 @@ class Telemetry:
         if step is None:  # robots are judged against what the reconciler serves
             return
         now = time.time()  # events carry it, so unix time; runs settle by it too
-        robots = self._robots(now)
+        seen = parse_retained(self.view.snapshot(), self.topics, memo=self._memo)
+        robots = self._robots(seen, now) if self.view.synced else None
         desired = self._desired_of(step)
+        drift = self._drifts(desired, seen) if robots is not None else None
         if self.notifier is not None:
             digests = {r: d.digest for r, d in desired.items() if not d.suspended}
             since = {r: seen for r, (_, seen) in self._running_since.items()}
             self._told, events = transitions(
-                self._told, Seen(step.status, robots, digests, since), now
+                self._told, Seen(step.status, robots, digests, since, drift), now
             )
             self.notifier.tell(events)
-        if self.metrics is not None and robots is not None:
+        if self.metrics is not None and robots is not None and drift is not None:
             self.metrics.verdicts(verdict_counts(desired, robots))
+            self.metrics.drift(drift)
 
-    def _robots(self, now: float) -> dict[str, AgentStatus] | None:
-        """The robots' statuses (None until known), and when each was first seen running."""
-        if not self.view.synced:
-            return None
-        seen = parse_retained(self.view.snapshot(), self.topics)
+    def _drifts(self, desired: Mapping[str, DesiredRobot], seen: Retained) -> dict[str, Drift]:
+        """Each assigned, unsuspended robot's drift against what it should run."""
+        found = {
+            robot_id: robot_drift(
+                robot_id, want, seen.robots.get(robot_id, RobotSeen()), self._drift
+            )
+            for robot_id, want in desired.items()
+            if not want.suspended
+        }
+        self._drift.keep_only(found)
+        return found
+
+    def _robots(self, seen: Retained, now: float) -> dict[str, AgentStatus]:
+        """The robots' statuses, and when each was first seen running."""
         statuses = {r: robot.status for r, robot in seen.robots.items() if robot.status}
         # A run is known by its digest and the agent's time of entering it: a brain that
         # crashed and runs again between two looks is a new run, not a settled one.

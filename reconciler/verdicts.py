@@ -12,6 +12,16 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from configurator.drift import (
+    UNKNOWN,
+    Drift,
+    DriftMemo,
+    Need,
+    drift_of,
+    needs_of,
+    needs_of_rendered,
+)
+from configurator.interfaces import interfaces_verdict
 from configurator.launch import template_mismatch
 from configurator.render import FleetRender
 from configurator.textsafe import printable
@@ -47,6 +57,7 @@ class DesiredRobot:
     template: str | None = None
     labels: Mapping[str, str] = field(default_factory=dict)
     wave: str | None = None  # the rollout wave it falls in; None: no policy
+    needs: tuple[Need, ...] = ()  # the interfaces its request needs of the robot
 
 
 def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
@@ -64,6 +75,7 @@ def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:
             request.robot_template,
             fleet.labels.get(robot_id, {}),
             waves.get(robot_id),
+            needs_of_rendered(request, fleet.needed_by.get(request.capability_name)),
         )
         for robot_id, request in fleet.requests.items()
     }
@@ -77,6 +89,7 @@ def desired_from_retained(retained: Retained) -> dict[str, DesiredRobot]:
             robot.launch.scenario.name,
             robot.launch.digest,
             template=robot.launch.scenario.capability.robot_template,
+            needs=needs_of(robot.launch),
         )
         for robot_id, robot in retained.robots.items()
         if robot.launch is not None
@@ -102,6 +115,7 @@ class RobotRow:
     # The last restart asked for from the desk that its agent carried out: who, issued when.
     restart_requested_by: str | None = None
     restart_requested_at: float | None = None
+    drift: Drift = UNKNOWN  # its reported interfaces against its desired request
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -119,6 +133,9 @@ class RobotRow:
             "restarts": self.restarts,
             "reloads": self.reloads,
             "warnings": self.warnings,
+            "interfaces": self.drift.interfaces,
+            "drift": [item.as_json() for item in self.drift.items],
+            "drift_note": self.drift.note,
             "restart": (
                 {"requested_by": self.restart_requested_by, "at": self.restart_requested_at}
                 if self.restart_requested_by is not None
@@ -174,13 +191,37 @@ def template_warning(desired: DesiredRobot | None, robot: RobotSeen) -> str | No
     return warning
 
 
-def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[RobotRow]:
-    """Every robot that is desired or known to the broker, worst verdict first."""
+def robot_drift(
+    robot_id: str, want: DesiredRobot | None, robot: RobotSeen, memo: DriftMemo | None = None
+) -> Drift:
+    """Its interfaces against its desired request: judged only for a robot assigned and not
+    suspended (whose request is delivered); else only whether it reports them."""
+    if want is None or want.suspended:
+        if robot.interfaces_error is not None:
+            return Drift("error", note=f"its interfaces cannot be read: {robot.interfaces_error}")
+        return Drift(interfaces_verdict(robot.interfaces), judged=False)
+    if memo is not None:
+        return memo.get(robot_id, want.digest, want.needs, robot.interfaces, robot.interfaces_error)
+    return drift_of(robot_id, want.needs, robot.interfaces, robot.interfaces_error)
+
+
+def build_rows(
+    desired: Mapping[str, DesiredRobot], retained: Retained, memo: DriftMemo | None = None
+) -> list[RobotRow]:
+    """Every robot that is desired or known to the broker, worst verdict first (a drifted
+    robot first among its verdict's). `memo`: each robot's drift, kept while its request and
+    its interfaces stay the same."""
     rows = []
-    for robot_id in sorted(set(desired) | set(retained.robots)):
+    robots = sorted(set(desired) | set(retained.robots))
+    reconciler = retained.reconciler
+    held = {h.robot: h.reason for h in reconciler.held} if reconciler is not None else {}
+    for robot_id in robots:
         want = desired.get(robot_id)
         robot = retained.robots.get(robot_id, RobotSeen())
         found, reason = verdict(want, robot)
+        if robot_id in held and found not in SETTLED:
+            why = f"held by the reconciler for drift (drift: hold): {held[robot_id]}"
+            reason = why if found is Verdict.PROGRESSING else f"{reason}; {why}"
         status = robot.status
         warnings = [w for w in [template_warning(want, robot)] if w]
         if status is not None:
@@ -203,9 +244,12 @@ def build_rows(desired: Mapping[str, DesiredRobot], retained: Retained) -> list[
                 wave=want.wave if want else None,
                 restart_requested_by=status.restart_requested_by if status else None,
                 restart_requested_at=status.restart_requested_at if status else None,
+                drift=robot_drift(robot_id, want, robot, memo),
             )
         )
-    rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), r.robot_id))
+    if memo is not None:
+        memo.keep_only(robots)
+    rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), not r.drift.drifted, r.robot_id))
     return rows
 
 

@@ -14,6 +14,9 @@ COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STA
 # keeps its table.
 LABELS = "LABELS"
 WAVE = "WAVE"
+# Shown last when some robot reports its interfaces: `ok`, `1 missing, 1 type`, `error`, ...
+DRIFT = "DRIFT"
+DRIFT_LINES = 20  # drift items listed under the table; the rest are counted
 
 _STYLE = {
     Verdict.DEGRADED: "bold red",
@@ -40,7 +43,8 @@ def columns(rows: list[RobotRow]) -> tuple[str, ...]:
         if shown
     ]
     at = COLUMNS.index("SCENARIO") + 1
-    return (*COLUMNS[:at], *extra, *COLUMNS[at:])
+    drift = (DRIFT,) if any(r.drift.interfaces != "unknown" for r in rows) else ()
+    return (*COLUMNS[:at], *extra, *COLUMNS[at:], *drift)
 
 
 def fleet_table(fleet: FleetStatus) -> Table:
@@ -66,9 +70,25 @@ def fleet_table(fleet: FleetStatus) -> Table:
             Text(short_digest(r.reported)),
             safe(r.state),
             Text(str(r.restarts)),
+            *([_drift_cell(r)] if DRIFT in names else []),
             safe("" if r.verdict is Verdict.IN_SYNC else r.reason),
         )
     return table
+
+
+def _drift_cell(row: RobotRow) -> Text:
+    summary = row.drift.summary()
+    style = "red" if row.drift.drifted else "yellow" if summary in ("error", "ok?") else ""
+    return Text(summary, style=style)
+
+
+def drift_lines(rows: list[RobotRow], limit: int = DRIFT_LINES) -> list[str]:
+    """`drift: tb3-04 lacks /scan (...)`, worst first as the rows are; notes after the items."""
+    lines = [f"drift: {item.text()}" for r in rows for item in r.drift.items]
+    lines += [f"note: {r.robot_id}: {r.drift.note}" for r in rows if r.drift.note]
+    if len(lines) > limit:
+        lines = [*lines[:limit], f"... {len(lines) - limit} more (robotconf status --json)"]
+    return lines
 
 
 def fleet_status_view(fleet: FleetStatus) -> Group:
@@ -90,6 +110,10 @@ def fleet_status_view(fleet: FleetStatus) -> Group:
     if warnings:
         parts.append(Text(""))
         parts += [safe(w, "yellow") for w in warnings]
+    drifted = drift_lines(fleet.rows)
+    if drifted:
+        parts.append(Text(""))
+        parts += [safe(line, "red" if line.startswith("drift:") else "yellow") for line in drifted]
     restarts = [line for r in fleet.rows if (line := r.restart_line()) is not None]
     if restarts:
         parts.append(Text(""))

@@ -57,7 +57,8 @@ def status(
     wait: float,
     selectors: tuple[str, ...],
 ) -> ExitCode:
-    """Show the fleet: desired vs reported, worst first (exit 0 when every robot is in sync)."""
+    """Show the fleet: desired vs reported, worst first (exit 0 when every robot is in sync),
+    and each robot's drift: what its request needs that the interfaces it reports lack."""
     selector = parse_selector(selectors)
     connection = mqtt.connection()
     topics = Topics(mqtt.prefix)

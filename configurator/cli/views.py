@@ -11,12 +11,20 @@ from rich.console import Group
 from rich.tree import Tree
 
 from configurator.catalog import Section, catalogue_sections, catalogue_summary
+from configurator.cli.broker_options import BrokerOptions, broker_options
 from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.options import repo_option, rev_option
 from configurator.cli.terminal import safe, show
 from configurator.diagnostics import did_you_mean, format_text, summary_line
 from configurator.incremental import BuildCache
-from configurator.plan import format_plan_markdown, format_plan_text, make_plan, plan_as_json
+from configurator.plan import (
+    Reported,
+    format_plan_markdown,
+    format_plan_text,
+    make_plan,
+    plan_as_json,
+    with_drift,
+)
 from configurator.render import FleetRender, RenderError, render_robot
 from configurator.textsafe import json_printable
 from configurator.tree import (
@@ -29,6 +37,7 @@ from configurator.tree import (
     task_label,
 )
 from configurator.types import RolloutPolicy
+from configurator.wire import Topics
 from configurator.workspace import check
 
 
@@ -148,13 +157,46 @@ def _fleet_at(
     return rendered, fleet.model.rollout if fleet is not None else None
 
 
+def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
+    """Each robot's retained interfaces report (or why it cannot be read); None, said on
+    stderr, when the broker does not answer: the plan stands without drift."""
+    from reconciler.observed import parse_retained
+    from reconciler.retained import take_snapshot
+
+    connection = mqtt.connection()
+    topics = Topics(mqtt.prefix)
+    messages = take_snapshot(
+        connection, [topics.all_interfaces], f"{mqtt.prefix}/sync", "plan", wait
+    )
+    if messages is None:
+        sys.stderr.write(
+            f"robotconf: note: no answer from {connection.address.url} within {wait:g} s: "
+            "drift is not judged (--wait S)\n"
+        )
+        return None
+    seen = parse_retained(messages, topics)
+    return {r: (robot.interfaces, robot.interfaces_error) for r, robot in seen.robots.items()}
+
+
 @click.command("plan")
 @repo_option
 @click.option("--base", required=True, help="the revision robots run now")
 @click.option("--head", default=None, help="the new revision (default: the work tree)")
 @click.option("--format", "fmt", type=click.Choice(["text", "markdown", "json"]), default="text")
-def plan(repo: Path, base: str, head: str | None, fmt: str) -> ExitCode:
-    """What would change per robot between two revisions (exit 1 when something would)."""
+@broker_options
+@click.option(
+    "--wait",
+    type=float,
+    default=3.0,
+    help="with --broker: seconds to wait for the robots' interfaces (then drift is not judged)",
+)
+def plan(
+    repo: Path, base: str, head: str | None, fmt: str, mqtt: BrokerOptions, wait: float
+) -> ExitCode:
+    """What would change per robot between two revisions (exit 1 when something would).
+    With --broker (or $ROBOTCONF_BROKER; without either no broker is read), also the drift of
+    each robot that would change: what its new request needs that the interfaces it reports
+    lack."""
     # Both revisions are checked before either is reported: each names its own problems.
     found: dict[str, tuple[FleetRender, RolloutPolicy | None]] = {}
     problems: list[str] = []
@@ -169,6 +211,10 @@ def plan(repo: Path, base: str, head: str | None, fmt: str) -> ExitCode:
     # The head's policy decides the waves: it is the one the reconciler will roll out by.
     (base_fleet, _), (head_fleet, rollout) = found["base"], found["head"]
     result = make_plan(base_fleet, head_fleet, rollout)
+    if mqtt.broker is not None:
+        reported = _reported_interfaces(mqtt, wait)
+        if reported is not None:
+            result = with_drift(result, head_fleet, reported)
     if fmt == "markdown":
         sys.stdout.write(format_plan_markdown(result))
     elif fmt == "json":

@@ -135,3 +135,24 @@ def test_a_mutated_request_never_passes_as_another(payload: bytes) -> None:
         assert canonical_json(message.content()) == canonical_json(
             {k: v for k, v in parse_object(payload).items() if k not in DIGEST_EXCLUDED}
         )
+
+
+@given(st.one_of(st.binary(max_size=300), json_values.map(lambda v: json.dumps(v).encode())))
+def test_an_interfaces_report_is_read_or_an_error_never_a_crash(payload: bytes) -> None:
+    """A robot's interfaces report: a model, or `error` with a reason; drift then claims
+    nothing from an unreadable one."""
+    from configurator.drift import Need, drift_of
+    from configurator.wire import Topics
+    from reconciler.observed import parse_retained
+
+    topics = Topics()
+    robot = parse_retained({topics.interfaces("r1"): payload}, topics).robots.get("r1")
+    if not payload:
+        assert robot is None  # an empty retained message clears it: nothing reported
+        return
+    assert robot is not None
+    assert (robot.interfaces is None) != (robot.interfaces_error is None)
+    need = Need("odometry", "/odom", "topic", "nav_msgs/msg/Odometry")
+    drift = drift_of("r1", [need], robot.interfaces, robot.interfaces_error)
+    if robot.interfaces_error is not None:
+        assert drift.interfaces == "error" and drift.items == ()

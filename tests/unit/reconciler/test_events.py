@@ -305,3 +305,44 @@ def test_verdict_counts_judge_robots_from_their_statuses() -> None:
         Verdict.OFFLINE: 1,  # r4 never reported
         Verdict.UNASSIGNED: 1,
     }
+
+
+def test_a_robot_is_told_once_into_drift_and_once_out_of_it() -> None:
+    from configurator.drift import UNKNOWN, Drift, DriftItem, Need
+
+    need = Need("scan", "/scan", "topic", "sensor_msgs/msg/LaserScan", ("patrol_with_lidar",))
+    lacking = Drift("reported", (DriftItem("r1", need),))
+    fits, failed = Drift("reported"), Drift("error", note="ros2 timed out")
+    desired = {"r1": D1}
+    steps = run(
+        [
+            Seen(ready(), {}, desired, drift=None),  # interfaces not known yet: nothing
+            Seen(ready(), {}, desired, drift={"r1": fits}),
+            Seen(ready(), {}, desired, drift={"r1": lacking}),
+            Seen(ready(), {}, desired, drift={"r1": lacking}),  # a resync
+            Seen(ready(), {}, desired, drift={"r1": UNKNOWN}),  # stopped reporting: no claim
+            Seen(ready(), {}, desired, drift={"r1": failed}),
+            Seen(ready(), {}, desired, drift={"r1": lacking}),  # still the same drift
+            Seen(ready(), {}, desired, drift={"r1": fits}),
+            Seen(ready(), {}, desired, drift={"r1": fits}),
+            Seen(ready(), {}, {}, drift={"r1": lacking}),  # no longer assigned: not judged
+        ]
+    )
+    assert kinds(steps) == [
+        [],
+        [],
+        [Kind.ROBOT_DRIFTED],
+        [],
+        [],
+        [],
+        [],
+        [Kind.ROBOT_DRIFT_CLEARED],
+        [],
+        [],
+    ]
+    drifted = steps[2][0]
+    assert drifted.robot == "r1" and drifted.as_json()["event"] == "robot_drifted"
+    assert drifted.message == (
+        "r1 drifted: lacks /scan (sensor_msgs/msg/LaserScan), needed by patrol_with_lidar via "
+        "mapping scan"
+    )

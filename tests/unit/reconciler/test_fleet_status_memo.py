@@ -42,3 +42,34 @@ def test_redraws_with_memos_are_fresh_reads(repo: Path) -> None:
         seen.append(json.dumps(got.as_json(heartbeat=False), sort_keys=True))
     assert len(set(seen)) == 3  # each change shows
     assert list(memos) == [repo != ROOT]  # requests read in full only without a repository
+
+
+@pytest.mark.parametrize("repo", [ROOT, Path("/nonexistent/lab")])
+def test_drift_is_worked_out_again_only_for_the_robot_whose_report_or_request_changed(
+    repo: Path,
+) -> None:
+    from configurator.drift import DriftMemo
+    from configurator.interfaces import Interface, RobotInterfaces
+
+    def report(*names: str) -> bytes:
+        topics = [Interface(name=n, type="nav_msgs/msg/Odometry") for n in names]
+        return RobotInterfaces(topics=topics, source="ros2").model_dump_json().encode()
+
+    fleet = render_fleet(check(ROOT).repo)
+    messages = {T.launch(r): q.payload() for r, q in fleet.requests.items()}
+    for robot in fleet.requests:
+        messages[T.interfaces(robot)] = report("/odom")
+    memos: dict[bool, ReadMemo] = {}
+    drift = DriftMemo()
+    desired = DesiredCache(repo, None)
+    first = fleet_status(dict(messages), T, desired, memos, drift)
+    assert drift.computed == len(fleet.requests)
+    again = fleet_status(dict(messages), T, desired, memos, drift)
+    assert drift.computed == len(fleet.requests)  # nothing changed: nothing worked out
+    assert again.as_json(heartbeat=False) == first.as_json(heartbeat=False)
+
+    messages[T.interfaces("tb3-04")] = report("/odom", "/scan")
+    changed = fleet_status(dict(messages), T, desired, memos, drift)
+    assert drift.computed == len(fleet.requests) + 1  # tb3-04, and no other
+    fresh = fleet_status(dict(messages), T, DesiredCache(repo, None))
+    assert changed.as_json(heartbeat=False) == fresh.as_json(heartbeat=False)
