@@ -6,7 +6,8 @@ The graph: {"topics": [{"name": "/scan", "type": "sensor_msgs/msg/LaserScan"}, .
 printed once with both (`/x [a/msg/A, b/msg/B]`). `$VAR` in a name is the variable of the
 environment it runs with (e.g. `/domain_$ROS_DOMAIN_ID`). `mode` is `ok`, `fail` (exit 1, a
 line on stderr), `hang` (sleep until killed), `garbage` (lines that are no list), or a mapping
-verb -> mode (`{"action": "fail"}`). Standard library only: it starts fast.
+verb -> mode (`{"action": "fail"}`). With $STANDIN_ROS2_LOG set, each run appends
+`PID VERB MODE` to that file. Standard library only: it starts fast.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import time
 from pathlib import Path
 
 GRAPH_ENV = "STANDIN_ROS2_GRAPH"
+LOG_ENV = "STANDIN_ROS2_LOG"
 KIND_OF_VERB = {"topic": "topics", "service": "services", "action": "actions"}
 USAGE = "usage: ros2 {topic,service,action} list [-t]"
 
@@ -56,6 +58,10 @@ def main(argv: list[str]) -> int:
         return 2
     graph = json.loads(Path(path).read_text(encoding="utf-8"))
     mode = _mode(graph, verb)
+    calls = os.environ.get(LOG_ENV)
+    if calls:
+        with open(calls, "a", encoding="utf-8") as out:
+            out.write(f"{os.getpid()} {verb} {mode}\n")
     if mode == "fail":
         print("!rclpy.ok(): the stand-in was told to fail", file=sys.stderr)
         return 1

@@ -4,6 +4,7 @@ strictly and bounded (agent/interfaces.py), and the stand-in `ros2` printing tha
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -62,7 +63,7 @@ def test_no_output_is_no_interface_and_blank_lines_are_skipped() -> None:
     ],
 )
 def test_any_other_line_refuses_the_whole_output(line: str) -> None:
-    with pytest.raises(SourceError, match="on line 2, not NAME \\[TYPE, ...\\]"):
+    with pytest.raises(SourceError, match=re.escape("on line 2, not NAME [TYPE, ...]")):
         parse_cli_list("/ok [std_msgs/msg/Empty]\n" + line + "\n", "ros2 topic list -t")
 
 
@@ -106,7 +107,7 @@ def test_the_command_json() -> None:
     ],
 )
 def test_a_command_printing_anything_else_is_refused(raw: bytes, reason: str) -> None:
-    with pytest.raises(SourceError, match=reason.replace("[", "\\[").replace("{", "\\{")):
+    with pytest.raises(SourceError, match=re.escape(reason)):
         parse_command_json(raw, "cmd")
 
 
