@@ -62,8 +62,9 @@ class SourceError(ValueError):
 
 
 def _shown(text: str, limit: int = 60) -> str:
+    """Quoted and printable (escapes written once: `\\x1b`), cut to `limit` characters."""
     text = printable(text)
-    return repr(text if len(text) <= limit else text[:limit] + "...")
+    return "'" + (text if len(text) <= limit else text[:limit] + "...") + "'"
 
 
 # ---------------------------------------------------------------- parsing (pure)
