@@ -353,6 +353,12 @@ class InterfaceProbe:
             self._child.kill()
             self._child = None
 
+    def postpone(self, now: float) -> None:
+        """After an internal error: this reading is given up, the next one an interval on."""
+        self.close()
+        self._steps, self._read = [], {}
+        self._next_at = now + self.config.interval
+
     # ------------------------------------------------------------ a reading, step by step
 
     def _service(self, ready: Iterable[int], now: float) -> RobotInterfaces | None:

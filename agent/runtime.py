@@ -571,7 +571,7 @@ class Agent:
             report = probe.service(ready, now)
         except Exception:
             log.exception("internal error while reading the interfaces; trying again later")
-            probe.close()
+            probe.postpone(now)
             return False
         if report is not None and self.connected:
             self._publish_interfaces(report)

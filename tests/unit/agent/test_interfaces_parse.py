@@ -18,6 +18,7 @@ from agent.interfaces import (
 )
 from agent.standin_ros2 import lines_of
 from configurator.interfaces import MAX_INTERFACE_NAME, MAX_INTERFACES, MAX_INTERFACES_BYTES
+from configurator.wire import AgentState, AgentStatus
 
 # What `ros2 topic list -t` prints on a TurtleBot3 (ros2topic/verb/list.py: name, a space,
 # the types in brackets joined by ', ').
@@ -146,3 +147,10 @@ def test_the_standin_prints_what_the_parser_reads() -> None:
     assert lines == ["/a [std_msgs/msg/Empty]", "/chatter [std_msgs/msg/String, example/msg/Other]"]
     assert lines_of(graph, "topic", show_types=False) == ["/a", "/chatter"]
     assert len(parse_cli_list("\n".join(lines), "t")) == 3
+
+
+def test_the_status_says_why_interfaces_cannot_be_read_and_older_statuses_still_read() -> None:
+    older = AgentStatus.model_validate_json(b'{"robot_id": "tb3-01", "state": "running"}')
+    assert older.interfaces_error is None
+    newer = AgentStatus(robot_id="tb3-01", state=AgentState.IDLE, interfaces_error="no `ros2`")
+    assert AgentStatus.model_validate_json(newer.model_dump_json()) == newer
