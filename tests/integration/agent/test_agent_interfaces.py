@@ -296,3 +296,21 @@ def test_more_interfaces_than_the_bound_are_cut_and_counted(
     report = seen.wait("reported", lambda r: bool(r.topics))
     assert len(report.topics) == MAX_INTERFACES and report.topics[0].name == "/robot/t00000"
     assert report.services == [] and report.truncated == 50 + 1  # a duplicate is no entry
+
+
+def test_a_broker_that_lost_its_retained_messages_gets_the_report_again(
+    make_agent: AgentFactory, watch: FleetWatch, mosquitto: Mosquitto, ros2: Ros2
+) -> None:
+    """Published at every connection: an hour-long interval, so no reading causes it."""
+    agent = make_agent(interfaces={"interval": 3600}, env=ros2.env()).start()
+    first = RobotInterfaces.model_validate_json(
+        read_retained(mosquitto.url, TOPICS.interfaces(ROBOT))
+    )
+    idle = watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    mosquitto.kill()
+    mosquitto.start()  # same port, retained messages gone (no persistence)
+    watch.wait_for(ROBOT, lambda s: s.seq > idle.seq, "a new connection", agent=agent)
+    again = RobotInterfaces.model_validate_json(
+        read_retained(mosquitto.url, TOPICS.interfaces(ROBOT))
+    )
+    assert again == first and ros2.readings() == 1
