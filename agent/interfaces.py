@@ -1,7 +1,5 @@
 """The robot's ROS interfaces for `<prefix>/robots/<id>/interfaces`: the source run as a child
 process that the agent's loop watches (no thread), its output parsed strictly and bounded.
-
-Pure parsing and bounding first, then `InterfaceProbe`, the edge the runtime drives.
 """
 
 from __future__ import annotations

@@ -1,14 +1,14 @@
 """A stand-in `ros2` for demos and tests: `ros2 topic|service|action list [-t]` as ros2cli prints
 them, from a JSON graph file named by $STANDIN_ROS2_GRAPH; it can hang, fail or print garbage.
-
-The graph: {"topics": [{"name": "/scan", "type": "sensor_msgs/msg/LaserScan"}, ...],
-"services": [...], "actions": [...], "mode": "ok"}. A name listed twice with two types is
-printed once with both (`/x [a/msg/A, b/msg/B]`). `$VAR` in a name is the variable of the
-environment it runs with (e.g. `/domain_$ROS_DOMAIN_ID`). `mode` is `ok`, `fail` (exit 1, a
-line on stderr), `hang` (sleep until killed), `garbage` (lines that are no list), or a mapping
-verb -> mode (`{"action": "fail"}`). With $STANDIN_ROS2_LOG set, each run appends
-`PID VERB MODE` to that file. Standard library only: it starts fast.
 """
+
+# The graph: {"topics": [{"name": "/scan", "type": "sensor_msgs/msg/LaserScan"}, ...],
+# "services": [...], "actions": [...], "mode": "ok"}. A name listed twice with two types is
+# printed once with both (`/x [a/msg/A, b/msg/B]`). `$VAR` in a name is the variable of the
+# environment it runs with (e.g. `/domain_$ROS_DOMAIN_ID`). `mode` is `ok`, `fail` (exit 1, a
+# line on stderr), `hang` (sleep until killed), `garbage` (lines that are no list), or a
+# mapping verb -> mode (`{"action": "fail"}`). With $STANDIN_ROS2_LOG set, each run appends
+# `PID VERB MODE` to that file. Standard library only: it starts fast.
 
 from __future__ import annotations
 
