@@ -74,6 +74,7 @@ class BrokerLink:
         self.restart_topic = self.topics.restart(robot_id)
         self.logs_request_topic = self.topics.logs_request(robot_id)
         self.logs_topic = self.topics.logs(robot_id)
+        self.interfaces_topic = self.topics.interfaces(robot_id)
         self._connection = connection
         self._keepalive = keepalive
         self._inbox = inbox
@@ -280,6 +281,10 @@ class BrokerLink:
     def publish_description(self, description: RobotDescription) -> None:
         payload = description.model_dump_json(exclude_none=True).encode("utf-8")
         self.client.publish(self.description_topic, payload, qos=QOS, retain=True)
+
+    def publish_interfaces(self, payload: bytes) -> None:
+        # Retained: a reader that comes later (the reconciler, `status`) needs the last report.
+        self.client.publish(self.interfaces_topic, payload, qos=QOS, retain=True)
 
     def publish_logs(self, payload: bytes) -> None:
         # Not retained: an answer is for who asks now. Paced by LogStream, so QoS 1 costs

@@ -28,6 +28,9 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG,
         description="Receive this robot's Launch Request over MQTT; supervise its brain service.",
+        epilog="With `interfaces: {interval: SECONDS}` in agent.yaml the agent also reports the "
+        "robot's ROS topics, services and actions (`ros2 ... list -t`, or `interfaces.command`) "
+        "on <prefix>/robots/<id>/interfaces; off unless configured.",
     )
     parser.add_argument(
         "--config",

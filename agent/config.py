@@ -117,6 +117,42 @@ class LogConfig(StrictModel):
     backups: int = Field(default=3, ge=0)
 
 
+INTERFACES_EXAMPLE = "interfaces: {interval: 30}"
+# The default source runs three `ros2 ... list -t` (each a Python start, and the first one
+# may start the ROS 2 daemon): seconds, not milliseconds, on a small robot computer.
+DEFAULT_INTERFACES_TIMEOUT = 20.0
+
+
+class InterfacesConfig(StrictModel):
+    """Reporting the robot's ROS interfaces (agent/interfaces.py): on when the section is
+    there. `command` replaces `ros2 topic/service/action list -t` by a program printing JSON."""
+
+    interval: float = Field(gt=0, description="seconds from the end of one reading to the next")
+    command: list[str] | None = None
+    timeout: float = Field(default=DEFAULT_INTERFACES_TIMEOUT, gt=0)
+
+    @field_validator("command", mode="before")
+    @classmethod
+    def _command_is_a_list(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            raise ValueError(
+                "must be an argument list, never a shell string; "
+                "e.g. command: [/opt/robot/bin/list-interfaces, --json]"
+            )
+        return value
+
+    @field_validator("command")
+    @classmethod
+    def _command(cls, value: list[str] | None) -> list[str] | None:
+        if value is not None and (not value or not value[0].strip()):
+            raise ValueError(
+                "is empty; give a program that prints the interfaces as "
+                "JSON, e.g. command: [/opt/robot/bin/list-interfaces, --json], or leave it "
+                "out to run `ros2 ... list -t`"
+            )
+        return value
+
+
 # ---------------------------------------------------------------- the brain's environment
 
 # POSIX's portable names: what every shell and `os.environ` takes as a variable name.
@@ -199,6 +235,8 @@ class AgentConfig(StrictModel):
     # or published, as it may hold secrets; so it stays out of the model's repr too.
     # ROS_DOMAIN_ID is checked on reading (`_env_problems`), located at its own line.
     env: dict[EnvName, EnvValue] = Field(default_factory=dict, repr=False)
+    # Absent: the robot reports no interfaces, and readers take them as unknown.
+    interfaces: InterfacesConfig | None = None
 
     @field_validator("broker")
     @classmethod
@@ -237,6 +275,13 @@ class AgentConfig(StrictModel):
             raise ValueError(
                 f"reload is a mapping of its settings, e.g. reload: {{signal: {name}}}"
             )
+        return value
+
+    @field_validator("interfaces", mode="before")
+    @classmethod
+    def _interfaces_is_a_mapping(cls, value: Any) -> Any:
+        if value is not None and not isinstance(value, dict):
+            raise ValueError(f"interfaces is a mapping of its settings, e.g. {INTERFACES_EXAMPLE}")
         return value
 
     @model_validator(mode="after")
@@ -321,6 +366,7 @@ _SECTIONS: dict[Loc, type[BaseModel]] = {
     ("tls",): TlsConfig,
     ("log",): LogConfig,
     ("reload",): ReloadConfig,
+    ("interfaces",): InterfacesConfig,
 }
 
 _HINTS: dict[str, str] = {
@@ -329,6 +375,7 @@ _HINTS: dict[str, str] = {
     "command": f"e.g. command: {COMMAND_EXAMPLE}",
     "workdir": "e.g. workdir: /var/lib/robotconf/tb3-01",
     "signal": "e.g. reload: {signal: SIGHUP}",
+    "interval": f"e.g. {INTERFACES_EXAMPLE} (seconds between readings)",
 }
 
 

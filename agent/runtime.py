@@ -36,6 +36,7 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
+from agent.interfaces import InterfaceProbe
 from agent.logs import LogStream, Redactor
 from agent.supervisor import (
     Effect,
@@ -59,6 +60,7 @@ from agent.workdir import (
     SeqStore,
     write_atomic,
 )
+from configurator.interfaces import RobotInterfaces
 from configurator.launch import LaunchRequest
 from configurator.safejson import PayloadError, parse_object
 from configurator.throttle import Throttle
@@ -138,6 +140,15 @@ class Agent:
                 "ROBOTCONF_ROBOT_ID": config.robot_id,
             }
         )
+        self.interfaces: InterfaceProbe | None = None
+        if config.interfaces is not None:
+            redactor = redactor_of(config)
+            self.interfaces = InterfaceProbe(
+                config.interfaces,
+                self.introspection_env,
+                self.workdir,
+                redact=lambda text: redactor.fresh().line(text),
+            )
         self.connected = False
         self.conn_seq = 0
         self._last_published: AgentStatus | None = None
@@ -174,12 +185,16 @@ class Agent:
     def step(self, ready: Mapping[int, int]) -> None:
         """One pass: what became ready (fd -> selector events), then events, deadlines, status."""
         readable = writable = False
+        probe_fds = self.interfaces.watches() if self.interfaces is not None else {}
+        probe_ready: list[int] = []
         for fd, mask in ready.items():
             if fd == self.inbox.fileno():
                 self.inbox.clear_wakeups()
             elif fd in self._exit_fds:
                 brain = self._exit_fds.pop(fd)
                 self.inbox.put_local(BrainExited(brain.pid, brain.reap()))
+            elif fd in probe_fds:
+                probe_ready.append(fd)
             else:
                 readable = bool(mask & selectors.EVENT_READ)
                 writable = bool(mask & selectors.EVENT_WRITE)
@@ -194,6 +209,8 @@ class Agent:
         if deadline is not None and now >= deadline:
             self._apply(self.supervisor.tick(now))
             handled = True
+        if self.interfaces is not None and (probe_ready or now >= self.interfaces.due()):
+            handled |= self._read_interfaces(probe_ready, now)
         self._maybe_rotate_log(now)
         self._send_logs(now)
         report = self._held_until
@@ -216,6 +233,9 @@ class Agent:
             wanted[fd] = (events, ("link", generation))
         for fd, exiting in self._exit_fds.items():
             wanted[fd] = (selectors.EVENT_READ, ("brain", exiting.pid))
+        if self.interfaces is not None:
+            for fd, identity in self.interfaces.watches().items():
+                wanted[fd] = (selectors.EVENT_READ, identity)
         return wanted
 
     def due(self) -> float:
@@ -230,6 +250,8 @@ class Agent:
             due = min(due, self._next_log_check)
         if self._held_until is not None:
             due = min(due, self._held_until)
+        if self.interfaces is not None:
+            due = min(due, self.interfaces.due())
         logs = self.logs.due(now)
         if logs is not None and self.connected:
             due = min(due, logs)
@@ -246,6 +268,8 @@ class Agent:
                 "message": "agent stopped",
             }
         )
+        if self.interfaces is not None:
+            self.interfaces.close()
         self.link.close(final if self.connected else None)
         self.inbox.close()
         log.info("agent stopped")
@@ -269,6 +293,8 @@ class Agent:
             self._last_connect_problem = None
             log.info("connected (seq %d)", event.seq)
             self.link.publish_description(self.description)
+            if self.interfaces is not None and self.interfaces.report is not None:
+                self._publish_interfaces(self.interfaces.report)
             self._publish(force=True)
         elif isinstance(event, Disconnected):
             if self.connected:
@@ -528,6 +554,32 @@ class Agent:
             log.info("rotated %s", self.brain_log.path)
             self.logs.rotated()
 
+    # ------------------------------------------------------------ interfaces
+
+    def introspection_env(self) -> dict[bytes, bytes]:
+        """The environment the interfaces source runs with, asked for at every reading: the
+        brain's, so that its ROS_DOMAIN_ID and RMW apply (the one place to change that)."""
+        return self._brain_env
+
+    def _read_interfaces(self, ready: list[int], now: float) -> bool:
+        """One look at the interfaces source; True when its error (in the status) changed.
+        A bug here is logged and the reading given up: it never stops the agent."""
+        probe = self.interfaces
+        assert probe is not None
+        before = probe.error
+        try:
+            report = probe.service(ready, now)
+        except Exception:
+            log.exception("internal error while reading the interfaces; trying again later")
+            probe.postpone(now)
+            return False
+        if report is not None and self.connected:
+            self._publish_interfaces(report)
+        return probe.error != before
+
+    def _publish_interfaces(self, report: RobotInterfaces) -> None:
+        self.link.publish_interfaces(report.model_dump_json(exclude_none=True).encode("utf-8"))
+
     def _remove(self, name: str) -> None:
         try:
             (self.workdir / name).unlink()
@@ -539,7 +591,10 @@ class Agent:
     # ------------------------------------------------------------ status
 
     def current_status(self) -> AgentStatus:
-        return self.supervisor.status(self.conn_seq)
+        status = self.supervisor.status(self.conn_seq)
+        if self.interfaces is not None and self.interfaces.error is not None:
+            status.interfaces_error = self.interfaces.error
+        return status
 
     def _publish_if_changed(self) -> None:
         self._publish(force=False)

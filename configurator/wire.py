@@ -225,6 +225,9 @@ class AgentStatus(_Message):
     # asked (as the request says) and when it was issued (unix time).
     restart_requested_by: str | None = None
     restart_requested_at: float | None = None
+    # Why the robot's interfaces could not be read (agent.yaml `interfaces`), while they
+    # cannot: the interfaces topic keeps the last lists read. Absent from older agents.
+    interfaces_error: str | None = None
 
 
 def is_online(status: AgentStatus | None) -> bool:

@@ -338,3 +338,33 @@ def test_a_refused_login_is_said_once_and_at_once(
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "refused the connection" in lines[0], done.stderr
     assert "is it running" not in done.stderr and "not the password" not in done.stderr
+
+
+def test_a_robot_writes_only_its_own_interfaces_and_every_reader_reads_them(
+    broker: Secured,
+) -> None:
+    """The interfaces topic (agent.yaml `interfaces`): retained, written by its robot alone."""
+    topic = "robotconf/robots/tb3-04/interfaces"
+    own = connect(broker.connection("tb3-04"), "tb3-04")
+    other = connect(broker.connection("tb3-05"), "tb3-05")
+    try:
+        publish(own, topic, b'{"topics": [], "source": "ros2"}')
+        # Acknowledged, and dropped by the ACL: the retained message stays the robot's own.
+        publish(other, topic, b'{"topics": [], "source": "forged"}')
+        publish(other, "robotconf/robots/tb3-05/interfaces", b'{"source": "tb3-05 own"}')
+    finally:
+        own.close()
+        other.close()
+    for reader in ("viewer", "reconciler", "operator"):
+        session = connect(broker.connection(reader), reader)
+        try:
+            session.client.subscribe([(topic, 1), ("robotconf/robots/tb3-05/interfaces", 1)])
+            deadline = time.monotonic() + WAIT
+            while time.monotonic() < deadline and len(session.messages) < 2:
+                time.sleep(0.05)
+            assert sorted(session.messages) == [
+                ("robotconf/robots/tb3-04/interfaces", b'{"topics": [], "source": "ros2"}'),
+                ("robotconf/robots/tb3-05/interfaces", b'{"source": "tb3-05 own"}'),
+            ], reader
+        finally:
+            session.close()

@@ -286,3 +286,37 @@ def test_values_have_their_own_type(tmp_path: Path, line: str, field: str) -> No
     text = GOOD.replace("stop_timeout: 10\n", "") + line + "\n"
     found = problems(tmp_path, text)
     assert len(found) == 1 and field in found[0], found
+
+
+def test_interfaces_reporting_is_off_unless_configured(tmp_path: Path) -> None:
+    assert load_config(write(tmp_path, GOOD)).interfaces is None
+    config = load_config(write(tmp_path, GOOD + "interfaces: {interval: 5}\n"))
+    assert config.interfaces is not None and config.interfaces.command is None
+    assert config.interfaces.interval == 5 and config.interfaces.timeout == 20
+    command = "interfaces: {interval: 30, command: [/opt/bin/list-interfaces, --json], timeout: 4}"
+    config = load_config(write(tmp_path, GOOD + command + "\n"))
+    assert config.interfaces is not None
+    assert config.interfaces.command == ["/opt/bin/list-interfaces", "--json"]
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        ("{command: [x]}", "8: 'interfaces.interval' is required; e.g. interfaces: {interval: 30}"),
+        ("{interval: 0}", "8: interfaces.interval: Input should be greater than 0"),
+        ("{interval: '5'}", "8: interfaces.interval: Input should be a valid number"),
+        ("{interval: 5, timeout: 0}", "8: interfaces.timeout: Input should be greater than 0"),
+        ("{interval: 5, intervall: 3}", "8: unknown key 'interfaces.intervall'; did you mean"),
+        ("30", "8: interfaces is a mapping of its settings, e.g. interfaces: {interval: 30}"),
+        (
+            "{interval: 5, command: 'ros2 topic list'}",
+            "8: interfaces.command: must be an argument list, never a shell string",
+        ),
+        ("{interval: 5, command: []}", "8: interfaces.command: is empty; give a program"),
+    ],
+)
+def test_a_bad_interfaces_section_is_one_located_line(
+    tmp_path: Path, value: str, expected: str
+) -> None:
+    found = problems(tmp_path, GOOD + f"interfaces: {value}\n")
+    assert len(found) == 1 and found[0].startswith(expected), found
