@@ -18,6 +18,8 @@ from configurator.files import NotRegularFile, file_kind, read_regular
 from configurator.yamlio import MAX_FILE_BYTES
 
 ROOTS = ("configs", "models")
+# The one file read outside ROOTS: the lab's rule configuration (configurator/ruleconfig.py).
+RULE_CONFIGURATION = ".robotconf.yaml"
 
 # What a folder entry that is not a regular file or folder is said to be, in the work tree and
 # in a commit alike: the same content must get the same verdict from pre-commit and reconciler.
@@ -32,7 +34,8 @@ class SourceError(Exception):
 
 class Source(Protocol):
     def files(self) -> list[str]:
-        """Repository-relative POSIX paths of every regular file under configs/ and models/."""
+        """Repository-relative POSIX paths of every regular file under configs/ and models/,
+        and of RULE_CONFIGURATION when the root holds it."""
         ...
 
     def refused(self) -> dict[str, str]:
@@ -140,7 +143,21 @@ class WorkTreeSource:
                         found.append(path)
                     else:
                         refused[path] = refusal(file_kind(mode) or "not a regular file")
+        self._scan_rule_configuration(found, refused)
         self._files, self._refused = sorted(found), refused
+
+    def _scan_rule_configuration(self, found: list[str], refused: dict[str, str]) -> None:
+        try:
+            mode = os.lstat(self.root / RULE_CONFIGURATION).st_mode
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            refused[RULE_CONFIGURATION] = f"cannot be read ({exc.strerror})"
+            return
+        if stat.S_ISREG(mode):
+            found.append(RULE_CONFIGURATION)
+        else:
+            refused[RULE_CONFIGURATION] = refusal(file_kind(mode) or "a folder")
 
     def files(self) -> list[str]:
         if self._files is None:
@@ -193,7 +210,10 @@ def _worktree_revision(root: Path) -> str:
     except (git.InvalidGitRepositoryError, git.NoSuchPathError, ValueError):
         return "worktree"
     try:
-        paths = [os.path.relpath(root / r, repo.working_tree_dir or root) for r in ROOTS]
+        paths = [
+            os.path.relpath(root / r, repo.working_tree_dir or root)
+            for r in (*ROOTS, RULE_CONFIGURATION)
+        ]
         dirty = bool(repo.git.status("--porcelain", "--", *paths))
     finally:
         repo.close()
@@ -232,7 +252,9 @@ class GitSource:
         self._refused: dict[str, str] = {}
         tree = f"{commit}:{prefix}" if prefix else commit
         # --full-tree: the paths given are in `tree`, whatever folder git runs in.
-        listing = _git(root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS)
+        listing = _git(
+            root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS, RULE_CONFIGURATION
+        )
         if listing.returncode != 0:
             if prefix:
                 raise SourceError(f"{rev!r} has no folder {prefix}")
@@ -253,15 +275,24 @@ class GitSource:
             shown = printable_path(path)
             if shown != path:
                 self._refused[shown] = "has a name that is not UTF-8; rename it"
+            elif parts[0] == RULE_CONFIGURATION and len(parts) > 1:
+                self._refused[RULE_CONFIGURATION] = refusal("a folder")
+            elif path == RULE_CONFIGURATION and kind == "blob" and mode in _REGULAR_MODES:
+                self._add_blob(path, object_id, size)
+            elif path == RULE_CONFIGURATION:
+                self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
             elif len(parts) == 1:  # configs or models itself is no folder
                 what = {_LINK_MODE: SYMLINK, _GITLINK_MODE: SUBMODULE}.get(mode, "a file")
                 self._refused[path] = refusal(what) + f" ({path}/ must be a folder)"
             elif kind == "blob" and mode in _REGULAR_MODES:
-                if not size.isdigit():  # git lists a blob it does not have with size BAD
-                    raise SourceError(_missing(self._revision, path, object_id))
-                self._blobs[path] = (object_id, int(size))
+                self._add_blob(path, object_id, size)
             else:
                 self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
+
+    def _add_blob(self, path: str, object_id: str, size: str) -> None:
+        if not size.isdigit():  # git lists a blob it does not have with size BAD
+            raise SourceError(_missing(self._revision, path, object_id))
+        self._blobs[path] = (object_id, int(size))
 
     def files(self) -> list[str]:
         return sorted(self._blobs)

@@ -235,3 +235,16 @@ class Fleet(StrictModel):
     rollout: RolloutPolicy | None = Field(
         None, description="roll out in health-gated waves; absent: every robot at once"
     )
+
+
+# ---------------------------------------------------------------- rule configuration
+
+
+class RuleConfiguration(StrictModel):
+    """`.robotconf.yaml` at the repository root: the severity a lab gives a rule it may tune
+    (configurator/ruleconfig.py judges the codes and values)."""
+
+    # YAML reads a bare `off` as false: both mean off.
+    rules: dict[str, str | bool] = Field(
+        default_factory=dict, description="rule code -> error, warning or off"
+    )
