@@ -29,6 +29,7 @@ class Configured(Protocol):
     @property
     def doc(self) -> YamlDocument: ...
 
+
 LEVELS = ("error", "warning", "off")
 _MARKER = b"robotconf:"  # a file without it has no ignore comment: most files cost one search
 _COMMENT = re.compile(r"#[ \t]*robotconf:[ \t]*ignore\b[ \t]*")
