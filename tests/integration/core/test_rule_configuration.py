@@ -120,3 +120,19 @@ def test_rev_reads_the_configuration_of_the_commit(lab: Lab) -> None:
 def test_validate_help_names_the_configuration() -> None:
     done = subprocess.run([ROBOTCONF, "validate", "--help"], capture_output=True, text=True)
     assert ".robotconf.yaml" in done.stdout and "# robotconf: ignore" in done.stdout
+
+
+def test_plan_judges_each_revision_with_its_own_configuration(lab: Lab) -> None:
+    base = lab.commit("the lab")
+    _twin(lab)
+    refused = lab.run("plan", "--base", base)
+    assert refused.returncode == 2 and "head revision (work tree) is invalid" in refused.stderr
+    lab.write(CONFIG, "rules: {RC505: off}\n")
+    head = lab.commit("a twin on its own ROS domain")
+    done = lab.run("plan", "--base", base, "--head", head, "--format", "json")
+    assert done.returncode == 1, done.stderr
+    assert [c["robot_id"] for c in json.loads(done.stdout)["changes"]] == ["tb3-06"]
+    lab.remove(CONFIG)
+    untuned = lab.commit("the configuration removed, nothing else")
+    again = lab.run("plan", "--base", head, "--head", untuned)
+    assert again.returncode == 2 and f"head revision {untuned} is invalid" in again.stderr
