@@ -166,7 +166,8 @@ def _levels(
         rule = RULES.get(code)
         level = "off" if value is False else value
         if rule is None:
-            refuse(code, f"unknown rule code '{code}'{did_you_mean(code, RULES)}", key=True)
+            message = f"unknown rule code '{_cut(code)}'{did_you_mean(code, RULES)}"
+            refuse(code, message, key=True)
         elif not rule.tunable:
             refuse(code, f"{code} cannot be tuned: {rule.fixed}", key=True)
         elif level not in LEVELS:
@@ -193,7 +194,7 @@ def _wanted(
                 rule = RULES.get(ignored.code)
                 if rule is None:
                     message = (
-                        f"'{ignored.code}' is not a rule code, so it silences nothing"
+                        f"'{_cut(ignored.code)}' is not a rule code, so it silences nothing"
                         f"{did_you_mean(ignored.code, RULES)}"
                     )
                 elif not rule.tunable:
@@ -205,6 +206,11 @@ def _wanted(
                     continue
                 problems.append(_rc802(path, ignored.line, ignored.col, message))
     return wanted, problems
+
+
+def _cut(text: str, limit: int = 20) -> str:
+    """A code as written, cut in a message: a file may write anything there."""
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def _rc802(path: str, line: int, col: int, message: str) -> Diagnostic:

@@ -142,3 +142,14 @@ def test_an_ignore_that_silences_nothing_is_reported_at_its_code() -> None:
 def test_an_ignored_finding_of_a_rule_turned_off_still_uses_its_comment() -> None:
     ignores = {FLEET: comments("a: 1  # robotconf: ignore RC505\n")}
     assert judge([finding("RC505", 1)], configured("rules: {RC505: off}\n"), ignores) == []
+
+
+def test_a_long_unknown_code_is_cut_in_the_message() -> None:
+    code = "RC" + "5" * 1000  # YAML keys end at 1,024 characters
+    found = judge(
+        [],
+        configured(f"rules: {{{code}: off}}\n"),
+        {FLEET: comments(f"a: 1  # robotconf: ignore {code}\n")},
+    )
+    assert [d.code for d in found] == ["RC801", "RC802"]
+    assert all(f"'RC{'5' * 18}...'" in d.message and len(d.message) < 200 for d in found)
