@@ -20,6 +20,8 @@ from configurator.yamlio import MAX_FILE_BYTES
 ROOTS = ("configs", "models")
 # The one file read outside ROOTS: the lab's rule configuration (configurator/ruleconfig.py).
 RULE_CONFIGURATION = ".robotconf.yaml"
+# Listed too, so that the loader says the file is misnamed (RC105) rather than unread in silence.
+_ROOT_FILES = (RULE_CONFIGURATION, ".robotconf.yml")
 
 # What a folder entry that is not a regular file or folder is said to be, in the work tree and
 # in a commit alike: the same content must get the same verdict from pre-commit and reconciler.
@@ -35,7 +37,7 @@ class SourceError(Exception):
 class Source(Protocol):
     def files(self) -> list[str]:
         """Repository-relative POSIX paths of every regular file under configs/ and models/,
-        and of RULE_CONFIGURATION when the root holds it."""
+        and of RULE_CONFIGURATION (or a misspelling of it) when the root holds it."""
         ...
 
     def refused(self) -> dict[str, str]:
@@ -143,21 +145,22 @@ class WorkTreeSource:
                         found.append(path)
                     else:
                         refused[path] = refusal(file_kind(mode) or "not a regular file")
-        self._scan_rule_configuration(found, refused)
+        for name in _ROOT_FILES:
+            self._scan_root_file(name, found, refused)
         self._files, self._refused = sorted(found), refused
 
-    def _scan_rule_configuration(self, found: list[str], refused: dict[str, str]) -> None:
+    def _scan_root_file(self, name: str, found: list[str], refused: dict[str, str]) -> None:
         try:
-            mode = os.lstat(self.root / RULE_CONFIGURATION).st_mode
+            mode = os.lstat(self.root / name).st_mode
         except FileNotFoundError:
             return
         except OSError as exc:
-            refused[RULE_CONFIGURATION] = f"cannot be read ({exc.strerror})"
+            refused[name] = f"cannot be read ({exc.strerror})"
             return
         if stat.S_ISREG(mode):
-            found.append(RULE_CONFIGURATION)
+            found.append(name)
         else:
-            refused[RULE_CONFIGURATION] = refusal(file_kind(mode) or "a folder")
+            refused[name] = refusal(file_kind(mode) or "a folder")
 
     def files(self) -> list[str]:
         if self._files is None:
@@ -199,7 +202,7 @@ class WorkTreeSource:
 
 
 def _worktree_revision(root: Path) -> str:
-    """HEAD's commit, with `+dirty` when configs/ or models/ differ from it."""
+    """HEAD's commit, with `+dirty` when configs/, models/ or .robotconf.yaml differ from it."""
     try:
         import git  # GitPython: server side only, imported when needed
     except ImportError:
@@ -253,7 +256,7 @@ class GitSource:
         tree = f"{commit}:{prefix}" if prefix else commit
         # --full-tree: the paths given are in `tree`, whatever folder git runs in.
         listing = _git(
-            root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS, RULE_CONFIGURATION
+            root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS, *_ROOT_FILES
         )
         if listing.returncode != 0:
             if prefix:
@@ -275,11 +278,11 @@ class GitSource:
             shown = printable_path(path)
             if shown != path:
                 self._refused[shown] = "has a name that is not UTF-8; rename it"
-            elif parts[0] == RULE_CONFIGURATION and len(parts) > 1:
-                self._refused[RULE_CONFIGURATION] = refusal("a folder")
-            elif path == RULE_CONFIGURATION and kind == "blob" and mode in _REGULAR_MODES:
+            elif parts[0] in _ROOT_FILES and len(parts) > 1:
+                self._refused[parts[0]] = refusal("a folder")
+            elif path in _ROOT_FILES and kind == "blob" and mode in _REGULAR_MODES:
                 self._add_blob(path, object_id, size)
-            elif path == RULE_CONFIGURATION:
+            elif path in _ROOT_FILES:
                 self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
             elif len(parts) == 1:  # configs or models itself is no folder
                 what = {_LINK_MODE: SYMLINK, _GITLINK_MODE: SUBMODULE}.get(mode, "a file")

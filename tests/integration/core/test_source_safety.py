@@ -224,3 +224,14 @@ def test_the_rule_configuration_is_read_and_refused_alike_in_a_commit(lab: Lab) 
     assert code == 1 and out[0].startswith(".robotconf.yaml:1:1: error RC008 not read: ")
     assert "is a folder" in out[0]
     assert lines(lab, "--rev", lab.commit("a folder")) == (code, out)
+
+
+def test_a_misspelt_rule_configuration_is_reported_not_ignored(lab: Lab) -> None:
+    lab.write(".robotconf.yml", "rules: {RC608: off}\n")
+    code, out = lines(lab)
+    assert code == 1
+    assert out == [
+        ".robotconf.yml:1:1: error RC105 YAML files here end in .yaml; rename this .yml file "
+        "(it is not read)"
+    ]
+    assert lines(lab, "--rev", lab.commit("a .yml rule configuration")) == (code, out)
