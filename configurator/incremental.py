@@ -37,7 +37,7 @@ from configurator.rules import DERIVED, Unit, rule_units
 from configurator.rules.report import Reporter
 from configurator.source import Source
 from configurator.types import RobotAssignment
-from configurator.workspace import Checked
+from configurator.workspace import Checked, judged
 
 V = TypeVar("V")
 
@@ -181,6 +181,8 @@ def _tracked(repo: Repository, recorder: _Recorder) -> _TrackedRepository:
         fleet=repo.fleet,
         broken=_TrackedDict("broken", recorder, repo.broken),
         files_read=repo.files_read,
+        rule_configuration=repo.rule_configuration,
+        ignores=repo.ignores,
     )
     object.__setattr__(tracked, "_recorder", recorder)
     return tracked
@@ -350,7 +352,7 @@ class BuildCache:
             if found.entry is not None:
                 found.entry.doc.release()
         self._checked = repo
-        return Checked(repo, sorted(diagnostics))
+        return judged(repo, diagnostics)
 
     def _refresh_derived(self, repo: _TrackedRepository, changed: set[Dep]) -> None:
         """Works out again each derived value that read something changed; one whose value

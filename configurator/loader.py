@@ -15,7 +15,8 @@ from pydantic import BaseModel, ValidationError
 
 from configurator.diagnostics import Diagnostic, Severity
 from configurator.repository import Entry, Platform, Repository
-from configurator.source import FileTooLarge, Source
+from configurator.ruleconfig import IgnoreComment, ignore_comments
+from configurator.source import RULE_CONFIGURATION, FileTooLarge, Source
 from configurator.types import (
     Action,
     CapabilityConfiguration,
@@ -24,6 +25,7 @@ from configurator.types import (
     MappingScheme,
     PlatformInfo,
     RobotTemplate,
+    RuleConfiguration,
     ScenarioConfiguration,
     Task,
 )
@@ -83,6 +85,13 @@ KINDS = (
     ),
 )
 KIND_BY_NAME = {kind.name: kind for kind in KINDS}
+# Read like every kind, from the same source, but not one of the lab's documents.
+RULE_CONFIGURATION_KIND = Kind(
+    "rule-configuration",
+    re.compile(r"^\.(robotconf)\.yaml$"),
+    RuleConfiguration,
+    "rule configuration",
+)
 
 _PLACES = (
     "configs/fleet.yaml, configs/capabilities/<name>.yaml, configs/scenarios/<name>.yaml, "
@@ -117,6 +126,7 @@ class LoadedFile:
     groups: tuple[str, ...]
     entry: Entry[Any] | None
     diagnostics: tuple[Diagnostic, ...]
+    ignores: tuple[IgnoreComment, ...] = ()  # of a typed file only
 
 
 class FileCache(Protocol):
@@ -180,6 +190,8 @@ def place(
 ) -> tuple[Kind, tuple[str, ...]] | None:
     """The kind of file a path holds, or None when it is not read (a README, a YAML file in
     the wrong place: reported). A platform's folder makes the platform, whatever it holds."""
+    if path == RULE_CONFIGURATION:
+        return RULE_CONFIGURATION_KIND, ("robotconf",)
     platform_dir = _PLATFORM_DIR.match(path)
     if platform_dir:
         repo.platforms.setdefault(platform_dir.group(1), Platform(platform_dir.group(1)))
@@ -223,13 +235,16 @@ def load_file(path: str, raw: bytes | OSError, kind: Kind, groups: tuple[str, ..
                 col,
             )
         )
-    return LoadedFile(path, kind, groups, Entry(name, model, doc), tuple(diagnostics))
+    entry = Entry(name, model, doc)
+    return LoadedFile(path, kind, groups, entry, tuple(diagnostics), ignore_comments(doc))
 
 
 def add_loaded(repo: Repository, loaded: LoadedFile, diagnostics: list[Diagnostic]) -> None:
     """One file's result into the repository: an entry, or a name remembered as broken."""
     repo.files_read += 1
     diagnostics.extend(loaded.diagnostics)
+    if loaded.ignores:
+        repo.ignores[loaded.path] = loaded.ignores
     if loaded.entry is None:
         repo.broken.setdefault(loaded.kind.name, set()).add(_qualified(loaded.groups))
     else:
@@ -300,3 +315,5 @@ def _add(repo: Repository, kind: str, groups: tuple[str, ...], entry: Entry[Any]
         repo.tasks[entry.name] = entry
     elif kind == "environment":
         repo.environments[entry.name] = entry
+    elif kind == "rule-configuration":
+        repo.rule_configuration = entry

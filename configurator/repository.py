@@ -9,6 +9,7 @@ from typing import Generic, TypeVar
 
 from pydantic import BaseModel
 
+from configurator.ruleconfig import IgnoreComment
 from configurator.types import (
     Action,
     CapabilityConfiguration,
@@ -17,6 +18,7 @@ from configurator.types import (
     MappingScheme,
     PlatformInfo,
     RobotTemplate,
+    RuleConfiguration,
     ScenarioConfiguration,
     Task,
 )
@@ -63,6 +65,10 @@ class Repository:
     # them are not reported a second time.
     broken: dict[str, set[str]] = field(default_factory=dict)
     files_read: int = 0
+    # What the lab tunes (configurator/ruleconfig.py), for judging the findings: the rules
+    # themselves never read these.
+    rule_configuration: Entry[RuleConfiguration] | None = None
+    ignores: dict[str, tuple[IgnoreComment, ...]] = field(default_factory=dict)  # by path
 
     @cached_property
     def revision(self) -> str:

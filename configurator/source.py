@@ -18,6 +18,10 @@ from configurator.files import NotRegularFile, file_kind, read_regular
 from configurator.yamlio import MAX_FILE_BYTES
 
 ROOTS = ("configs", "models")
+# The one file read outside ROOTS: the lab's rule configuration (configurator/ruleconfig.py).
+RULE_CONFIGURATION = ".robotconf.yaml"
+# Listed too, so that the loader says the file is misnamed (RC105) rather than unread in silence.
+_ROOT_FILES = (RULE_CONFIGURATION, ".robotconf.yml")
 
 # What a folder entry that is not a regular file or folder is said to be, in the work tree and
 # in a commit alike: the same content must get the same verdict from pre-commit and reconciler.
@@ -32,7 +36,8 @@ class SourceError(Exception):
 
 class Source(Protocol):
     def files(self) -> list[str]:
-        """Repository-relative POSIX paths of every regular file under configs/ and models/."""
+        """Repository-relative POSIX paths of every regular file under configs/ and models/,
+        and of RULE_CONFIGURATION (or a misspelling of it) when the root holds it."""
         ...
 
     def refused(self) -> dict[str, str]:
@@ -140,7 +145,22 @@ class WorkTreeSource:
                         found.append(path)
                     else:
                         refused[path] = refusal(file_kind(mode) or "not a regular file")
+        for name in _ROOT_FILES:
+            self._scan_root_file(name, found, refused)
         self._files, self._refused = sorted(found), refused
+
+    def _scan_root_file(self, name: str, found: list[str], refused: dict[str, str]) -> None:
+        try:
+            mode = os.lstat(self.root / name).st_mode
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            refused[name] = f"cannot be read ({exc.strerror})"
+            return
+        if stat.S_ISREG(mode):
+            found.append(name)
+        else:
+            refused[name] = refusal(file_kind(mode) or "a folder")
 
     def files(self) -> list[str]:
         if self._files is None:
@@ -182,7 +202,7 @@ class WorkTreeSource:
 
 
 def _worktree_revision(root: Path) -> str:
-    """HEAD's commit, with `+dirty` when configs/ or models/ differ from it."""
+    """HEAD's commit, with `+dirty` when configs/, models/ or .robotconf.yaml differ from it."""
     try:
         import git  # GitPython: server side only, imported when needed
     except ImportError:
@@ -193,7 +213,10 @@ def _worktree_revision(root: Path) -> str:
     except (git.InvalidGitRepositoryError, git.NoSuchPathError, ValueError):
         return "worktree"
     try:
-        paths = [os.path.relpath(root / r, repo.working_tree_dir or root) for r in ROOTS]
+        paths = [
+            os.path.relpath(root / r, repo.working_tree_dir or root)
+            for r in (*ROOTS, RULE_CONFIGURATION)
+        ]
         dirty = bool(repo.git.status("--porcelain", "--", *paths))
     finally:
         repo.close()
@@ -232,7 +255,9 @@ class GitSource:
         self._refused: dict[str, str] = {}
         tree = f"{commit}:{prefix}" if prefix else commit
         # --full-tree: the paths given are in `tree`, whatever folder git runs in.
-        listing = _git(root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS)
+        listing = _git(
+            root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS, *_ROOT_FILES
+        )
         if listing.returncode != 0:
             if prefix:
                 raise SourceError(f"{rev!r} has no folder {prefix}")
@@ -253,15 +278,24 @@ class GitSource:
             shown = printable_path(path)
             if shown != path:
                 self._refused[shown] = "has a name that is not UTF-8; rename it"
+            elif parts[0] in _ROOT_FILES and len(parts) > 1:
+                self._refused[parts[0]] = refusal("a folder")
+            elif path in _ROOT_FILES and kind == "blob" and mode in _REGULAR_MODES:
+                self._add_blob(path, object_id, size)
+            elif path in _ROOT_FILES:
+                self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
             elif len(parts) == 1:  # configs or models itself is no folder
                 what = {_LINK_MODE: SYMLINK, _GITLINK_MODE: SUBMODULE}.get(mode, "a file")
                 self._refused[path] = refusal(what) + f" ({path}/ must be a folder)"
             elif kind == "blob" and mode in _REGULAR_MODES:
-                if not size.isdigit():  # git lists a blob it does not have with size BAD
-                    raise SourceError(_missing(self._revision, path, object_id))
-                self._blobs[path] = (object_id, int(size))
+                self._add_blob(path, object_id, size)
             else:
                 self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
+
+    def _add_blob(self, path: str, object_id: str, size: str) -> None:
+        if not size.isdigit():  # git lists a blob it does not have with size BAD
+            raise SourceError(_missing(self._revision, path, object_id))
+        self._blobs[path] = (object_id, int(size))
 
     def files(self) -> list[str]:
         return sorted(self._blobs)

@@ -284,3 +284,16 @@ class Fleet(StrictModel):
         description="what a robot's reported interfaces not fitting its request does: warn "
         "(deliver, and report the drift) or hold (keep its last good request until they fit)",
     )
+
+
+# ---------------------------------------------------------------- rule configuration
+
+
+class RuleConfiguration(StrictModel):
+    """`.robotconf.yaml` at the repository root: the severity a lab gives a rule it may tune
+    (configurator/ruleconfig.py judges the codes and values)."""
+
+    # YAML reads a bare `off` as false: both mean off.
+    rules: dict[str, str | bool] = Field(
+        default_factory=dict, description="rule code -> error, warning or off"
+    )

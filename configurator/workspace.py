@@ -10,6 +10,7 @@ from configurator.diagnostics import Diagnostic
 from configurator.gcpause import collector_paused
 from configurator.loader import load_repository
 from configurator.repository import Repository
+from configurator.ruleconfig import judge
 from configurator.rules import check_repository
 from configurator.source import OverlaySource, Source, open_source
 
@@ -30,11 +31,17 @@ class Checked:
         return not self.errors
 
 
+def judged(repo: Repository, diagnostics: list[Diagnostic]) -> Checked:
+    """A build's findings as the lab tuned them (`.robotconf.yaml`, ignore comments): every
+    build, full or incremental, ends here, so every command and the reconciler see the same."""
+    return Checked(repo, judge(diagnostics, repo.rule_configuration, repo.ignores))
+
+
 def check_source(source: Source) -> Checked:
     with collector_paused():
         repo, diagnostics = load_repository(source)
         diagnostics.extend(check_repository(repo))
-        return Checked(repo, sorted(diagnostics))
+        return judged(repo, diagnostics)
 
 
 def check(

@@ -22,7 +22,15 @@ from configurator.workspace import check
 @click.option("--format", "fmt", type=click.Choice(["text", "json", "github"]), default="text")
 @click.argument("files", nargs=-1, type=click.UNPROCESSED)  # pre-commit may pass some
 def validate(repo: Path, rev: str | None, fmt: str, files: tuple[str, ...]) -> ExitCode:
-    """Validate the whole repository (file names given are ignored: one file can break another)."""
+    """Validate the whole repository (file names given are ignored: one file can break another).
+
+    \b
+    A lab tunes rules in .robotconf.yaml at the repository root (read from the work tree, or
+    from the commit with --rev), and silences one finding with a comment on its line:
+      .robotconf.yaml     rules: {RC505: warning, RC608: off}   (error, warning or off)
+      configs/fleet.yaml  tb3-04: {...}  # robotconf: ignore RC505, RC608
+    Rules that could make a robot unsafe or undeliverable cannot be tuned (README's table).
+    Exit 1 on errors; warnings alone exit 0."""
     checked = check(repo, rev)
     diagnostics = checked.diagnostics
     if fmt == "json":

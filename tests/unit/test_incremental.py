@@ -150,6 +150,8 @@ def incremental_build(
 _NUMBER = re.compile(rb"(?<![\w.\-/])-?\d+(?:\.\d+)?(?![\w.\-/])")
 _WORD = re.compile(rb"[A-Za-z_][A-Za-z0-9_.\-]*")
 _NUMBERS = [b"0", b"1", b"2", b"0.1", b"0.25", b"-5", b"1000", b"3.5", b"true", b"x", b"'7'"]
+_RULE_CONFIGURATION = ".robotconf.yaml"
+_TUNED = ["RC505", "RC608", "RC501", "RC302", "RC706", "RC803"]
 _BOGUS = [b"nothing", b"Follow", b"ROS2", b"ROS1", b"scenario-0001", b"capability-000", b"x"]
 
 
@@ -323,6 +325,31 @@ class IncrementalMatchesFull(RuleBasedStateMachine):
         )
         text = self.files[path]
         self.files[path] = text[: which.start(1)] + new + text[which.end(1) :]
+
+    @rule(data=st.data())
+    def tune_a_rule(self, data: st.DataObject) -> None:
+        """`.robotconf.yaml` written, changed or removed (issue 21, item 6): the verdicts change
+        though no rule reads it."""
+        codes = data.draw(st.lists(st.sampled_from(_TUNED), max_size=3, unique=True))
+        if not codes:
+            self.files.pop(_RULE_CONFIGURATION, None)
+            return
+        levels = [data.draw(st.sampled_from(["error", "warning", "off", "loud"])) for _ in codes]
+        lines = "".join(f"  {code}: {level}\n" for code, level in zip(codes, levels, strict=True))
+        self.files[_RULE_CONFIGURATION] = f"rules:\n{lines}".encode()
+
+    @rule(data=st.data())
+    def ignore_on_a_line(self, data: st.DataObject) -> None:
+        """`# robotconf: ignore CODE` at the end of a line of the fleet or a scheme."""
+        paths = [p for p in self._yaml() if p == FLEET or "/mapping-schemes/" in p]
+        path = data.draw(st.sampled_from(paths)) if paths else None
+        if path is None:
+            return
+        lines = self.files[path].split(b"\n")
+        index = data.draw(st.integers(0, len(lines) - 1))
+        code = data.draw(st.sampled_from(_TUNED))
+        lines[index] += f"  # robotconf: ignore {code}".encode()
+        self.files[path] = b"\n".join(lines)
 
     @invariant()
     def same_as_a_full_build(self) -> None:

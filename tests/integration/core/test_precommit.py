@@ -152,6 +152,15 @@ def test_hooks_only_run_for_configuration_changes(repo: FleetRepo) -> None:
     assert f"{FLEET}:" in done.stdout + done.stderr
 
 
+def test_a_change_of_the_rule_configuration_alone_runs_validate(repo: FleetRepo) -> None:
+    (repo.root / ".robotconf.yaml").write_text("rules: {RC501: off}\n", encoding="utf-8")
+    done = repo.pre_commit("--files", ".robotconf.yaml")
+    output = done.stdout + done.stderr
+    assert done.returncode == 1, output
+    assert _status(output, "robotconf validate") == "Failed"
+    assert ".robotconf.yaml:1:9: error RC801 RC501 cannot be tuned" in output
+
+
 def test_this_repositorys_own_hooks_mirror_the_published_ones() -> None:
     own = yaml.safe_load((ROOT / ".pre-commit-config.yaml").read_text(encoding="utf-8"))
     local = {h["id"]: h for r in own["repos"] if r["repo"] == "local" for h in r["hooks"]}
@@ -164,7 +173,11 @@ def test_this_repositorys_own_hooks_mirror_the_published_ones() -> None:
 
 
 def _folders(pattern: str) -> set[str]:
-    """`^(configs|models)/` -> {'configs', 'models'}."""
-    match = re.fullmatch(r"\^\(([\w|-]+)\)/", pattern)
+    """`^(configs|models)/` -> {'configs', 'models'}; `^((configs|models)/|\\.robotconf\\.yaml$)`
+    -> {'configs', 'models', '.robotconf.yaml'}."""
+    match = re.fullmatch(r"\^\(([\w|-]+)\)/", pattern) or re.fullmatch(
+        r"\^\(\(([\w|-]+)\)/\|((?:\\.|\w)+)\$\)", pattern
+    )
     assert match, pattern
-    return set(match.group(1).split("|"))
+    files = {match.group(2).replace("\\", "")} if match.lastindex == 2 else set()
+    return set(match.group(1).split("|")) | files

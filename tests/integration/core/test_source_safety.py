@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from configurator.source import GitSource, WorkTreeSource
 from configurator.yamlio import MAX_FILE_BYTES
 from reconciler.desired import load_desired
 from tests.support.lab import ROBOTCONF, Lab
@@ -197,3 +198,40 @@ def test_a_shallow_clone_without_the_revision(lab: Lab, tmp_path: Path) -> None:
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "no such revision" in done.stderr
     assert load_desired(shallow, first).problems[0].message.startswith(f"cannot read {first}")
+
+
+def test_the_rule_configuration_is_read_and_refused_alike_in_a_commit(lab: Lab) -> None:
+    lab.write(".robotconf.yaml", "rules: {RC608: off}\n")
+    revision = lab.commit("a rule configuration")
+    work_tree, commit = WorkTreeSource(lab.root), GitSource(lab.root, revision)
+    assert ".robotconf.yaml" in commit.files() and commit.files() == work_tree.files()
+    assert commit.read(".robotconf.yaml") == work_tree.read(".robotconf.yaml")
+    assert lab.check().repo.revision == revision  # the file counts for the work tree's revision
+    lab.write(".robotconf.yaml", "rules: {RC608: warning}\n")
+    assert lab.check().repo.revision == f"{revision}+dirty"
+    lab.remove(".robotconf.yaml")
+    os.symlink(lab.path("configs/fleet.yaml"), lab.path(".robotconf.yaml"))
+    code, out = lines(lab)
+    assert code == 1
+    assert out == [
+        ".robotconf.yaml:1:1: error RC008 not read: .robotconf.yaml is a symbolic link; only "
+        "regular files inside the repository are read: replace the link with the file itself"
+    ]
+    assert lines(lab, "--rev", lab.commit("a linked rule configuration")) == (code, out)
+    lab.remove(".robotconf.yaml")
+    lab.write(".robotconf.yaml/rules.yaml", "rules: {}\n")
+    code, out = lines(lab)
+    assert code == 1 and out[0].startswith(".robotconf.yaml:1:1: error RC008 not read: ")
+    assert "is a folder" in out[0]
+    assert lines(lab, "--rev", lab.commit("a folder")) == (code, out)
+
+
+def test_a_misspelt_rule_configuration_is_reported_not_ignored(lab: Lab) -> None:
+    lab.write(".robotconf.yml", "rules: {RC608: off}\n")
+    code, out = lines(lab)
+    assert code == 1
+    assert out == [
+        ".robotconf.yml:1:1: error RC105 YAML files here end in .yaml; rename this .yml file "
+        "(it is not read)"
+    ]
+    assert lines(lab, "--rev", lab.commit("a .yml rule configuration")) == (code, out)

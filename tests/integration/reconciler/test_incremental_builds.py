@@ -96,3 +96,39 @@ def test_plan_builds_its_head_from_its_base(lab: GitLab) -> None:
 def lab_scenarios(lab: GitLab) -> dict[str, str]:
     requests = lab.requests(lab.first)
     return {robot_id: request.scenario_name for robot_id, request in requests.items()}
+
+
+TWIN = "  tb3-06: {scenario: patrol-real, name: Twin}\n"  # tb3-04's names: RC505
+
+
+def test_a_rule_the_lab_turns_off_no_longer_refuses_a_commit(lab: GitLab) -> None:
+    """Issue 21, item 6: the reconciler's cached build judges each commit with that commit's
+    `.robotconf.yaml`; a change of that file alone re-judges, a rule a lab cannot tune still
+    refuses."""
+    builder = DesiredBuilder()
+    assert builder(lab.root, lab.first).ok
+    lab.replace(FLEET, "  tb3-05:", TWIN + "  tb3-05:")
+    clash = lab.commit("a second real-world robot on tb3-04's names")
+    refused = builder(lab.root, clash)
+    assert not refused.ok and [p.code for p in refused.problems] == ["RC505"]
+    lab.write(".robotconf.yaml", "rules:\n  RC505: off  # the two are on two ROS domains\n")
+    lab.git("add", ".robotconf.yaml")
+    tuned = lab.commit("RC505 off")  # nothing else changed: no rule needs to run again
+    built = builder(lab.root, tuned)
+    assert built.fleet is not None and "tb3-06" in built.fleet.requests
+    assert builder.cache.stats.units_run == [] and builder.cache.stats.files_parsed == 1
+    same(built, load_desired(lab.root, tuned))
+    lab.replace(
+        FLEET, "  tb3-05:", "  tb3/07: {scenario: guide-gazebo, namespace: tb3_07}\n  tb3-05:"
+    )
+    lab.write(".robotconf.yaml", "rules: {RC505: off, RC501: off}\n")
+    lab.git("add", ".robotconf.yaml")
+    bad_id = lab.commit("an id that is no topic level, and RC501 turned off")
+    still = builder(lab.root, bad_id)
+    assert not still.ok
+    assert sorted((p.path, p.code) for p in still.problems) == [
+        (".robotconf.yaml", "RC801"),
+        (FLEET, "RC501"),
+    ]
+    same(still, load_desired(lab.root, bad_id))
+    same(builder(lab.root, clash), load_desired(lab.root, clash))  # back: refused again

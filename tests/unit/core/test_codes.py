@@ -70,26 +70,37 @@ def test_readme_table_is_generated_from_the_registry() -> None:
 def test_the_readme_table_is_rewritten_row_for_row() -> None:
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     current = with_readme_table(readme)
-    row = f"| RC204 | {RULES['RC204'].summary} |\n"
+    row = f"| RC204 | {RULES['RC204'].summary} | no: {RULES['RC204'].fixed} |\n"
     assert row in current
-    edited = current.replace(row, "| RC204 | something else |\n| RC999 | invented |\n")
+    edited = current.replace(row, "| RC204 | something else | yes |\n| RC999 | invented |\n")
     assert with_readme_table(edited) == current
     assert with_readme_table(current.replace(row, "")) == current
-    assert "| RC608 | warning: " in current
+    assert f"| RC608 | warning: {RULES['RC608'].summary} | yes |\n" in current
 
 
 def test_registry_declares_each_code_once_with_a_summary() -> None:
     for code, rule in RULES.items():
         assert rule.code == code and CODE.fullmatch(code)
         assert rule.summary and "|" not in rule.summary and "\n" not in rule.summary
-    assert [c for c, r in RULES.items() if r.severity is Severity.WARNING] == ["RC608", "RC706"]
+    warnings = [c for c, r in RULES.items() if r.severity is Severity.WARNING]
+    assert warnings == ["RC608", "RC706", "RC802", "RC803"]
+
+
+def test_rules_that_can_make_a_robot_unsafe_or_undeliverable_cannot_be_tuned() -> None:
+    tunable = [code for code, rule in RULES.items() if rule.tunable]
+    lab_judgement = ["RC505", "RC605", "RC607", "RC608", "RC703", "RC704", "RC706"]
+    assert tunable == [*lab_judgement, "RC802", "RC803"]
+    for code, rule in RULES.items():
+        assert "|" not in rule.fixed and "\n" not in rule.fixed, code
 
 
 def test_a_diagnostic_with_an_undeclared_code_is_refused() -> None:
     with pytest.raises(UnregisteredCode, match="'RC999' is not declared"):
         Diagnostic("configs/fleet.yaml", 1, 1, Severity.ERROR, "RC999", "invented")
-    with pytest.raises(UnregisteredCode, match="RC608 is declared as warning, not error"):
-        Diagnostic("configs/fleet.yaml", 1, 1, Severity.ERROR, "RC608", "wrong severity")
+    with pytest.raises(UnregisteredCode, match="RC501 is declared as error, not warning"):
+        Diagnostic("configs/fleet.yaml", 1, 1, Severity.WARNING, "RC501", "wrong severity")
+    # A rule a lab can tune comes at the severity `.robotconf.yaml` gives it.
+    assert Diagnostic("a.yaml", 1, 1, Severity.ERROR, "RC608", "tuned").is_error
     with pytest.raises(UnregisteredCode):
         YamlProblem(1, 1, "RC010", "invented")
     assert Diagnostic("a.yaml", 1, 1, Severity.WARNING, "RC608", "fine").code == "RC608"

@@ -20,9 +20,12 @@ from tests.unit.fuzz.strategies import mutated, yaml_text
 
 ROOT = Path(__file__).resolve().parents[3]
 FILES = sorted(
-    p.relative_to(ROOT).as_posix()
-    for top in ("configs", "models")
-    for p in (ROOT / top).rglob("*.yaml")
+    [
+        p.relative_to(ROOT).as_posix()
+        for top in ("configs", "models")
+        for p in (ROOT / top).rglob("*.yaml")
+    ]
+    + [".robotconf.yaml"]  # the rule configuration (issue 21, item 6)
 )
 
 
@@ -31,6 +34,7 @@ def lab() -> Iterator[Path]:
     folder = Path(tempfile.mkdtemp(prefix="robotconf-fuzz-"))
     for part in ("configs", "models"):
         shutil.copytree(ROOT / part, folder / part)
+    shutil.copy(ROOT / ".robotconf.yaml", folder / ".robotconf.yaml")
     yield folder
     shutil.rmtree(folder, ignore_errors=True)
 
@@ -70,3 +74,19 @@ edits = st.sampled_from(FILES).flatmap(
 @given(edits)
 def test_one_mangled_file(lab: Path, edit: tuple[str, bytes]) -> None:
     validate_with(lab, *edit)
+
+
+_FLEET = (ROOT / "configs/fleet.yaml").read_bytes()
+_IGNORES = st.text(alphabet="RC05816, #\"'|:-\n", max_size=30).map(
+    lambda tail: b" # robotconf: ignore " + tail.encode()
+)
+
+
+@given(st.lists(st.tuples(st.integers(0, len(_FLEET)), _IGNORES), max_size=4))
+def test_ignore_comments_anywhere(lab: Path, inserts: list[tuple[int, bytes]]) -> None:
+    """Ignore comments (and look-alikes in values) at any place of the fleet: located
+    diagnostics, never a crash."""
+    content = _FLEET
+    for at, text in sorted(inserts, reverse=True):
+        content = content[:at] + text + content[at:]
+    validate_with(lab, "configs/fleet.yaml", content)
