@@ -45,7 +45,7 @@ def plan(lab: Lab) -> Plan:
 
 
 def test_changes_come_in_wave_order_with_their_wave(plan: Plan) -> None:
-    # canary: tb3-01 (tb3-03, the other canary, is removed); half of the five robots is three,
+    # canary: tb3-01 (tb3-03, the other canary, is removed); half of the six robots is three,
     # so half takes tb3-02 and tb3-04 (unchanged); all takes the rest; the removed are in none.
     assert plan.waves == ["canary", "half", "all"]
     assert [(c.robot_id, c.kind, c.wave) for c in plan.changes] == [
@@ -59,7 +59,7 @@ def test_changes_come_in_wave_order_with_their_wave(plan: Plan) -> None:
 
 def test_text_groups_the_changes_under_their_waves(plan: Plan) -> None:
     lines = format_plan_text(plan).splitlines()
-    assert lines[0].endswith(": 3 changed, 1 added, 1 removed, 1 unchanged")
+    assert lines[0].endswith(": 3 changed, 1 added, 1 removed, 2 unchanged")
     assert lines[1:] == [
         "rollout in waves: canary, half, all",
         "wave canary (1 of 3):",
