@@ -481,7 +481,7 @@ def test_the_work_tree_and_a_commit_share_what_they_parsed(built: Any) -> None:
 
 
 def test_a_domain_changed_in_a_commit_is_judged_and_rendered_again() -> None:
-    """tb3-04 (on RoboticsLab's domain) and tb3-06 (its own) patrol on the same names: a
+    """tb3-04 (on RoboticsLab's domain) and tb3-07 (its own) patrol on the same names: a
     commit that puts them on one domain is refused, one that parts them again is not, whether
     the robot's domain or its environment's changed; their requests follow."""
     files, lab = example_lab(), "models/environments/RoboticsLab.yaml"
@@ -503,9 +503,9 @@ def test_a_domain_changed_in_a_commit_is_judged_and_rendered_again() -> None:
     assert rendered.requests["tb3-04"].ros_domain_id == 1
     checked, rendered = incremental_build(cache_, parted, "5" * 40)
     assert isinstance(rendered, FleetRender)
-    assert {r: rendered.requests[r].ros_domain_id for r in ("tb3-04", "tb3-06")} == {
+    assert {r: rendered.requests[r].ros_domain_id for r in ("tb3-04", "tb3-07")} == {
         "tb3-04": 3,
-        "tb3-06": 1,
+        "tb3-07": 1,
     }
     assert cache_.stats.robots_rendered == 2  # the environment's robots, no other
     assert_same_fleet(rendered, full_build(parted, "5" * 40)[1])

@@ -121,35 +121,35 @@ def test_a_suspended_robot_clashes_with_no_one(lab: Lab) -> None:
 
 
 ROBOTICS_LAB = "models/environments/RoboticsLab.yaml"
-PATROL_CLASH = "robots 'tb3-04' and 'tb3-06' both use /navigate_to_pose (navigate_to_pose), /odom"
+PATROL_CLASH = "robots 'tb3-04' and 'tb3-07' both use /navigate_to_pose (navigate_to_pose), /odom"
 
 
 def test_two_robots_on_two_domains_share_no_graph_and_on_one_they_clash(lab: Lab) -> None:
-    # The example lab: tb3-04 on RoboticsLab's domain (1), tb3-06 on its own (2), the same
+    # The example lab: tb3-04 on RoboticsLab's domain (1), tb3-07 on its own (2), the same
     # scenario at the root on the same absolute names.
     assert lab.check().diagnostics == []
-    tb3_04, tb3_06 = lab.render("tb3-04"), lab.render("tb3-06")
-    assert (tb3_04.ros_domain_id, tb3_06.ros_domain_id) == (1, 2)
-    assert tb3_04.scenario.capability.mappings == tb3_06.scenario.capability.mappings
+    tb3_04, tb3_07 = lab.render("tb3-04"), lab.render("tb3-07")
+    assert (tb3_04.ros_domain_id, tb3_07.ros_domain_id) == (1, 2)
+    assert tb3_04.scenario.capability.mappings == tb3_07.scenario.capability.mappings
     lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 1}")
     d = lab.only("RC505")
-    assert d.line == lab.line_of(FLEET, "tb3-06:")
+    assert d.line == lab.line_of(FLEET, "tb3-07:")
     assert d.message == (
         f"{PATROL_CLASH} (odometry) in environment RoboticsLab (ROS2) on ROS domain 1: they "
         "would drive each other; write these names relative in mapping scheme ROS2/real-world "
         "(cmd_vel, not /cmd_vel) and give them namespaces (`namespace: tb3_04`, `namespace: "
-        "tb3_06`), or put them on different domains (e.g. `ros_domain_id: 2` for 'tb3-06')"
+        "tb3_07`), or put them on different domains (e.g. `ros_domain_id: 2` for 'tb3-07')"
     )
 
 
 def test_an_environments_domain_is_the_default_of_its_robots(lab: Lab) -> None:
-    lab.replace(FLEET, ", ros_domain_id: 2}", "}")  # tb3-06 on the lab's domain too
+    lab.replace(FLEET, ", ros_domain_id: 2}", "}")  # tb3-07 on the lab's domain too
     assert "in environment RoboticsLab (ROS2) on ROS domain 1: " in lab.only("RC505").message
     lab.replace(ROBOTICS_LAB, "ros_domain_id: 1", "ros_domain_id: 7")
     assert " on ROS domain 7: " in lab.only("RC505").message
     lab.replace(FLEET, "name: Lab patrol,", "name: Lab patrol, ros_domain_id: 1,")  # its own wins
     assert lab.check().diagnostics == []
-    assert (lab.render("tb3-04").ros_domain_id, lab.render("tb3-06").ros_domain_id) == (1, 7)
+    assert (lab.render("tb3-04").ros_domain_id, lab.render("tb3-07").ros_domain_id) == (1, 7)
 
 
 def test_an_unset_domain_is_ross_default_0(lab: Lab) -> None:
@@ -160,7 +160,7 @@ def test_an_unset_domain_is_ross_default_0(lab: Lab) -> None:
         f"{PATROL_CLASH} (odometry) in environment RoboticsLab (ROS2) on ROS domain 0 (ROS's "
         "default, where a robot without `ros_domain_id` runs): they would drive each other"
     )
-    assert message.endswith("(e.g. `ros_domain_id: 1` for 'tb3-06')")
+    assert message.endswith("(e.g. `ros_domain_id: 1` for 'tb3-07')")
     lab.replace(FLEET, "ros_domain_id: 0}", "ros_domain_id: 1}")
     assert lab.check().diagnostics == []
     assert lab.render("tb3-04").ros_domain_id is None  # not sent: the robot keeps its own
@@ -169,8 +169,8 @@ def test_an_unset_domain_is_ross_default_0(lab: Lab) -> None:
 def test_a_domain_out_of_range_is_located_with_the_bound(lab: Lab) -> None:
     lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 233}")
     d = lab.only("RC103")
-    assert (d.path, d.line) == (FLEET, lab.line_of(FLEET, "tb3-06:"))
-    assert d.message == "robots.tb3-06.ros_domain_id must be less than or equal to 232, got 233"
+    assert (d.path, d.line) == (FLEET, lab.line_of(FLEET, "tb3-07:"))
+    assert d.message == "robots.tb3-07.ros_domain_id must be less than or equal to 232, got 233"
     lab.replace(FLEET, "ros_domain_id: 233}", "ros_domain_id: 2}")
     lab.replace(ROBOTICS_LAB, "ros_domain_id: 1", "ros_domain_id: '1'")
     d = lab.only("RC103")

@@ -13,7 +13,7 @@ from reconciler.observed import parse_retained
 from reconciler.report import Followed, offline_status, status_of
 from tests.support.lab import Lab
 
-ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-06"]
+ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-07"]
 HEAD, GOOD = "h" * 40, "g" * 40
 
 
