@@ -148,7 +148,7 @@ def test_status_watch_on_a_terminal_is_a_live_screen(lab: GitLab, mosquitto: Mos
         return shown.decode("utf-8", errors="replace")
 
     try:
-        wait_for(lambda: "5 robots: 5 Offline" in read(), "the fleet on the screen")
+        wait_for(lambda: "6 robots: 6 Offline" in read(), "the fleet on the screen")
         text = read()
         assert "\x1b[" in text  # drawn for a terminal: cursor movement, colour
         assert all(f"tb3-0{i}" in text for i in range(1, 6))
