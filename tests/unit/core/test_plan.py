@@ -139,3 +139,16 @@ def test_wave_names_from_the_file_are_printed_safely(lab: Lab) -> None:
     assert "wave can*ary\\u202e|x (1 of 3):" in text and "\u202e" not in text
     markdown = format_plan_markdown(plan)
     assert "| can\\*ary\\\\u202e\\|x | `tb3-01` |" in markdown and "\u202e" not in markdown
+
+
+def test_a_domain_change_is_a_restart(lab: Lab) -> None:
+    """A brain joins its ROS domain when it starts: a new domain is never reloaded."""
+    base, _ = fleet(lab)
+    lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 3}")  # tb3-07
+    lab.replace("models/environments/RoboticsLab.yaml", "ros_domain_id: 1", "")  # tb3-04's
+    head, rollout = fleet(lab)
+    lines = format_plan_text(make_plan(base, head, rollout)).splitlines()
+    assert lines[1:] == [
+        "  ~ tb3-04  patrol-real: ros_domain_id [restart]",
+        "  ~ tb3-07  patrol-real: ros_domain_id [restart]",
+    ]
