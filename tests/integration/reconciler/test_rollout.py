@@ -44,7 +44,7 @@ def complete(status: ReconcilerStatus, revision: str) -> bool:
 def rename_all(fleet: Fleet, suffix: str) -> str:
     """A commit that changes every robot's request (their names)."""
     text = fleet.lab.read(FLEET)
-    for name in ("Delivery bot", "Guide bot", "Bluetooth delivery bot", "Lab patrol"):
+    for name in ("Delivery bot", "Guide bot", "Bluetooth delivery bot", "Lab patrol", "Corridor"):
         text = text.replace(f"name: {name}", f"name: {name} {suffix}")
     text = text.replace("name: Noetic patrol", f"name: Noetic patrol {suffix}")
     text = text.replace("name: Second delivery bot", f"name: Second delivery bot {suffix}")
