@@ -68,9 +68,11 @@ def _assert_same(scenario: LaunchScenario, robot: Robot) -> None:
 
 
 def test_every_request_of_the_example_fleet_is_the_whole_request() -> None:
-    """With a namespace and without; payload, digests and model."""
+    """With a namespace and without, with a ROS domain and without; payload, digests and
+    model."""
     rendered = _example_fleet()
     assert {r.namespace is None for r in rendered.requests.values()} == {True, False}
+    assert {r.ros_domain_id is None for r in rendered.requests.values()} == {True, False}
     for request in rendered.requests.values():
         model = request.model()
         assert model == with_digest(model) and model.digest_matches()
