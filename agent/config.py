@@ -27,7 +27,7 @@ from pydantic_core import ErrorDetails
 from configurator.diagnostics import did_you_mean
 from configurator.files import read_regular
 from configurator.mqtt import Connection
-from configurator.types import ROBOT_ID_PATTERN, StrictModel
+from configurator.types import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
 from configurator.typing_errors import error_path, error_text
 from configurator.wire import (
     BROKER_ENV,
@@ -163,10 +163,8 @@ AGENT_ENV_PREFIX = "ROBOTCONF_"
 # Linux refuses one environment string longer than 128 KiB at exec time: the brain would never
 # start, and only the robot's log would say why. Far below, and plenty for any setting.
 MAX_ENV_VALUE = 32 * 1024
-# DDS derives its UDP ports from the domain id; beyond 232 they pass 65535 and the brain's
-# nodes fail at start (ROS 2 docs, "The ROS_DOMAIN_ID"). Checked here so a typo is an
+# ROS_DOMAIN_ID is checked against MAX_ROS_DOMAIN_ID (configurator/types.py) so a typo is an
 # agent.yaml error at start-up, not a brain restarting until it gives up.
-MAX_ROS_DOMAIN_ID = 232
 
 
 def _env_name(name: str) -> str:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.workdir import write_atomic
+from configurator.launch import LaunchRequest
 
 log = logging.getLogger("robotconf.agent.process")
 
@@ -242,10 +243,43 @@ class Brain:
 
 
 def brain_environment(extra: Mapping[str, str]) -> dict[bytes, bytes]:
-    """This process's environment plus `extra`, encoded once: a brain's complete environment.
+    """This process's environment plus `extra`, encoded once: what a brain's environment is
+    made of (`request_environment` adds the request's part).
 
     Bytes, so that Popen need not encode some forty variables again at every start."""
     return {**os.environb, **{os.fsencode(k): os.fsencode(v) for k, v in extra.items()}}
+
+
+ROS_DOMAIN_VARIABLE = "ROS_DOMAIN_ID"
+DIGEST_VARIABLE = "ROBOTCONF_DIGEST"
+
+
+def request_environment(
+    base: Mapping[bytes, bytes], local: Mapping[str, str], request: LaunchRequest
+) -> tuple[dict[bytes, bytes], list[str]]:
+    """The brain's complete environment for `request`, and the warnings it gives: the one
+    definition, for starting the brain and for anything that must see its ROS graph.
+
+    `base`: `brain_environment` of agent.yaml's `env:` (`local`) and the agent's own ROBOTCONF_*
+    variables. Lowest first: the agent's environment, the request's ROS domain, agent.yaml's
+    `env:` (a robot-local override, so a conflict with the request is warned about, never
+    resolved silently), the agent's ROBOTCONF_* variables."""
+    env = dict(base)
+    warnings: list[str] = []
+    domain = request.ros_domain_id
+    if domain is not None:
+        override = local.get(ROS_DOMAIN_VARIABLE)
+        if override is None:
+            env[ROS_DOMAIN_VARIABLE.encode()] = str(domain).encode()
+        elif int(override) != domain:  # agent.yaml's is checked to be a domain id on reading
+            warnings.append(
+                f"agent.yaml's env sets {ROS_DOMAIN_VARIABLE} to {int(override)}, the launch "
+                f"request's ros_domain_id is {domain}: the brain runs in domain {int(override)} "
+                "(agent.yaml wins on the robot); make the two agree, or remove "
+                f"{ROS_DOMAIN_VARIABLE} from agent.yaml's env"
+            )
+    env[DIGEST_VARIABLE.encode()] = request.digest.encode("ascii")
+    return env, warnings
 
 
 def spawn(

@@ -337,7 +337,8 @@ class Agent:
             self.brain_log.note(f"launch request rejected: {outcome.reason}")
             self._apply(sup.reject(outcome.reason, now))
         else:
-            for warning in outcome.warnings:
+            warnings = [*outcome.warnings, *self._environment(outcome.request)[1]]
+            for warning in warnings:
                 log.warning("%s", warning)
             if self.verify is not None:
                 self.issued.accepted(outcome.request.issued_at)
@@ -350,7 +351,11 @@ class Agent:
                     log.error("%s", problem)
                     self._apply(sup.reject(problem, now))
                     return
-            self._apply(sup.accept(outcome.request, outcome.warnings, now))
+            self._apply(sup.accept(outcome.request, warnings, now))
+
+    def _environment(self, request: LaunchRequest) -> tuple[dict[bytes, bytes], list[str]]:
+        """The brain's environment for `request`, and the conflicts it has (warnings)."""
+        return process.request_environment(self._brain_env, self.config.env, request)
 
     def _stage(self, payload: bytes) -> str | None:
         """Writes the next request beside the current one before anything is stopped: a full
@@ -522,7 +527,7 @@ class Agent:
                 argv,
                 cwd=self.workdir,
                 log_fd=log_fd,
-                env={**self._brain_env, b"ROBOTCONF_DIGEST": request.digest.encode("ascii")},
+                env=self._environment(request)[0],
                 on_exit=lambda pid, code: self.inbox.put(BrainExited(pid, code)),
             )
         except OSError as exc:

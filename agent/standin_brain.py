@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import signal
 import sys
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
@@ -19,7 +21,8 @@ if TYPE_CHECKING:
     from configurator.launch import LaunchRequest
 
 
-def describe(request: LaunchRequest) -> list[str]:
+def describe(request: LaunchRequest, environ: Mapping[str, str]) -> list[str]:
+    """What a brain would load, and the ROS domain its environment puts it in (`environ`)."""
     scenario = request.scenario
     capability = scenario.capability
     lines = [
@@ -40,6 +43,8 @@ def describe(request: LaunchRequest) -> list[str]:
     ]
     if scenario.goals:
         lines.append("goals: " + ", ".join(goal.task for goal in scenario.goals))
+    # Where a ROS 2 brain's nodes would join; said so that the agent's choice can be seen.
+    lines.append(f"ROS domain: {environ.get('ROS_DOMAIN_ID', 'unset (ROS default, 0)')}")
     return lines
 
 
@@ -123,7 +128,7 @@ def main(argv: list[str]) -> int:
             where = ".".join(str(p) for p in error["loc"]) or "(top level)"
             print(f"  {where}: {error['msg']}", file=sys.stderr)
         return 1
-    for line in describe(request):
+    for line in describe(request, os.environ):
         print(line)
     sys.stdout.flush()
     # A request can ask for a crash, so that a bad commit can be rehearsed end to end (a

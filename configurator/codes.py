@@ -226,9 +226,11 @@ RULES: dict[str, Rule] = {
         Rule(
             "RC505",
             Severity.ERROR,
-            "fleet: two robots in one environment (one world) on one platform bind a topic or "
-            "action mapping to the same fully qualified name: they would drive each other (give "
-            "them namespaces and the scheme relative names); suspended robots are left out",
+            "fleet: two robots in one environment (one world), on one platform and one ROS "
+            "domain, bind a topic or action mapping to the same fully qualified name: they would "
+            "drive each other (give them namespaces and the scheme relative names, or different "
+            "domains: `ros_domain_id`); a robot whose `ros_domain_id` is unset, and its "
+            "environment's too, is on ROS's default domain 0; suspended robots are left out",
             TUNABLE,
         ),
         Rule(

@@ -30,7 +30,7 @@ from typing import Any, TypeVar
 from configurator.diagnostics import Diagnostic
 from configurator.gcpause import collector_paused
 from configurator.loader import LoadedFile, load_repository
-from configurator.render import FleetRender, render_fleet, render_scenario, request_for
+from configurator.render import FleetRender, render_fleet, request_for, scenario_requests
 from configurator.rendered import RenderedRequest, ScenarioRequests
 from configurator.repository import Entry, Platform, Repository
 from configurator.rules import DERIVED, Unit, rule_units
@@ -430,11 +430,14 @@ class BuildCache:
                 found = self._scenarios.get(name)
                 if found is None or not found.deps.isdisjoint(changed):
                     with self._recorder.recording() as deps:
-                        value = render_scenario(repo, name)
-                    if found is not None and found.value.scenario == value:
-                        made = found.value  # the same content: its robots need nothing new
-                    else:
-                        made = ScenarioRequests(value)
+                        made = scenario_requests(repo, name)
+                    before: ScenarioRequests | None = None if found is None else found.value
+                    if (
+                        before is not None
+                        and before.scenario == made.scenario
+                        and before.ros_domain_id == made.ros_domain_id
+                    ):
+                        made = before  # the same content: its robots need nothing new
                     found = _Value(frozenset(deps), made)
                     self.stats.scenarios_rendered.append(name)
                 scenarios[name] = found

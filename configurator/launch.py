@@ -12,7 +12,13 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import Field
 
-from configurator.types import ROBOT_ID_PATTERN, JsonObject, MappingBinding, StrictModel
+from configurator.types import (
+    MAX_ROS_DOMAIN_ID,
+    ROBOT_ID_PATTERN,
+    JsonObject,
+    MappingBinding,
+    StrictModel,
+)
 
 API_VERSION = "robotconf/v1"
 DIGEST_PATTERN = r"^sha256:[0-9a-f]{64}$"
@@ -26,7 +32,7 @@ DIGEST_EXCLUDED = frozenset({"revision", "digest", "restart_digest", "issued_at"
 # Content a request carries only when set: unset, it is neither published nor digested, so a
 # robot that uses none has the request (and digests) it had before the field existed, and an
 # agent that predates the field (its models refuse unknown fields) still accepts it.
-CONTENT_WHEN_SET = ("namespace",)
+CONTENT_WHEN_SET = ("namespace", "ros_domain_id")
 # A well-formed placeholder while a request is built; `with_digest` replaces it.
 _PENDING_DIGEST = "sha256:" + "0" * 64
 
@@ -106,6 +112,13 @@ class LaunchRequest(_Published):
         description="the robot's ROS 2 namespace, absolute (/tb3_01); the names in "
         "scenario.capability.mappings are resolved in it already (fully qualified)",
     )
+    ros_domain_id: int | None = Field(
+        None,
+        ge=0,
+        le=MAX_ROS_DOMAIN_ID,
+        description="the ROS 2 domain the brain runs in: the agent sets ROS_DOMAIN_ID to it "
+        "(agent.yaml's env may override it, reported as a conflict); none: the robot's own",
+    )
     scenario: LaunchScenario
 
     def content(self) -> dict[str, Any]:
@@ -174,19 +187,24 @@ def digest_content(request: LaunchRequest, without: Set[str] = frozenset()) -> d
 def restart_content(request: LaunchRequest) -> Any:
     """What only a restart applies, of this request (see `restart_content_of`)."""
     return restart_content_of(
-        request.scenario.capability.model_dump(mode="json"), request.namespace
+        request.scenario.capability.model_dump(mode="json"),
+        request.namespace,
+        request.ros_domain_id,
     )
 
 
-def restart_content_of(capability: Any, namespace: str | None) -> Any:
+def restart_content_of(capability: Any, namespace: Any, ros_domain_id: Any = None) -> Any:
     """The one definition of what only a restart applies: the capability (platform, mapping
     scheme, template, actions, logics, mappings), as JSON. The rest (goals, knowledge,
-    settings, the robot's name) a brain that supports it may reload in place. A namespace is
-    restart content too: a brain's nodes cannot move into another one in place."""
-    if namespace is None:
-        # Without one, the content it always had: such a robot's restart digest is unchanged.
+    settings, the robot's name) a brain that supports it may reload in place. A namespace and
+    a ROS domain are restart content too: a brain's nodes cannot move into another namespace
+    in place, and a process joins its DDS domain once, when it starts."""
+    if namespace is None and ros_domain_id is None:
+        # Without either, the content it always had: such a robot's restart digest is unchanged.
         return capability
-    return {"capability": capability, "namespace": namespace}
+    content = {"capability": capability, "namespace": namespace, "ros_domain_id": ros_domain_id}
+    # Each only when set: a robot with a namespace and no domain keeps its restart digest.
+    return {key: value for key, value in content.items() if value is not None}
 
 
 def restart_digest_of(request: LaunchRequest) -> str:
@@ -212,10 +230,11 @@ def make_launch_request(
     revision: str,
     scenario: LaunchScenario,
     namespace: str | None = None,
+    ros_domain_id: int | None = None,
 ) -> LaunchRequest:
     """Build a request whose digest covers everything but the revision, and whose
-    restart_digest covers its capability (and namespace). Rendering a fleet makes the same
-    bytes without a model per robot (configurator/rendered.py)."""
+    restart_digest covers its capability (and namespace, and ROS domain). Rendering a fleet
+    makes the same bytes without a model per robot (configurator/rendered.py)."""
     return with_digest(
         LaunchRequest(
             robot_id=robot_id,
@@ -223,6 +242,7 @@ def make_launch_request(
             revision=revision,
             digest=_PENDING_DIGEST,
             namespace=namespace,
+            ros_domain_id=ros_domain_id,
             scenario=scenario,
         )
     )

@@ -88,7 +88,7 @@ def request_for(
     """The robot's request from its scenario's shared content (`scenario`: that of the
     robot's scenario, rendered once for all its robots; by default rendered here)."""
     if scenario is None:
-        scenario = ScenarioRequests(render_scenario(repo, assignment.scenario))
+        scenario = scenario_requests(repo, assignment.scenario)
     namespace = assignment.namespace
     try:
         return scenario.request(
@@ -96,9 +96,26 @@ def request_for(
             assignment.name or robot_id,
             repo.revision,
             absolute_namespace(namespace) if namespace is not None else None,
+            assignment.ros_domain_id,
         )
     except UnresolvableName as e:
         raise RenderError(f"robot '{robot_id}': {e}") from None
+
+
+def scenario_requests(repo: Repository, scenario_name: str) -> ScenarioRequests:
+    """The scenario's content and the ROS domain of its robots that name none (that of the
+    environment it runs in, if any), for its robots' requests."""
+    return ScenarioRequests(
+        render_scenario(repo, scenario_name), environment_domain(repo, scenario_name)
+    )
+
+
+def environment_domain(repo: Repository, scenario_name: str) -> int | None:
+    """The ROS domain the scenario's environment names (the default of its robots), or None."""
+    environment = repo.scenarios[scenario_name].model.environment
+    if environment is None:
+        return None
+    return repo.environments[environment].model.ros_domain_id
 
 
 def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
@@ -185,7 +202,7 @@ def _render_fleet(
     def each_once(name: str) -> ScenarioRequests:
         scenario = scenarios.get(name)
         if scenario is None:
-            scenario = scenarios[name] = ScenarioRequests(render_scenario(repo, name))
+            scenario = scenarios[name] = scenario_requests(repo, name)
         return scenario
 
     scenario_for = scenario_of or each_once

@@ -29,7 +29,18 @@ from configurator.types import MappingBinding
 _Template = tuple[tuple[bytes, ...], tuple[int, ...]]
 # The robot's own values, written into its scenario's bytes: the mapping names it resolves
 # are its namespace in front of text of the scenario's, so the namespace is all they need.
-_SLOT_NAMES = ("robot_id", "robot_name", "namespace", "revision", "digest", "restart_digest")
+_SLOT_NAMES = (
+    "robot_id",
+    "robot_name",
+    "namespace",
+    "ros_domain_id",
+    "revision",
+    "digest",
+    "restart_digest",
+)
+_DOMAIN = "ros_domain_id"
+# Slots written as JSON numbers, not inside a string: cut with their quotes, as nested ones.
+_RAW = frozenset({_DOMAIN})
 _SCENARIO = "scenario"
 _CAPABILITY = "capability"
 _MAPPINGS = "mappings"
@@ -47,41 +58,54 @@ def _prefix(mark: int) -> str:
 
 class ScenarioRequests:
     """The requests of one scenario's robots: the scenario serialised once with each robot's
-    own values left as slots (its id, name, namespace, revision and digests). A robot's
-    digests hash its values between those bytes, its payload joins them: the same bytes as
-    its whole request serialised, at a fraction of the cost."""
+    own values left as slots (its id, name, namespace, domain, revision and digests). A
+    robot's digests hash its values between those bytes, its payload joins them: the same
+    bytes as its whole request serialised, at a fraction of the cost. `ros_domain_id`: the
+    domain of the robots that name none (their scenario's environment's), or None."""
 
-    __slots__ = ("_templates", "scenario")
+    __slots__ = ("_templates", "ros_domain_id", "scenario")
 
-    def __init__(self, scenario: LaunchScenario) -> None:
+    def __init__(self, scenario: LaunchScenario, ros_domain_id: int | None = None) -> None:
         self.scenario = scenario
-        # (with a namespace) -> the templates of the digest content, restart content, payload
-        self._templates: dict[bool, tuple[_Template, _Template, _Template]] = {}
+        self.ros_domain_id = ros_domain_id
+        # (with a namespace, with a domain) -> the templates of the digest content, restart
+        # content, payload
+        self._templates: dict[tuple[bool, bool], tuple[_Template, _Template, _Template]] = {}
 
     def request(
-        self, robot_id: str, robot_name: str, revision: str, namespace: str | None
+        self,
+        robot_id: str,
+        robot_name: str,
+        revision: str,
+        namespace: str | None,
+        ros_domain_id: int | None = None,
     ) -> RenderedRequest:
-        """The robot's request; `namespace` absolute, or None. Raises rosnames.UnresolvableName when
-        a mapping name needs a namespace and the robot has none."""
-        content, restart, _ = self._templates_for(namespace is not None)
-        values = _values(robot_id, robot_name, namespace)
+        """The robot's request; `namespace` absolute, or None; `ros_domain_id` the robot's
+        own (None: the scenario's default). Raises rosnames.UnresolvableName when a mapping
+        name needs a namespace and the robot has none."""
+        domain = self.ros_domain_id if ros_domain_id is None else ros_domain_id
+        content, restart, _ = self._templates_for(namespace is not None, domain is not None)
+        values = _values(robot_id, robot_name, namespace, domain)
         return RenderedRequest(
             self,
             robot_id,
             robot_name,
             revision,
             namespace,
+            domain,
             _hash(content, values),
             _hash(restart, values),
         )
 
     def payload(self, request: RenderedRequest) -> bytes:
         """The canonical bytes published on the robot's launch topic, unsigned."""
-        template = self._templates_for(request.namespace is not None)[2]
+        domain = request.ros_domain_id
+        template = self._templates_for(request.namespace is not None, domain is not None)[2]
         values = _values(
             request.robot_id,
             request.robot_name,
             request.namespace,
+            domain,
             request.revision,
             request.digest,
             request.restart_digest,
@@ -99,17 +123,20 @@ class ScenarioRequests:
             update={"capability": capability.model_copy(update={"mappings": mappings})}
         )
 
-    def _templates_for(self, with_namespace: bool) -> tuple[_Template, _Template, _Template]:
-        found = self._templates.get(with_namespace)
+    def _templates_for(
+        self, with_namespace: bool, with_domain: bool
+    ) -> tuple[_Template, _Template, _Template]:
+        key = (with_namespace, with_domain)
+        found = self._templates.get(key)
         if found is None:
             mark = 0
-            while (found := self._make(with_namespace, mark)) is None:
+            while (found := self._make(with_namespace, with_domain, mark)) is None:
                 mark += 1
-            self._templates[with_namespace] = found
+            self._templates[key] = found
         return found
 
     def _make(
-        self, with_namespace: bool, mark: int
+        self, with_namespace: bool, with_domain: bool, mark: int
     ) -> tuple[_Template, _Template, _Template] | None:
         """The templates with slots `mark` names; None when text of the scenario contains
         that mark (a slot must be found where the robot's value goes, and nowhere else).
@@ -119,7 +146,9 @@ class ScenarioRequests:
         the namespace's slot (those two shared by a capability's scenarios:
         `_capability_templates`); the request around the scenario, the restart content around
         the capability (both the same for every scenario: `_around`)."""
-        capability = _capability_templates(self.scenario.capability, with_namespace, mark)
+        capability = _capability_templates(
+            self.scenario.capability, with_namespace, with_domain, mark
+        )
         if capability is None:
             return None
         around_capability, restart = capability
@@ -131,7 +160,7 @@ class ScenarioRequests:
         if around_scenario.count(marker) != 1:
             return None
         scenario = _nest(_template(around_scenario, marker), _CAPABILITY, around_capability)
-        content, _, payload = _around(with_namespace, mark)
+        content, _, payload = _around(with_namespace, with_domain, mark)
         return _shared(
             _nest(content, _SCENARIO, scenario), restart, _nest(payload, _SCENARIO, scenario)
         )
@@ -139,16 +168,16 @@ class ScenarioRequests:
 
 # Capability name -> its templates, shared by the scenarios of a capability while it stays the
 # same (many scenarios use one capability); bounded, and checked equal before each use.
-_CAPABILITIES: dict[tuple[str, bool, int], tuple[LaunchCapability, _Template, _Template]] = {}
+_CAPABILITIES: dict[tuple[str, bool, bool, int], tuple[LaunchCapability, _Template, _Template]] = {}
 _MAX_CAPABILITIES = 4096
 
 
 def _capability_templates(
-    capability: LaunchCapability, with_namespace: bool, mark: int
+    capability: LaunchCapability, with_namespace: bool, with_domain: bool, mark: int
 ) -> tuple[_Template, _Template] | None:
     """The capability with its mapping names resolved in the namespace's slot, and the
     restart content around it; None when its text contains the mark."""
-    key = (capability.name, with_namespace, mark)
+    key = (capability.name, with_namespace, with_domain, mark)
     found = _CAPABILITIES.get(key)
     if found is not None and found[0] == capability:
         return found[1], found[2]
@@ -169,7 +198,7 @@ def _capability_templates(
     ):
         return None
     template = _nest(_template(around_mappings, marker), _MAPPINGS, _template(mappings, marker))
-    restart = _nest(_around(with_namespace, mark)[1], _CAPABILITY, template)
+    restart = _nest(_around(with_namespace, with_domain, mark)[1], _CAPABILITY, template)
     if len(_CAPABILITIES) >= _MAX_CAPABILITIES:
         _CAPABILITIES.clear()
     _CAPABILITIES[key] = (capability, template, restart)
@@ -177,7 +206,9 @@ def _capability_templates(
 
 
 @functools.cache
-def _around(with_namespace: bool, mark: int) -> tuple[_Template, _Template, _Template]:
+def _around(
+    with_namespace: bool, with_domain: bool, mark: int
+) -> tuple[_Template, _Template, _Template]:
     """The digest content, restart content and payload around the scenario (or capability):
     the same for every scenario, since what is not the robot's own there is constant."""
     prefix = _prefix(mark)
@@ -189,11 +220,18 @@ def _around(with_namespace: bool, mark: int) -> tuple[_Template, _Template, _Tem
         digest=slot["digest"],
         restart_digest=slot["restart_digest"],
         namespace=slot["namespace"] if with_namespace else None,
+        # A number: its slot (text) is written over it where the model writes it.
+        ros_domain_id=0 if with_domain else None,
     )
     content = digest_content(probe, without={_SCENARIO})
     payload = probe.wire(without={_SCENARIO})
     content[_SCENARIO] = payload[_SCENARIO] = slot[_SCENARIO]
-    restart = restart_content_of(slot[_CAPABILITY], probe.namespace)
+    for written in (content, payload):
+        if _DOMAIN in written:
+            written[_DOMAIN] = slot[_DOMAIN]
+    restart = restart_content_of(
+        slot[_CAPABILITY], probe.namespace, slot[_DOMAIN] if with_domain else None
+    )
     marker = _inner(prefix)
     return (
         _template(canonical_json(content), marker),
@@ -212,6 +250,7 @@ class RenderedRequest:
         "revision",
         "robot_id",
         "robot_name",
+        "ros_domain_id",
         "scenario_requests",
     )
 
@@ -222,6 +261,7 @@ class RenderedRequest:
         robot_name: str,
         revision: str,
         namespace: str | None,
+        ros_domain_id: int | None,
         digest: str,
         restart_digest: str,
     ) -> None:
@@ -230,6 +270,7 @@ class RenderedRequest:
         self.robot_name = robot_name
         self.revision = revision
         self.namespace = namespace
+        self.ros_domain_id = ros_domain_id
         self.digest = digest
         self.restart_digest = restart_digest
 
@@ -253,6 +294,7 @@ class RenderedRequest:
             self.robot_name,
             revision,
             self.namespace,
+            self.ros_domain_id,
             self.digest,
             self.restart_digest,
         )
@@ -270,6 +312,7 @@ class RenderedRequest:
             digest=self.digest,
             restart_digest=self.restart_digest,
             namespace=self.namespace,
+            ros_domain_id=self.ros_domain_id,
             scenario=self.scenario_requests.resolved(self.namespace),
         )
 
@@ -288,13 +331,17 @@ class RenderedRequest:
         return f"RenderedRequest({self.robot_id!r}, {self.scenario_name!r}, {self.digest[:15]}…)"
 
 
-def _values(robot_id: str, robot_name: str, namespace: str | None, *rest: str) -> list[bytes]:
-    """A robot's values as they are written inside JSON strings, in _SLOT_NAMES order; `rest`
-    the revision and digests (the digests' templates hold none of them)."""
+def _values(
+    robot_id: str, robot_name: str, namespace: str | None, domain: int | None, *rest: str
+) -> list[bytes]:
+    """A robot's values as they are written inside JSON strings (the domain as a JSON
+    number), in _SLOT_NAMES order; `rest` the revision and digests (the digests' templates
+    hold none of them)."""
     return [
         _inner(robot_id),
         _inner(robot_name),
         b"" if namespace is None else _inner(namespace),
+        b"" if domain is None else b"%d" % domain,
         *(map(_inner, rest) if rest else _NOT_DIGESTED),
     ]
 
@@ -324,15 +371,16 @@ _SLOT_END = b"\\u0000"
 def _template(serialised: bytes, marker: bytes) -> _Template:
     """`serialised` cut at each slot: text that starts with `marker` and ends at the next NUL
     (the slots are text nothing else in it contains). A nested slot is cut with its quotes:
-    a JSON object goes there, not text."""
+    a JSON object goes there, not text; so is a raw one (_RAW): a number goes there."""
     parts: list[bytes] = []
     slots: list[int] = []
     start = 0
     while (at := serialised.find(marker, start)) >= 0:
         close = serialised.index(_SLOT_END, at + len(marker))
-        index = _index(serialised[at + len(marker) : close].decode())
+        name = serialised[at + len(marker) : close].decode()
+        index = _index(name)
         end = close + len(_SLOT_END)
-        if index < 0:
+        if index < 0 or name in _RAW:
             at, end = at - 1, end + 1
         parts.append(serialised[start:at])
         slots.append(index)

@@ -16,6 +16,14 @@ ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 _ROBOT_ID = re.compile(ROBOT_ID_PATTERN)
 # The broker users of the service side (broker-config): no robot may log in as one of them.
 SERVICE_USERS = ("reconciler", "viewer", "operator")
+# DDS derives its UDP ports from the ROS domain id; beyond 232 they pass 65535 and a node fails
+# at start (ROS 2 docs, "The ROS_DOMAIN_ID"). One bound for fleet.yaml, the Launch Request and
+# agent.yaml's `env:`.
+MAX_ROS_DOMAIN_ID = 232
+ROS_DOMAIN_DESCRIPTION = (
+    f"the ROS 2 domain (ROS_DOMAIN_ID, 0 to {MAX_ROS_DOMAIN_ID}) the robot's brain runs "
+    "in: robots on different domains share no ROS graph"
+)
 
 
 def is_robot_id(text: str) -> bool:
@@ -142,6 +150,13 @@ class Environment(StrictModel):
     type: str = Field(description="e.g. 2D, Gazebo, Real")
     objects: list[OntologyObject] = Field(default_factory=list)
     knowledge_sets: dict[str, JsonObject] = Field(default_factory=dict)
+    ros_domain_id: int | None = Field(
+        None,
+        ge=0,
+        le=MAX_ROS_DOMAIN_ID,
+        description=f"{ROS_DOMAIN_DESCRIPTION}; the default of the robots whose scenario runs "
+        "here (a robot's own wins); none: ROS's default, 0",
+    )
 
 
 # ---------------------------------------------------------------- configurations: configs/
@@ -239,6 +254,12 @@ class RobotAssignment(StrictModel):
         description="the robot's ROS 2 namespace, e.g. tb3_01 (or /fleet/tb3_01): relative "
         "mapping names resolve in it; tokens of letters, digits and single '_', not starting "
         "with a digit; none by default",
+    )
+    ros_domain_id: int | None = Field(
+        None,
+        ge=0,
+        le=MAX_ROS_DOMAIN_ID,
+        description=f"{ROS_DOMAIN_DESCRIPTION}; none: its environment's, else ROS's default, 0",
     )
 
 

@@ -1,5 +1,5 @@
 """ROS 2 names in the fleet (RC503-RC505): namespaces, `{namespace}`, and robots of one world
-whose names clash."""
+and ROS domain whose names clash."""
 
 from __future__ import annotations
 
@@ -18,19 +18,23 @@ from configurator.rosnames import (
     suggest_namespace,
 )
 from configurator.rules.report import Reporter
-from configurator.types import Fleet, MappingBinding
+from configurator.types import MAX_ROS_DOMAIN_ID, Fleet, MappingBinding
 
 # A service is a server the robots call: one of the world (a door controller) is shared on
 # purpose, and two clients calling it do not drive each other. Topics and actions are a robot's
 # own (its velocity, its navigation), so two robots on one name is the mistake to catch.
 CLASHING_KINDS = ("topic", "action_client")
+# The domain of a robot that names none, nor its environment: ROS's default.
+DEFAULT_ROS_DOMAIN = 0
 
 
 @dataclass(frozen=True)
 class _Robot:
     robot_id: str
     namespace: str | None
-    world: tuple[str, str]  # (environment, platform): robots that share one ROS graph
+    # (environment, platform, ROS domain): robots that share one ROS graph
+    world: tuple[str, str, int]
+    domain_set: bool  # by the robot or its environment; else ROS's default
     scheme: str
     names: dict[str, tuple[str, str, bool]]  # mapping -> (kind, resolved name, written absolute)
 
@@ -43,6 +47,7 @@ class ScenarioNames:
     world: tuple[str, str]  # (environment, platform)
     scheme: str  # platform/scheme, as messages name it
     bindings: dict[str, MappingBinding]  # the valid names the selected logics need
+    domain: int | None = None  # the environment's ROS domain: its robots' default
 
 
 def scenario_names(repo: Repository, scenario_name: str) -> ScenarioNames | None:
@@ -62,9 +67,12 @@ def scenario_names(repo: Repository, scenario_name: str) -> ScenarioNames | None
         for key, b in bound_mappings(resolved).items()
         if mapping_name_problem(b.name) is None
     }
-    world = (scenario.model.environment or "", resolved.platform.name)
+    environment_name = scenario.model.environment
+    environment = None if environment_name is None else repo.environments.get(environment_name)
+    domain = None if environment is None else environment.model.ros_domain_id
+    world = (environment_name or "", resolved.platform.name)
     scheme = f"{resolved.platform.name}/{capability.model.mapping_scheme}"
-    return ScenarioNames(world, scheme, bindings)
+    return ScenarioNames(world, scheme, bindings, domain)
 
 
 NamesOf = Callable[[str], "ScenarioNames | None"]
@@ -110,7 +118,9 @@ def _robot_names(
             )
             return None
         names[key] = (binding.kind, full, binding.name.startswith("/"))
-    return _Robot(robot_id, namespace, found.world, found.scheme, names)
+    domain = assignment.ros_domain_id if assignment.ros_domain_id is not None else found.domain
+    world = (*found.world, DEFAULT_ROS_DOMAIN if domain is None else domain)
+    return _Robot(robot_id, namespace, world, domain is not None, found.scheme, names)
 
 
 def _check_namespace(fleet: Entry[Fleet], robot_id: str, report: Reporter) -> None:
@@ -129,7 +139,10 @@ def _check_namespace(fleet: Entry[Fleet], robot_id: str, report: Reporter) -> No
         )
 
 
-def _clash_message(first: _Robot, second: _Robot, shared: list[tuple[str, str, bool]]) -> str:
+def _clash_message(
+    first: _Robot, second: _Robot, shared: list[tuple[str, str, bool]], free: int
+) -> str:
+    """`free`: a domain no robot of their world uses, for the other fix."""
     names = ", ".join(f"{name} ({key})" for key, name, _ in shared)
     unnamed = [r.robot_id for r in (first, second) if r.namespace is None]
     examples = ", ".join(f"`namespace: {suggest_namespace(r)}`" for r in unnamed)
@@ -144,10 +157,22 @@ def _clash_message(first: _Robot, second: _Robot, shared: list[tuple[str, str, b
         fix = f"give them namespaces ({examples})"
     else:
         fix = "give them different namespaces"
+    environment, platform, domain = first.world
+    where = f"ROS domain {domain}"
+    if not (first.domain_set and second.domain_set):
+        where += " (ROS's default, where a robot without `ros_domain_id` runs)"
     return (
         f"robots '{first.robot_id}' and '{second.robot_id}' both use {names} in environment "
-        f"{first.world[0]} ({first.world[1]}): they would drive each other; {fix}"
+        f"{environment} ({platform}) on {where}: they would drive each other; {fix}, or put "
+        f"them on different domains (e.g. `ros_domain_id: {free}` for '{second.robot_id}')"
     )
+
+
+def _free_domain(used: set[int]) -> int:
+    """The lowest domain none of `used` is, past the default (where whatever is not configured
+    runs): the other fix of a clash."""
+    free = (d for d in range(DEFAULT_ROS_DOMAIN + 1, MAX_ROS_DOMAIN_ID + 1) if d not in used)
+    return next(free, MAX_ROS_DOMAIN_ID)
 
 
 def _each_once(repo: Repository) -> NamesOf:
@@ -168,7 +193,8 @@ def check_namespaces(repo: Repository, report: Reporter, names_of: NamesOf | Non
     if fleet is None:
         return
     lookup = names_of or _each_once(repo)
-    seen: dict[tuple[str, str, str, str], _Robot] = {}  # (world, kind, name) -> first robot
+    robots: list[_Robot] = []
+    domains: dict[tuple[str, str], set[int]] = {}  # (environment, platform) -> domains used
     for robot_id in fleet.model.robots:
         _check_namespace(fleet, robot_id, report)
         robot = _robot_names(fleet, robot_id, lookup, report)
@@ -178,6 +204,11 @@ def check_namespaces(repo: Repository, report: Reporter, names_of: NamesOf | Non
             # Left as it is: its assignment does not reach it, so uses none of these names
             # (it is checked when it is resumed).
             continue
+        robots.append(robot)
+        domains.setdefault(robot.world[:2], set()).add(robot.world[2])
+    # (environment, platform, domain, kind, name) -> the first robot using it
+    seen: dict[tuple[str, str, int, str, str], _Robot] = {}
+    for robot in robots:
         clashes: dict[str, tuple[_Robot, list[tuple[str, str, bool]]]] = {}
         for key, (kind, name, absolute) in robot.names.items():
             if kind not in CLASHING_KINDS:
@@ -185,11 +216,12 @@ def check_namespaces(repo: Repository, report: Reporter, names_of: NamesOf | Non
             first = seen.setdefault((*robot.world, kind, name), robot)
             if first is not robot:
                 clashes.setdefault(first.robot_id, (first, []))[1].append((key, name, absolute))
+        free = _free_domain(domains[robot.world[:2]])
         for first, shared in clashes.values():
             report.add(
                 fleet,
-                ["robots", robot_id],
+                ["robots", robot.robot_id],
                 "RC505",
-                _clash_message(first, robot, shared),
+                _clash_message(first, robot, shared, free),
                 key=True,
             )

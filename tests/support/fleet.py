@@ -162,7 +162,7 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
-ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
+ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-07"]
 
 
 class Running:

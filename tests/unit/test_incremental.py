@@ -505,3 +505,34 @@ def test_the_work_tree_and_a_commit_share_what_they_parsed(built: Any) -> None:
     checked, _ = incremental_build(cache_, changed, "worktree", commit=False)
     assert cache_.stats.files_parsed == 1
     assert checked.diagnostics == full_build(changed, "worktree")[0].diagnostics
+
+
+def test_a_domain_changed_in_a_commit_is_judged_and_rendered_again() -> None:
+    """tb3-04 (on RoboticsLab's domain) and tb3-07 (its own) patrol on the same names: a
+    commit that puts them on one domain is refused, one that parts them again is not, whether
+    the robot's domain or its environment's changed; their requests follow."""
+    files, lab = example_lab(), "models/environments/RoboticsLab.yaml"
+    cache_ = BuildCache()
+    checked, rendered = incremental_build(cache_, files, "1" * 40)
+    assert checked.ok and isinstance(rendered, FleetRender)
+    assert rendered.requests["tb3-04"].ros_domain_id == 1
+    one = _edit(files, FLEET, b"ros_domain_id: 2}", b"ros_domain_id: 1}")
+    parted = _edit(one, lab, b"ros_domain_id: 1", b"ros_domain_id: 3")
+    for revision, changed, clash in (("2", one, True), ("3", parted, False), ("4", files, False)):
+        checked, rendered = incremental_build(cache_, changed, revision * 40)
+        full, expected = full_build(changed, revision * 40)
+        assert checked.diagnostics == full.diagnostics
+        assert [d.code for d in checked.diagnostics] == (["RC505"] if clash else [])
+        if not clash:
+            assert isinstance(rendered, FleetRender)
+            assert_same_fleet(rendered, expected)
+    assert isinstance(rendered, FleetRender)
+    assert rendered.requests["tb3-04"].ros_domain_id == 1
+    checked, rendered = incremental_build(cache_, parted, "5" * 40)
+    assert isinstance(rendered, FleetRender)
+    assert {r: rendered.requests[r].ros_domain_id for r in ("tb3-04", "tb3-07")} == {
+        "tb3-04": 3,
+        "tb3-07": 1,
+    }
+    assert cache_.stats.robots_rendered == 2  # the environment's robots, no other
+    assert_same_fleet(rendered, full_build(parted, "5" * 40)[1])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 from pathlib import Path
@@ -12,10 +13,13 @@ from tests.support.agents import STANDIN, TIMEOUT, make_request
 def test_prints_what_it_would_load_and_stops_on_sigterm(tmp_path: Path) -> None:
     request_file = tmp_path / "launch-request.json"
     request_file.write_bytes(make_request().payload())
-    proc = subprocess.Popen([*STANDIN, str(request_file)], stdout=subprocess.PIPE, text=True)
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    proc = subprocess.Popen(
+        [*STANDIN, str(request_file)], stdout=subprocess.PIPE, text=True, env=env
+    )
     try:
         assert proc.stdout is not None
-        lines = [proc.stdout.readline().rstrip("\n") for _ in range(6)]
+        lines = [proc.stdout.readline().rstrip("\n") for _ in range(7)]
         assert proc.poll() is None  # still running: it waits for a signal
         proc.send_signal(signal.SIGTERM)
         rest, _ = proc.communicate(timeout=TIMEOUT)
@@ -30,6 +34,7 @@ def test_prints_what_it_would_load_and_stops_on_sigterm(tmp_path: Path) -> None:
         "  Follow: follow_with_poses",
         "mappings:",
         "  cmd_vel: topic /cmd_vel (geometry_msgs/msg/Twist)",
+        "ROS domain: unset (ROS default, 0)",
     ]
     assert "SIGTERM received, stopping" in rest
     assert proc.returncode == 0
@@ -90,7 +95,7 @@ def test_sighup_rereads_the_request_and_a_broken_one_keeps_the_old(tmp_path: Pat
     proc = subprocess.Popen([*STANDIN, str(request_file)], stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None
-        for _ in range(6):  # what it loaded: its handlers are in place by now
+        for _ in range(7):  # what it loaded: its handlers are in place by now
             proc.stdout.readline()
         request_file.write_bytes(second.payload())
         proc.send_signal(signal.SIGHUP)

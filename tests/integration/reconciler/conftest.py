@@ -16,7 +16,7 @@ from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch
 
-# A sixth robot shares tb3-01's scenario, so that "its robots" is more than one.
+# One more robot shares tb3-01's scenario, so that "its robots" is more than one.
 EXTRA_ROBOT = "  tb3-06: {scenario: delivery-gazebo, name: Second delivery bot}\n"
 
 
@@ -62,11 +62,11 @@ class Fleet:
 
 @contextlib.contextmanager
 def fleet_on(tmp_path: Path, broker: Mosquitto) -> Iterator[Fleet]:
-    """Six agents with the stand-in brain and a reconciler on `main` on `broker`, all running
+    """Seven agents with the stand-in brain and a reconciler on `main` on `broker`, all running
     (converged); stopped on the way out."""
     lab = GitLab(tmp_path / "lab")
     lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
-    lab.commit("a sixth robot")
+    lab.commit("one more robot")
     watch = FleetWatch(broker.url)
     state = Fleet(lab, broker, watch, tmp_path)
     try:

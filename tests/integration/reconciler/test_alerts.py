@@ -251,10 +251,10 @@ def test_robot_transitions_are_told_once_and_scraped(
     in_sync = wait_for(
         lambda: (
             (m := scrape_or_none(port))
-            and value(m, "robotconf_robots", verdict="InSync") == 6
+            and value(m, "robotconf_robots", verdict="InSync") == 7
             and m
         ),
-        "six robots in sync, scraped",
+        "seven robots in sync, scraped",
     )
     assert value(in_sync, "robotconf_applied_revision_info", revision=head) == 1.0
     assert value(in_sync, "robotconf_ready") == 1.0

@@ -19,7 +19,7 @@ from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Controller
 from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch
-from tests.support.fleet import GitLab, Proc, robotconf_argv
+from tests.support.fleet import ROBOTS, GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.watch import FleetWatch, wait_for
 
@@ -102,7 +102,7 @@ def test_status_watch_follows_the_fleet(lab: GitLab, mosquitto: Mosquitto, tmp_p
             assert isinstance(robots, list)
             return {r["robot_id"]: r["verdict"] for r in robots}
 
-        assert wait_for(verdicts, "a first report") == {f"tb3-0{i}": "Offline" for i in range(1, 6)}
+        assert wait_for(verdicts, "a first report") == dict.fromkeys(ROBOTS, "Offline")
         request = lab.requests()["tb3-01"]
         running = AgentStatus(
             robot_id="tb3-01", state=AgentState.RUNNING, digest=request.digest, pid=1
@@ -148,10 +148,10 @@ def test_status_watch_on_a_terminal_is_a_live_screen(lab: GitLab, mosquitto: Mos
         return shown.decode("utf-8", errors="replace")
 
     try:
-        wait_for(lambda: "5 robots: 5 Offline" in read(), "the fleet on the screen")
+        wait_for(lambda: "6 robots: 6 Offline" in read(), "the fleet on the screen")
         text = read()
         assert "\x1b[" in text  # drawn for a terminal: cursor movement, colour
-        assert all(f"tb3-0{i}" in text for i in range(1, 6))
+        assert all(robot in text for robot in ROBOTS)
         assert "its agent has never reported" in text
     finally:
         proc.send_signal(signal.SIGINT)

@@ -17,7 +17,7 @@ def test_initial_convergence(fleet: Fleet) -> None:
     assert status.state == "Ready"
     assert status.last_applied_revision == head
     assert status.last_attempted_revision == head
-    assert status.robots == 6
+    assert status.robots == 7
     assert status.diagnostics == []
     for robot_id, request in fleet.requests().items():
         launch = fleet.watch.launch(robot_id)

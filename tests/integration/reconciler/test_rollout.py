@@ -16,7 +16,7 @@ from tests.support.watch import wait_for
 
 FLEET = "configs/fleet.yaml"
 CANARY = "tb3-01"
-ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-06"]
+ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-06", "tb3-07"]
 
 
 def with_policy(fleet: Fleet, policy: str) -> str:
@@ -44,7 +44,7 @@ def complete(status: ReconcilerStatus, revision: str) -> bool:
 def rename_all(fleet: Fleet, suffix: str) -> str:
     """A commit that changes every robot's request (their names)."""
     text = fleet.lab.read(FLEET)
-    for name in ("Delivery bot", "Guide bot", "Bluetooth delivery bot", "Lab patrol"):
+    for name in ("Delivery bot", "Guide bot", "Bluetooth delivery bot", "Lab patrol", "Corridor"):
         text = text.replace(f"name: {name}", f"name: {name} {suffix}")
     text = text.replace("name: Noetic patrol", f"name: Noetic patrol {suffix}")
     text = text.replace("name: Second delivery bot", f"name: Second delivery bot {suffix}")
@@ -114,8 +114,8 @@ def test_healthy_waves_advance_in_order(fleet: Fleet) -> None:
     assert status.rollout is not None and status.rollout.wave_name == "all"
     requests = fleet.requests(head)
     fleet.watch.wait_running(requests)
-    # canary: tb3-01; half of six is three: tb3-02 and tb3-03 join; all: the rest.
-    waves = [[CANARY], ["tb3-02", "tb3-03"], ["tb3-04", "tb3-05", "tb3-06"]]
+    # canary: tb3-01; half of seven is four: tb3-02 to tb3-04 join; all: the rest.
+    waves = [[CANARY], ["tb3-02", "tb3-03", "tb3-04"], ["tb3-05", "tb3-06", "tb3-07"]]
     first = {robot: min(launched(fleet, robot)) for robot in ROBOTS}
     for earlier, later in itertools.pairwise(waves):
         # A later wave is published only once every robot of the earlier one has run the new

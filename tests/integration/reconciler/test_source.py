@@ -51,7 +51,14 @@ def test_desired_state_comes_from_the_commit_not_the_work_tree(lab: GitLab) -> N
     lab.write("configs/fleet.yaml", "robots: {tb3-01: {scenario: nope}}\n")  # not committed
     desired = load_desired(lab.root, good)
     assert desired.ok and desired.fleet is not None
-    assert sorted(desired.fleet.requests) == ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
+    assert sorted(desired.fleet.requests) == [
+        "tb3-01",
+        "tb3-02",
+        "tb3-03",
+        "tb3-04",
+        "tb3-05",
+        "tb3-07",
+    ]
 
     bad = lab.commit("broken fleet")
     desired = load_desired(lab.root, bad)

@@ -74,7 +74,7 @@ def up_folder(lab: GitLab) -> str:
 
 def in_sync(up: Proc, lab: GitLab) -> None:
     wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
-    assert len(processes_mentioning(up_folder(lab))) == 10  # five agents, five brains
+    assert len(processes_mentioning(up_folder(lab))) == 12  # six agents, six brains
 
 
 def none_left(folder: str) -> None:
@@ -114,7 +114,7 @@ def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -
 
             status = run("status", "--repo", str(lab.root), *login)
             assert status.returncode == 0, status.stdout + status.stderr
-            assert len(re.findall(r"^tb3-0\d\s+InSync\s", status.stdout, re.M)) == 5
+            assert len(re.findall(r"^tb3-0\d\s+InSync\s", status.stdout, re.M)) == 6
             logs = run("logs", "tb3-01", "--lines", "5", *login)
             assert logs.returncode == 0 and logs.stdout.strip(), logs.stdout + logs.stderr
             # Any other user of the machine can reach 127.0.0.1, but not read a robot's log.
@@ -125,7 +125,7 @@ def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -
             head = lab.commit("looser guide")
             wait_for(lambda: f"all robots InSync with {head[:12]}" in up.output(), "the new commit")
             workdir = str(lab.root / ".robotconf" / "up")
-            assert len(processes_mentioning(workdir)) >= 10  # five agents, five brains
+            assert len(processes_mentioning(workdir)) >= 12  # six agents, six brains
         finally:
             code = up.stop(signal.SIGINT, timeout=60)
     assert code == 0, up.output()
@@ -270,7 +270,7 @@ def test_closing_the_terminal_stops_everything(lab: GitLab, tmp_path: Path) -> N
         screen = terminal.screen
         wait_for(lambda: b"all robots InSync" in screen, "the live screen to report InSync")
         assert b"tb3-05" in screen  # the fleet is drawn, not said as lines
-        assert len(processes_mentioning(up_folder(lab))) == 10
+        assert len(processes_mentioning(up_folder(lab))) == 12
         lab.replace("configs/scenarios/guide-gazebo.yaml", "capability: ", "capability: nope-")
         bad = lab.commit("typo")
         # Framed above the robots on the live screen, not only said in a line over it.
@@ -399,7 +399,7 @@ def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path
 
 def test_the_embedded_broker_takes_many_clients_at_once_without_an_error(tmp_path: Path) -> None:
     """amqtt 0.11/0.12 raised "dictionary changed size during iteration" when a client
-    connected while others subscribed (reconciler/broker.py): up's five agents did, at most
+    connected while others subscribed (reconciler/broker.py): up's six agents did, at most
     starts. Thirty clients with five subscriptions each make it happen at every run."""
     errors: list[logging.LogRecord] = []
 

@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 
 from agent.config import AgentConfig, load_config
-from agent.process import brain_environment
+from agent.process import brain_environment, request_environment
+from configurator.launch import with_digest
+from tests.support.agents import make_request
 from tests.unit.agent.test_config import GOOD, problems, write
 
 SECRET = "hunter2-secret"
@@ -92,3 +94,31 @@ def test_the_brain_environment_adds_env_to_the_agents_own() -> None:
     built = brain_environment({"ROS_DOMAIN_ID": "7", "ROBOTCONF_ROBOT_ID": "tb3-01"})
     assert built[b"ROS_DOMAIN_ID"] == b"7" and built[b"ROBOTCONF_ROBOT_ID"] == b"tb3-01"
     assert built[b"PATH"] == os.environb[b"PATH"]  # the agent's own environment underneath
+
+
+@pytest.mark.parametrize(
+    ("inherited", "local", "domain", "expected", "conflict"),
+    [
+        (None, {}, None, None, False),  # no domain anywhere: none set
+        (b"9", {}, None, b"9", False),  # the agent's own environment, as before domains
+        (b"9", {}, 4, b"4", False),  # the repository's over the agent's environment
+        (None, {"ROS_DOMAIN_ID": "7"}, 4, b"7", True),  # agent.yaml's wins, and is reported
+        (None, {"ROS_DOMAIN_ID": "07"}, 7, b"07", False),  # the same domain: no conflict
+        (None, {"ROS_DOMAIN_ID": "7"}, None, b"7", False),  # the request names none
+    ],
+)
+def test_the_brains_environment_for_a_request(
+    inherited: bytes | None,
+    local: dict[str, str],
+    domain: int | None,
+    expected: bytes | None,
+    conflict: bool,
+) -> None:
+    request = with_digest(make_request().model_copy(update={"ros_domain_id": domain}))
+    own = {b"PATH": b"/usr/bin"} | ({} if inherited is None else {b"ROS_DOMAIN_ID": inherited})
+    base = own | {k.encode(): v.encode() for k, v in local.items()}
+    env, warnings = request_environment(base, local, request)
+    assert env.get(b"ROS_DOMAIN_ID") == expected
+    assert env[b"ROBOTCONF_DIGEST"] == request.digest.encode() and env[b"PATH"] == b"/usr/bin"
+    assert len(warnings) == conflict
+    assert base == own | {k.encode(): v.encode() for k, v in local.items()}  # left as it was

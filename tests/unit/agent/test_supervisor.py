@@ -5,7 +5,10 @@ from __future__ import annotations
 import signal
 from typing import Any
 
+import pytest
+
 from agent.supervisor import Kill, Policy, Reload, Spawn, Supervisor, Terminate
+from configurator.launch import with_digest
 from configurator.wire import AgentState
 from tests.support.agents import make_request
 
@@ -317,6 +320,21 @@ def test_a_capability_change_restarts_and_resets_the_reloads() -> None:
     sup.spawned(101, 7.0)
     status = sup.status()
     assert status.digest == LOGIC.digest and status.reloads == 0 and status.restarts == 0
+
+
+@pytest.mark.parametrize(("before", "after"), [(None, 1), (1, 2), (1, None), (None, 0)])
+def test_a_domain_change_restarts_never_reloads(before: int | None, after: int | None) -> None:
+    """A process joins its DDS domain when it starts: no reload can move a brain to another."""
+    first = with_digest(A.model_copy(update={"ros_domain_id": before}))
+    moved = with_digest(B.model_copy(update={"ros_domain_id": after}))
+    sup = supervisor(reload_signal=HUP)
+    assert sup.accept(first, [], 0.0) == [Spawn(first)]
+    sup.spawned(100, 0.0)
+    sup.tick(sup.policy.startsecs)
+    assert sup.state == AgentState.RUNNING
+    assert sup.accept(moved, [], 5.0) == [Terminate(100)]
+    assert sup.exited(100, -15, 6.0) == [Spawn(moved)]
+    assert sup.status().reloads == 0
 
 
 def test_a_request_without_restart_digest_always_restarts() -> None:

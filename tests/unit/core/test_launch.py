@@ -3,6 +3,7 @@ that the agent's admission and the fleet status share."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 from typing import Any
 
@@ -47,6 +48,8 @@ def _other(name: str, value: Any) -> Any:
     """A different value of the same type; a field of a new type must be taught here."""
     if name == "namespace":  # content only when set: None to a namespace, one to another
         return "/tb3_02" if value is None else value + "_b"
+    if name == "ros_domain_id":  # the same: None to a domain, one to another
+        return 3 if value is None else value + 1
     if isinstance(value, str):
         return value + "~"
     if isinstance(value, float):
@@ -150,7 +153,7 @@ def test_strict_requests_still_take_json_as_the_agent_receives_it() -> None:
 
 
 def test_a_namespace_is_content_and_restart_content_only_when_set() -> None:
-    assert CONTENT_WHEN_SET == ("namespace",)
+    assert CONTENT_WHEN_SET == ("namespace", "ros_domain_id")
     plain = make_request()
     assert plain.namespace is None
     # Unset: not on the wire and not digested, so an agent that predates the field accepts
@@ -171,3 +174,58 @@ def test_a_namespace_is_content_and_restart_content_only_when_set() -> None:
     data = json.loads(placed.payload())
     data["namespace"] = "/tb3_09"
     assert not LaunchRequest.model_validate(data).digest_matches()
+
+
+# The digests and payload of `make_request()` (and with a namespace) before ros_domain_id
+# existed: a robot without a domain keeps its request byte for byte, so upgrading the
+# reconciler restarts no brain.
+BEFORE_DOMAINS = {
+    None: (
+        "sha256:3f6365fd221ee9a9f73a4e62caa8dd70077fc2bd59ed52132644aa5c355e2745",
+        "sha256:d60d5166f7d4c7c0cc08862b3dc5f89a866fb006ec4fe792b03c9953df5914a2",
+        "9632729b93c7e80b9fe9c6570d2e4eb252984cdb8fba584fb0338f1ff93e6063",
+    ),
+    "/tb3_01": (
+        "sha256:badf94bbb00de9ba76a3bdb2beda123cc6de8e0ac6c28baf11303f92bc758dd5",
+        "sha256:b1437b1801fbe738647089019d26f5ae0f64f1b7e956af511305f5cfd4b6da7e",
+        "e762cc3809921621e66fcc67454140bfcca5e45b90e00252b9d6432547fccd09",
+    ),
+}
+
+
+@pytest.mark.parametrize("namespace", list(BEFORE_DOMAINS))
+def test_a_request_without_a_domain_is_byte_for_byte_what_it_was(namespace: str | None) -> None:
+    request = with_digest(make_request().model_copy(update={"namespace": namespace}))
+    assert request.ros_domain_id is None
+    payload = request.payload()
+    assert b"ros_domain_id" not in payload
+    found = (request.digest, request.restart_digest, hashlib.sha256(payload).hexdigest())
+    assert found == BEFORE_DOMAINS[namespace]
+
+
+def test_a_domain_is_content_and_restart_content_only_when_set() -> None:
+    plain = make_request()
+    placed = with_digest(plain.model_copy(update={"ros_domain_id": 0}))
+    # Set, even to ROS's default 0: published, digested, and a restart, never a reload (a
+    # process joins its DDS domain when it starts).
+    assert json.loads(placed.payload())["ros_domain_id"] == 0
+    assert placed.digest != plain.digest and placed.restart_digest != plain.restart_digest
+    moved = with_digest(placed.model_copy(update={"ros_domain_id": 1}))
+    assert moved.digest != placed.digest and moved.restart_digest != placed.restart_digest
+    # Beside a namespace: each part of the restart content.
+    named = with_digest(plain.model_copy(update={"namespace": "/tb3_01"}))
+    both = with_digest(named.model_copy(update={"ros_domain_id": 1}))
+    assert len({named.restart_digest, both.restart_digest, moved.restart_digest}) == 3
+    back = LaunchRequest.model_validate_json(both.payload())
+    assert back == both and back.digest_matches()
+    data = json.loads(both.payload())
+    data["ros_domain_id"] = 2  # tampered with on the way
+    assert not LaunchRequest.model_validate(data).digest_matches()
+
+
+@pytest.mark.parametrize("domain", [-1, 233, "1", True, 1.0])
+def test_a_domain_is_an_integer_from_0_to_232(domain: Any) -> None:
+    data = json.loads(with_digest(make_request()).payload())
+    data["ros_domain_id"] = domain
+    with pytest.raises(ValidationError, match="ros_domain_id"):
+        LaunchRequest.model_validate(data)

@@ -45,7 +45,7 @@ def plan(lab: Lab) -> Plan:
 
 
 def test_changes_come_in_wave_order_with_their_wave(plan: Plan) -> None:
-    # canary: tb3-01 (tb3-03, the other canary, is removed); half of the five robots is three,
+    # canary: tb3-01 (tb3-03, the other canary, is removed); half of the six robots is three,
     # so half takes tb3-02 and tb3-04 (unchanged); all takes the rest; the removed are in none.
     assert plan.waves == ["canary", "half", "all"]
     assert [(c.robot_id, c.kind, c.wave) for c in plan.changes] == [
@@ -59,7 +59,7 @@ def test_changes_come_in_wave_order_with_their_wave(plan: Plan) -> None:
 
 def test_text_groups_the_changes_under_their_waves(plan: Plan) -> None:
     lines = format_plan_text(plan).splitlines()
-    assert lines[0].endswith(": 3 changed, 1 added, 1 removed, 1 unchanged")
+    assert lines[0].endswith(": 3 changed, 1 added, 1 removed, 2 unchanged")
     assert lines[1:] == [
         "rollout in waves: canary, half, all",
         "wave canary (1 of 3):",
@@ -139,3 +139,16 @@ def test_wave_names_from_the_file_are_printed_safely(lab: Lab) -> None:
     assert "wave can*ary\\u202e|x (1 of 3):" in text and "\u202e" not in text
     markdown = format_plan_markdown(plan)
     assert "| can\\*ary\\\\u202e\\|x | `tb3-01` |" in markdown and "\u202e" not in markdown
+
+
+def test_a_domain_change_is_a_restart(lab: Lab) -> None:
+    """A brain joins its ROS domain when it starts: a new domain is never reloaded."""
+    base, _ = fleet(lab)
+    lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 3}")  # tb3-07
+    lab.replace("models/environments/RoboticsLab.yaml", "ros_domain_id: 1", "")  # tb3-04's
+    head, rollout = fleet(lab)
+    lines = format_plan_text(make_plan(base, head, rollout)).splitlines()
+    assert lines[1:] == [
+        "  ~ tb3-04  patrol-real: ros_domain_id [restart]",
+        "  ~ tb3-07  patrol-real: ros_domain_id [restart]",
+    ]

@@ -38,9 +38,12 @@ def _shared() -> LaunchScenario:
     return request.scenario_requests.scenario
 
 
-def _whole(scenario: LaunchScenario, robot: tuple[str, str, str, str | None]) -> LaunchRequest:
+Robot = tuple[str, str, str, str | None] | tuple[str, str, str, str | None, int | None]
+
+
+def _whole(scenario: LaunchScenario, robot: Robot) -> LaunchRequest:
     """The request made the plain way: resolved, built as a model, serialised whole."""
-    robot_id, name, revision, namespace = robot
+    robot_id, name, revision, namespace, *domain = robot
     capability = scenario.capability
     mappings = {
         key: b.model_copy(update={"name": resolve_name(b.name, namespace)})
@@ -49,12 +52,12 @@ def _whole(scenario: LaunchScenario, robot: tuple[str, str, str, str | None]) ->
     resolved = scenario.model_copy(
         update={"capability": capability.model_copy(update={"mappings": mappings})}
     )
-    return make_launch_request(robot_id, name, revision, resolved, namespace)
+    return make_launch_request(robot_id, name, revision, resolved, namespace, *domain)
 
 
-def _assert_same(scenario: LaunchScenario, robot: tuple[str, str, str, str | None]) -> None:
-    robot_id, name, revision, namespace = robot
-    made = ScenarioRequests(scenario).request(robot_id, name, revision, namespace)
+def _assert_same(scenario: LaunchScenario, robot: Robot) -> None:
+    robot_id, name, revision, namespace, *domain = robot
+    made = ScenarioRequests(scenario).request(robot_id, name, revision, namespace, *domain)
     whole = _whole(scenario, robot)
     assert made.payload() == whole.payload()
     assert (made.digest, made.restart_digest) == (whole.digest, whole.restart_digest)
@@ -65,9 +68,11 @@ def _assert_same(scenario: LaunchScenario, robot: tuple[str, str, str, str | Non
 
 
 def test_every_request_of_the_example_fleet_is_the_whole_request() -> None:
-    """With a namespace and without; payload, digests and model."""
+    """With a namespace and without, with a ROS domain and without; payload, digests and
+    model."""
     rendered = _example_fleet()
     assert {r.namespace is None for r in rendered.requests.values()} == {True, False}
+    assert {r.ros_domain_id is None for r in rendered.requests.values()} == {True, False}
     for request in rendered.requests.values():
         model = request.model()
         assert model == with_digest(model) and model.digest_matches()
@@ -115,14 +120,14 @@ def test_marks_a_commit_can_write_cost_no_retries(monkeypatch: pytest.MonkeyPatc
     made: list[int] = []
     real = ScenarioRequests._make
 
-    def counted(self: ScenarioRequests, with_namespace: bool, mark: int) -> Any:
+    def counted(self: ScenarioRequests, with_namespace: bool, domain: bool, mark: int) -> Any:
         made.append(mark)
-        return real(self, with_namespace, mark)
+        return real(self, with_namespace, domain, mark)
 
     monkeypatch.setattr(ScenarioRequests, "_make", counted)
     guesses = {f"\x00robotconf{i}:": f"\x00robotconf{i}:scenario\x00" for i in range(500)}
     shared = base.model_copy(update={"environment_knowledge": guesses})
-    _assert_same(shared, ("tb3-09", "bot", "r", "/tb3_09"))
+    _assert_same(shared, ("tb3-09", "bot", "r", "/tb3_09", 7))
     assert made == [0]
     made.clear()
     held = {_prefix(i): i for i in range(3)}  # this process's own: the next mark is tried
@@ -136,6 +141,8 @@ def test_a_scenario_without_mappings() -> None:
     scenario = shared.model_copy(update={"capability": capability})
     _assert_same(scenario, ("tb3-09", "x", "r", None))
     _assert_same(scenario, ("tb3-09", "x", "r", "/tb3_09"))
+    _assert_same(scenario, ("tb3-09", "x", "r", None, 0))
+    _assert_same(scenario, ("tb3-09", "x", "r", "/tb3_09", 232))
 
 
 def _with_logics(logics: dict[str, str | list[str]]) -> LaunchScenario:
@@ -243,12 +250,17 @@ _json = st.recursive(
     robot_name=_text,
     namespace=st.none() | st.sampled_from(["/tb3_01", "/a/b", "/robotconf0"]),
     revision=_text,
+    domain=st.none() | st.integers(0, 232),
 )
 def test_any_text_gives_the_whole_requests_bytes(
-    knowledge: dict[str, Any], robot_name: str, namespace: str | None, revision: str
+    knowledge: dict[str, Any],
+    robot_name: str,
+    namespace: str | None,
+    revision: str,
+    domain: int | None,
 ) -> None:
     shared = _shared().model_copy(update={"environment_knowledge": knowledge})
-    _assert_same(shared, ("tb3-09", robot_name, revision, namespace))
+    _assert_same(shared, ("tb3-09", robot_name, revision, namespace, domain))
 
 
 def test_scenarios_of_one_capability_share_its_templates_only_while_it_is_the_same() -> None:
@@ -262,3 +274,16 @@ def test_scenarios_of_one_capability_share_its_templates_only_while_it_is_the_sa
         _assert_same(scenario, ("tb3-01", "bot", "r", "/tb3_01"))
     made = [ScenarioRequests(s).request("tb3-01", "b", "r", "/n") for s in (first, third)]
     assert made[0].restart_digest != made[1].restart_digest
+
+
+def test_a_robots_domain_wins_over_its_scenarios_and_is_written_as_the_model_writes_it() -> None:
+    shared = _shared()
+    for default, own, domain in ((None, None, None), (4, None, 4), (4, 0, 0), (None, 232, 232)):
+        made = ScenarioRequests(shared, default).request("tb3-01", "b", "r", "/tb3_01", own)
+        assert made.ros_domain_id == domain
+        whole = _whole(shared, ("tb3-01", "b", "r", "/tb3_01", domain))
+        assert made.payload() == whole.payload() and made.model() == whole
+        assert (made.digest, made.restart_digest) == (whole.digest, whole.restart_digest)
+        assert json.loads(made.payload()).get("ros_domain_id", "unset") == (
+            "unset" if domain is None else domain
+        )

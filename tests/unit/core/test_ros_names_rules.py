@@ -70,8 +70,10 @@ def test_two_robots_of_one_world_on_the_same_names_would_drive_each_other(lab: L
     assert (d.path, d.line, d.col) == (FLEET, lab.line_of(FLEET, "tb3-02:"), 3)
     assert d.message == (
         "robots 'tb3-01' and 'tb3-02' both use /odom (odometry) in environment GazeboDemo1 "
-        "(ROS2): they would drive each other; give them namespaces (`namespace: tb3_01`, "
-        "`namespace: tb3_02`)"
+        "(ROS2) on ROS domain 0 (ROS's default, where a robot without `ros_domain_id` runs): "
+        "they would drive each other; give them namespaces (`namespace: tb3_01`, "
+        "`namespace: tb3_02`), or put them on different domains (e.g. `ros_domain_id: 1` for "
+        "'tb3-02')"
     )
 
 
@@ -83,7 +85,8 @@ def test_absolute_names_clash_whatever_the_namespaces(lab: Lab) -> None:
     # Both have namespaces already: an absolute name ignores them, the scheme is the fix.
     assert d.message.endswith(
         "would drive each other; write these names relative in mapping scheme ROS2/gazebo "
-        "(cmd_vel, not /cmd_vel)"
+        "(cmd_vel, not /cmd_vel), or put them on different domains (e.g. `ros_domain_id: 1` "
+        "for 'tb3-03')"
     )
 
 
@@ -91,7 +94,7 @@ def test_one_namespace_for_two_robots_clashes(lab: Lab) -> None:
     lab.replace(FLEET, "namespace: tb3_02}", "namespace: /tb3_01}")
     d = lab.only("RC505")
     assert "both use /tb3_01/odom (odometry)" in d.message
-    assert d.message.endswith("give them different namespaces")
+    assert "give them different namespaces, or put them on different domains" in d.message
 
 
 def test_shared_services_other_worlds_and_platforms_do_not_clash(lab: Lab) -> None:
@@ -115,3 +118,61 @@ def test_a_suspended_robot_clashes_with_no_one(lab: Lab) -> None:
     assert "robots 'tb3-09' and 'tb3-04' both use /navigate_to_pose" in lab.only("RC505").message
     lab.replace(FLEET, "namespace: other}", "namespace: other, suspended: true}")
     assert lab.check().diagnostics == []
+
+
+ROBOTICS_LAB = "models/environments/RoboticsLab.yaml"
+PATROL_CLASH = "robots 'tb3-04' and 'tb3-07' both use /navigate_to_pose (navigate_to_pose), /odom"
+
+
+def test_two_robots_on_two_domains_share_no_graph_and_on_one_they_clash(lab: Lab) -> None:
+    # The example lab: tb3-04 on RoboticsLab's domain (1), tb3-07 on its own (2), the same
+    # scenario at the root on the same absolute names.
+    assert lab.check().diagnostics == []
+    tb3_04, tb3_07 = lab.render("tb3-04"), lab.render("tb3-07")
+    assert (tb3_04.ros_domain_id, tb3_07.ros_domain_id) == (1, 2)
+    assert tb3_04.scenario.capability.mappings == tb3_07.scenario.capability.mappings
+    lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 1}")
+    d = lab.only("RC505")
+    assert d.line == lab.line_of(FLEET, "tb3-07:")
+    assert d.message == (
+        f"{PATROL_CLASH} (odometry) in environment RoboticsLab (ROS2) on ROS domain 1: they "
+        "would drive each other; write these names relative in mapping scheme ROS2/real-world "
+        "(cmd_vel, not /cmd_vel) and give them namespaces (`namespace: tb3_04`, `namespace: "
+        "tb3_07`), or put them on different domains (e.g. `ros_domain_id: 2` for 'tb3-07')"
+    )
+
+
+def test_an_environments_domain_is_the_default_of_its_robots(lab: Lab) -> None:
+    lab.replace(FLEET, ", ros_domain_id: 2}", "}")  # tb3-07 on the lab's domain too
+    assert "in environment RoboticsLab (ROS2) on ROS domain 1: " in lab.only("RC505").message
+    lab.replace(ROBOTICS_LAB, "ros_domain_id: 1", "ros_domain_id: 7")
+    assert " on ROS domain 7: " in lab.only("RC505").message
+    lab.replace(FLEET, "name: Lab patrol,", "name: Lab patrol, ros_domain_id: 1,")  # its own wins
+    assert lab.check().diagnostics == []
+    assert (lab.render("tb3-04").ros_domain_id, lab.render("tb3-07").ros_domain_id) == (1, 7)
+
+
+def test_an_unset_domain_is_ross_default_0(lab: Lab) -> None:
+    lab.replace(ROBOTICS_LAB, "ros_domain_id: 1", "")
+    lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 0}")  # tb3-04 names none
+    message = lab.only("RC505").message
+    assert message.startswith(
+        f"{PATROL_CLASH} (odometry) in environment RoboticsLab (ROS2) on ROS domain 0 (ROS's "
+        "default, where a robot without `ros_domain_id` runs): they would drive each other"
+    )
+    assert message.endswith("(e.g. `ros_domain_id: 1` for 'tb3-07')")
+    lab.replace(FLEET, "ros_domain_id: 0}", "ros_domain_id: 1}")
+    assert lab.check().diagnostics == []
+    assert lab.render("tb3-04").ros_domain_id is None  # not sent: the robot keeps its own
+
+
+def test_a_domain_out_of_range_is_located_with_the_bound(lab: Lab) -> None:
+    lab.replace(FLEET, "ros_domain_id: 2}", "ros_domain_id: 233}")
+    d = lab.only("RC103")
+    assert (d.path, d.line) == (FLEET, lab.line_of(FLEET, "tb3-07:"))
+    assert d.message == "robots.tb3-07.ros_domain_id must be less than or equal to 232, got 233"
+    lab.replace(FLEET, "ros_domain_id: 233}", "ros_domain_id: 2}")
+    lab.replace(ROBOTICS_LAB, "ros_domain_id: 1", "ros_domain_id: '1'")
+    d = lab.only("RC103")
+    assert (d.path, d.line) == (ROBOTICS_LAB, lab.line_of(ROBOTICS_LAB, "ros_domain_id"))
+    assert d.message == "ros_domain_id must be a whole number, got '1'"
