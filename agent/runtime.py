@@ -563,8 +563,13 @@ class Agent:
 
     def introspection_env(self) -> dict[bytes, bytes]:
         """The environment the interfaces source runs with, asked for at every reading: the
-        brain's, so that its ROS_DOMAIN_ID and RMW apply (the one place to change that)."""
-        return self._brain_env
+        brain's for the request it runs (or is to run), so that the request's ROS domain,
+        agent.yaml's override of it and its RMW apply; before any request, the agent's own."""
+        sup = self.supervisor
+        assignment = sup.brain or sup.desired
+        if assignment is None:
+            return self._brain_env
+        return self._environment(assignment.request)[0]
 
     def _read_interfaces(self, ready: list[int], now: float) -> bool:
         """One look at the interfaces source; True when its error (in the status) changed.

@@ -20,6 +20,7 @@ import pytest
 from agent.process import is_alive
 from agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install
 from configurator.interfaces import MAX_INTERFACES, RobotInterfaces
+from configurator.launch import with_digest
 from configurator.mqtt import Connection, make_client
 from configurator.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
@@ -314,3 +315,22 @@ def test_a_broker_that_lost_its_retained_messages_gets_the_report_again(
         read_retained(mosquitto.url, TOPICS.interfaces(ROBOT))
     )
     assert again == first and ros2.readings() == 1
+
+
+def test_the_interfaces_are_read_in_the_request_s_ros_domain(
+    make_agent: AgentFactory,
+    watch: FleetWatch,
+    mosquitto: Mosquitto,
+    seen: InterfacesWatch,
+    ros2: Ros2,
+) -> None:
+    """The source looks where the brain runs: the request's `ros_domain_id`, unless
+    agent.yaml's env overrides it; before any request, the agent's own environment."""
+    env = ros2.env()
+    del env["ROS_DOMAIN_ID"]
+    agent = make_agent(interfaces={"interval": 0.2}, env=env).start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    request = with_digest(make_request().model_copy(update={"ros_domain_id": 5}))
+    publish(mosquitto.url, TOPICS.launch(ROBOT), request.payload())
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    seen.wait("the request's domain", lambda r: ("/domain_5", "std_msgs/msg/Empty") in names(r))
