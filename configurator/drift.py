@@ -13,7 +13,7 @@ from typing import Any, Literal
 from configurator.interfaces import (
     KIND_OF_MAPPING,
     InterfacesVerdict,
-    RobotInterfaces,
+    Reported,
     index,
     interfaces_verdict,
     same_type,
@@ -177,7 +177,7 @@ def _needs(
 
 
 def drift_of(
-    robot_id: str, needs: Sequence[Need], found: RobotInterfaces | None, error: str | None = None
+    robot_id: str, needs: Sequence[Need], found: Reported | None, error: str | None = None
 ) -> Drift:
     """The robot's drift. `error`: its interfaces payload could not be read (why)."""
     if error is not None:
@@ -225,7 +225,7 @@ class DriftMemo:
         robot_id: str,
         digest: str,
         needs: Sequence[Need],
-        found: RobotInterfaces | None,
+        found: Reported | None,
         error: str | None = None,
     ) -> Drift:
         """The drift of `needs` (the request of `digest`) against `found` (or the `error` its

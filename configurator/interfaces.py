@@ -6,6 +6,7 @@ it to judge drift and draft templates). Topic: `<prefix>/robots/<id>/interfaces`
 
 from __future__ import annotations
 
+import json
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -58,7 +59,42 @@ class RobotInterfaces(BaseModel):
         return "error" if self.error is not None else "reported"
 
 
-def interfaces_verdict(found: RobotInterfaces | None) -> InterfacesVerdict:
+class KeptInterfaces:
+    """A report as a reader keeps it (the reconciler, `robotconf status`): what it says of
+    itself, and its entries left as the payload's bytes, already validated, until `index`
+    asks. Parsed into models, a report of 300 interfaces takes nine times its payload: 10,000
+    robots would hold gigabytes; the bytes are held by the reader's view of the broker anyway."""
+
+    __slots__ = ("at", "count", "error", "payload", "source", "truncated")
+
+    def __init__(self, payload: bytes, report: RobotInterfaces) -> None:
+        self.payload = payload
+        self.source = report.source
+        self.at = report.at
+        self.truncated = report.truncated
+        self.error = report.error
+        self.count = len(report.topics) + len(report.services) + len(report.actions)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, KeptInterfaces) and other.payload == self.payload
+
+    def __hash__(self) -> int:
+        return hash(self.payload)
+
+    @property
+    def verdict(self) -> InterfacesVerdict:
+        return "error" if self.error is not None else "reported"
+
+    def report(self) -> RobotInterfaces:
+        """The whole report, parsed again."""
+        return RobotInterfaces.model_validate_json(self.payload)
+
+
+# A robot's interfaces as any reader has them: the message, or as a reader keeps it.
+Reported = RobotInterfaces | KeptInterfaces
+
+
+def interfaces_verdict(found: Reported | None) -> InterfacesVerdict:
     """`unknown` when the robot reported nothing (reporting off, a ROS 1 robot, an old agent)."""
     return "unknown" if found is None else found.verdict
 
@@ -75,11 +111,32 @@ def same_type(expected: str, found: str) -> bool:
     return expected.strip() == found.strip() or _short(expected) == _short(found)
 
 
-def index(found: RobotInterfaces) -> dict[tuple[InterfaceKind, str], list[str]]:
+def index(found: Reported) -> dict[tuple[InterfaceKind, str], list[str]]:
     """(kind, name) -> the types the robot reports under it (a topic may carry several)."""
+    if isinstance(found, KeptInterfaces):
+        return _index_payload(found.payload)
     table: dict[tuple[InterfaceKind, str], list[str]] = {}
     kinds: tuple[InterfaceKind, ...] = ("topic", "service", "action")
     for kind in kinds:
         for entry in found.of_kind(kind):
             table.setdefault((kind, entry.name), []).append(entry.type)
+    return table
+
+
+_LISTS: tuple[tuple[str, InterfaceKind], ...] = (
+    ("topics", "topic"),
+    ("services", "service"),
+    ("actions", "action"),
+)
+
+
+def _index_payload(payload: bytes) -> dict[tuple[InterfaceKind, str], list[str]]:
+    """`index` of a payload that validated as a report when it was kept: read as plain JSON,
+    without a model per entry. Entries are kept as the model reads them (text name and type
+    within the bounds); anything else was refused when the payload was kept."""
+    raw = json.loads(payload)
+    table: dict[tuple[InterfaceKind, str], list[str]] = {}
+    for field, kind in _LISTS:
+        for entry in raw.get(field) or ():
+            table.setdefault((kind, entry["name"]), []).append(entry["type"])
     return table

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
-from configurator.interfaces import RobotInterfaces
+from configurator.interfaces import Reported as Report
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.textsafe import markdown_code, markdown_text, printable_lines
@@ -151,7 +151,7 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
     return Plan(base.revision, head.revision, changes, unchanged, names)
 
 
-Reported = Mapping[str, tuple[RobotInterfaces | None, str | None]]  # robot -> (report, error)
+Reported = Mapping[str, tuple[Report | None, str | None]]  # robot -> (report, error)
 
 
 def with_drift(plan: Plan, head: FleetRender, reported: Reported) -> Plan:

@@ -21,7 +21,7 @@ from typing import Protocol
 from pydantic import ValidationError
 
 from configurator.backoff import Backoff
-from configurator.interfaces import RobotInterfaces
+from configurator.interfaces import Reported
 from configurator.launch import LaunchRequest, StopRequest
 from configurator.mqtt import Connection
 from configurator.render import FleetRender
@@ -384,7 +384,7 @@ class Controller:
     def _serving_fleet(self) -> FleetRender | None:
         return self.serving.fleet if self.serving is not None else None
 
-    def _follow_interfaces(self, wanted: bool) -> dict[str, RobotInterfaces] | None:
+    def _follow_interfaces(self, wanted: bool) -> dict[str, Reported] | None:
         """The robots' readable interfaces reports, followed only while fleet.yaml says
         `drift: hold` (None until they are known, or when not followed)."""
         if wanted and self.interfaces is None:

@@ -11,7 +11,7 @@ from collections.abc import Mapping, Set
 from dataclasses import dataclass, field, replace
 
 from configurator.drift import Drift, drift_of, needs_of_rendered
-from configurator.interfaces import RobotInterfaces
+from configurator.interfaces import Reported
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.wire import (
@@ -67,7 +67,7 @@ class Observation:
     dark_since: Mapping[str, float] = field(default_factory=dict)  # robot -> first seen dark
     # The robots' readable interfaces reports, followed while fleet.yaml says `drift: hold`
     # (None: not followed; a robot absent reports nothing readable: never held).
-    interfaces: Mapping[str, RobotInterfaces] | None = None
+    interfaces: Mapping[str, Reported] | None = None
 
 
 @dataclass(frozen=True)

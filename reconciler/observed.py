@@ -12,7 +12,12 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from configurator.interfaces import MAX_INTERFACES, MAX_INTERFACES_BYTES, RobotInterfaces
+from configurator.interfaces import (
+    MAX_INTERFACES,
+    MAX_INTERFACES_BYTES,
+    KeptInterfaces,
+    RobotInterfaces,
+)
 from configurator.launch import LaunchRequest, StopRequest, canonical_json
 from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from configurator.wire import (
@@ -41,7 +46,7 @@ class RobotSeen:
     stopped: bool = False  # the launch topic holds a Stop for this robot: nothing assigned
     status: AgentStatus | None = None
     description: RobotDescription | None = None
-    interfaces: RobotInterfaces | None = None  # what it reports of its ROS graph
+    interfaces: KeptInterfaces | None = None  # what it reports of its ROS graph
     interfaces_error: str | None = None  # why its interfaces payload cannot be read
 
     @property
@@ -207,7 +212,7 @@ def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _R
         elif kind == "status":
             fields["status"] = AgentStatus.model_validate(raw)
         elif kind == INTERFACES:
-            fields["interfaces"] = _interfaces(raw)
+            fields["interfaces"] = _interfaces(raw, payload)
         else:
             fields["description"] = RobotDescription.model_validate(raw)
     except (PayloadError, ValidationError, ValueError) as exc:
@@ -218,11 +223,11 @@ def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _R
     return _Reading(fields)
 
 
-def _interfaces(raw: dict[str, Any]) -> RobotInterfaces:
-    found = RobotInterfaces.model_validate(raw)
-    count = len(found.topics) + len(found.services) + len(found.actions)
-    if count > MAX_INTERFACES:
-        raise ValueError(f"{count:,} interfaces, over the limit of {MAX_INTERFACES:,}")
+def _interfaces(raw: dict[str, Any], payload: bytes) -> KeptInterfaces:
+    """Validated whole, kept as its bytes (see KeptInterfaces)."""
+    found = KeptInterfaces(payload, RobotInterfaces.model_validate(raw))
+    if found.count > MAX_INTERFACES:
+        raise ValueError(f"{found.count:,} interfaces, over the limit of {MAX_INTERFACES:,}")
     return found
 
 

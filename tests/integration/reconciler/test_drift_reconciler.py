@@ -15,7 +15,7 @@ from reconciler.notify import Notifier, parse_receiver
 from reconciler.source import LocalBranch
 from reconciler.telemetry import Telemetry
 from tests.integration.reconciler.test_alerts import Receiver, free_port, scrape, value
-from tests.support.fleet import GitLab, Running, robotconf_argv
+from tests.support.fleet import ROBOTS, GitLab, Running, robotconf_argv
 from tests.support.interfaces import publish_interfaces, report
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
@@ -55,8 +55,11 @@ def test_drift_is_told_once_each_way_and_scraped(
         head = lab.head()
         watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == head, "applied")
         wait_for(
-            lambda: value(scrape(port), "robotconf_robot_interfaces", interfaces="unknown") == 5,
-            "five robots with unknown interfaces",
+            lambda: (
+                value(scrape(port), "robotconf_robot_interfaces", interfaces="unknown")
+                == len(ROBOTS)
+            ),
+            "every robot's interfaces unknown",
         )
         publish_interfaces(mosquitto.url, "tb3-04", report(ODOM))  # no Nav2
         publish_interfaces(mosquitto.url, "tb3-02", b"garbage")
