@@ -41,3 +41,22 @@ def report(*topics: tuple[str, str], actions: tuple[tuple[str, str], ...] = ()) 
         source="ros2",
         at=1.0,
     )
+
+
+# tb3-04 (patrol-real) reporting only /odom, as a nav_msgs/msg/Path: its drift as JSON.
+PATROL_ON_A_PATH_DRIFT = [
+    {
+        "mapping": "navigate_to_pose",
+        "name": "/navigate_to_pose",
+        "kind": "action_client",
+        "expected_type": "nav2_msgs/action/NavigateToPose",
+        "found_type": None,
+    },
+    {
+        "mapping": "odometry",
+        "name": "/odom",
+        "kind": "topic",
+        "expected_type": "nav_msgs/msg/Odometry",
+        "found_type": "nav_msgs/msg/Path",
+    },
+]

@@ -8,7 +8,7 @@ from typing import Any
 
 from configurator.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
 from tests.support.fleet import GitLab, robotconf_argv
-from tests.support.interfaces import publish_interfaces, report
+from tests.support.interfaces import PATROL_ON_A_PATH_DRIFT, publish_interfaces, report
 from tests.support.mosquitto import Mosquitto, free_port
 
 # tb3-04 runs patrol-real: navigate_with_nav2 needs /navigate_to_pose and /odom.
@@ -53,22 +53,7 @@ def test_status_shows_each_robot_s_drift_and_whether_it_reports(
 
     found = rows(lab, url)
     assert found["tb3-04"]["interfaces"] == "reported"
-    assert found["tb3-04"]["drift"] == [
-        {
-            "mapping": "navigate_to_pose",
-            "name": "/navigate_to_pose",
-            "kind": "action_client",
-            "expected_type": "nav2_msgs/action/NavigateToPose",
-            "found_type": None,
-        },
-        {
-            "mapping": "odometry",
-            "name": "/odom",
-            "kind": "topic",
-            "expected_type": "nav_msgs/msg/Odometry",
-            "found_type": "nav_msgs/msg/Path",
-        },
-    ]
+    assert found["tb3-04"]["drift"] == PATROL_ON_A_PATH_DRIFT
     assert (found["tb3-01"]["interfaces"], found["tb3-01"]["drift"]) == ("reported", [])
     # Unreadable (garbage, or over the bound) and a failed source: `error`, never drift.
     for robot_id in ("tb3-02", "tb3-03", "tb3-05"):

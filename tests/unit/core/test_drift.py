@@ -13,6 +13,7 @@ from configurator.drift import (
 from configurator.interfaces import Interface, RobotInterfaces
 from configurator.launch import LaunchRequest
 from configurator.render import render_fleet
+from tests.support.interfaces import PATROL_ON_A_PATH_DRIFT
 from tests.support.lab import Lab
 
 # What the example lab's tb3-04 (patrol-real: navigate_with_nav2 on the real-world scheme)
@@ -53,22 +54,7 @@ def test_a_missing_interface_and_a_wrong_type_are_named_with_the_logic_needing_t
         topics=[Interface(name="/odom", type="nav_msgs/msg/Path")], source="ros2"
     )
     drift = drift_of("tb3-04", needs_of(request, needed_by), found)
-    assert [item.as_json() for item in drift.items] == [
-        {
-            "mapping": "navigate_to_pose",
-            "name": "/navigate_to_pose",
-            "kind": "action_client",
-            "expected_type": "nav2_msgs/action/NavigateToPose",
-            "found_type": None,
-        },
-        {
-            "mapping": "odometry",
-            "name": "/odom",
-            "kind": "topic",
-            "expected_type": "nav_msgs/msg/Odometry",
-            "found_type": "nav_msgs/msg/Path",
-        },
-    ]
+    assert [item.as_json() for item in drift.items] == PATROL_ON_A_PATH_DRIFT
     assert [item.text() for item in drift.items] == [
         "tb3-04 lacks /navigate_to_pose (nav2_msgs/action/NavigateToPose), needed by "
         "navigate_with_nav2 via action client mapping navigate_to_pose",
