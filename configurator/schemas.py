@@ -12,11 +12,12 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from configurator.codes import RULES
 from configurator.launch import LaunchRequest
 from configurator.loader import KIND_BY_NAME
 from configurator.repository import Repository
 from configurator.resolve import resolve_capability
-from configurator.types import ROBOT_ID_PATTERN, SettingDefinition
+from configurator.types import ROBOT_ID_PATTERN, RuleConfiguration, SettingDefinition
 
 # "0%" to "100%": the plain spellings of what configurator.waves.failure_budget reads
 SHARE_PATTERN = r"^(100|[1-9]?[0-9])%$"
@@ -312,6 +313,25 @@ def _fleet_schema(repo: Repository) -> dict[str, Any]:
     return schema
 
 
+def _rule_configuration_schema() -> dict[str, Any]:
+    """`.robotconf.yaml`: only the rules a lab may tune are offered, each with its row."""
+    schema = _base(RuleConfiguration, "Rule configuration (.robotconf.yaml)")
+    tunable = {code: rule.summary for code, rule in RULES.items() if rule.tunable}
+    schema["properties"]["rules"] = {
+        "description": "rule code -> error, warning or off (only rules a lab may tune)",
+        "type": "object",
+        "propertyNames": {"enum": sorted(tunable)},
+        "properties": {
+            code: {
+                "description": summary,
+                "anyOf": [{"enum": ["error", "warning", "off"]}, {"const": False}],
+            }
+            for code, summary in sorted(tunable.items())
+        },
+    }
+    return schema
+
+
 def generate(repo: Repository) -> dict[str, dict[str, Any]]:
     """File name -> schema, for every kind plus the Launch Request."""
     out: dict[str, dict[str, Any]] = {}
@@ -323,6 +343,7 @@ def generate(repo: Repository) -> dict[str, dict[str, Any]]:
     out[schema_file("scenario")] = _scenario_schema(repo)
     out[schema_file("fleet")] = _fleet_schema(repo)
     out[schema_file("launch-request")] = _base(LaunchRequest, "Launch Request")
+    out[schema_file("rule-configuration")] = _rule_configuration_schema()
     return {name: copy.deepcopy(schema) for name, schema in sorted(out.items())}
 
 

@@ -173,3 +173,16 @@ def test_the_editor_takes_one_logic_or_a_list_of_distinct_ones(
     assert found and {d["range"]["start"]["line"] for d in found} == {line}, found
     empty = good.replace(both, "Follow: []")
     assert server.check(path, empty, 5) != []
+
+
+def test_the_editor_offers_only_rules_a_lab_may_tune(lab: Lab, server: LanguageServer) -> None:
+    path = lab.root / ".robotconf.yaml"
+    good = (ROOT / ".robotconf.yaml").read_text(encoding="utf-8")
+    assert good.startswith("# yaml-language-server: $schema=schemas/rule-configuration.schema")
+    assert server.check(path, good, 1) == []
+    fixed = good.replace("RC608: off", "RC501: off")  # ids are topic levels: never tuned
+    found = server.check(path, fixed, 2)
+    line = next(n for n, text in enumerate(fixed.splitlines()) if "RC501" in text)
+    assert found and {d["range"]["start"]["line"] for d in found} == {line}, found
+    loud = good.replace("RC608: off", "RC608: loud")
+    assert server.check(path, loud, 3) != []
