@@ -80,3 +80,27 @@ def test_restart_prints_the_robots_confirmation_escaped(mosquitto: Mosquitto) ->
         f"{ROBOT}: restart requested by alice: running "
         "(\\nERROR forged line\\r\\x1b[2J\\x1b]0;owned\\x07\\u202egnp.exe)"
     ]
+
+
+def test_status_shows_a_robot_s_hostile_interfaces_escaped(mosquitto: Mosquitto) -> None:
+    """The types a robot reports are its own text: a drift line quoting them forges nothing."""
+    from configurator.interfaces import Interface, RobotInterfaces
+    from tests.support.agents import make_request
+    from tests.support.interfaces import publish_interfaces
+
+    request = make_request(ROBOT)  # the lab (cwd) wants /tb3_01/cmd_vel as a Twist
+    publish(mosquitto.url, TOPICS.launch(ROBOT), request.payload())
+    running = AgentStatus(robot_id=ROBOT, state=AgentState.RUNNING, digest=request.digest)
+    publish(mosquitto.url, TOPICS.status(ROBOT), running.model_dump_json().encode())
+    hostile = RobotInterfaces(topics=[Interface(name="/tb3_01/cmd_vel", type=FORGED)], source=FORGED)
+    publish_interfaces(mosquitto.url, ROBOT, hostile)
+    for args in ([], ["--json"]):
+        done = subprocess.run(
+            [ROBOTCONF, "status", "--broker", mosquitto.url, "--wait", "5", *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert "not geometry_msgs/msg/Twist" in done.stdout or "found_type" in done.stdout
+        for raw in ("\x1b", "\x07", "\r", "\u202e", "\nERROR forged line"):
+            assert raw not in done.stdout + done.stderr, (args, raw)
