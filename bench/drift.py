@@ -3,7 +3,8 @@ robot's interfaces changing, judged incrementally (the memo `status --watch` and
 reconciler's alerts keep) beside a full comparison of the fleet. Pure: no broker.
 
 Each robot runs one of the example lab's scenarios in a namespace of its own and reports what
-its request needs plus --extra other topics (a real robot has many it does not need). A round
+its request needs plus --extra other topics (a real robot has many it does not need), kept as
+readers keep reports (KeptInterfaces: the payload's bytes, parsed again when drift asks). A round
 replaces one robot's report (a new object, as a new payload is read into one) and a tenth of
 the rounds make it drift. Medians and p90 over --rounds rounds.
 
@@ -18,7 +19,7 @@ import time
 from pathlib import Path
 
 from configurator.drift import DriftMemo, Need, drift_of, needs_of_rendered
-from configurator.interfaces import Interface, RobotInterfaces
+from configurator.interfaces import Interface, KeptInterfaces, RobotInterfaces
 from configurator.render import render_fleet
 from configurator.rendered import RenderedRequest
 from configurator.workspace import check
@@ -45,15 +46,23 @@ def others(extra: int) -> list[Interface]:
 
 def report(
     needs: tuple[Need, ...], extra: list[Interface], drop: int = 0, at: float = 1.0
-) -> RobotInterfaces:
-    """What the robot reports: what it needs (but the first `drop`), and `extra` topics more
-    (the same entries for every robot: setting up 10,000 robots stays quick)."""
+) -> KeptInterfaces:
+    """What the robot reports: what it needs (but the first `drop`), and `extra` topics more,
+    kept as the reconciler and `robotconf status` keep it: the payload's bytes."""
     kinds = {"topic": "topics", "service": "services", "action_client": "actions"}
     found: dict[str, list[Interface]] = {"topics": [], "services": [], "actions": []}
     for need in needs[drop:]:
         found[kinds[need.kind]].append(Interface(name=need.name, type=need.type))
     found["topics"] += extra
-    return RobotInterfaces(**found, source="ros2", at=at)
+    model = RobotInterfaces(**found, source="ros2", at=at)
+    return KeptInterfaces(model.model_dump_json().encode(), model)
+
+
+def rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
 
 
 def p(values: list[float], q: float) -> float:
@@ -72,11 +81,15 @@ def main() -> None:
     fleet = requests(args.robots)
     needs = {r.robot_id: needs_of_rendered(r) for r in fleet}
     extra = others(args.extra)
+    before = rss_mb()
     reports = {r.robot_id: report(needs[r.robot_id], extra) for r in fleet}
+    held = rss_mb() - before
+    payload = sum(len(k.payload) for k in reports.values()) / len(reports)
     digests = {r.robot_id: r.digest for r in fleet}
     print(
         f"{args.robots:,} robots, {args.extra} extra topics each: set up in "
-        f"{time.perf_counter() - started:.1f} s"
+        f"{time.perf_counter() - started:.1f} s; the reports held: {held:.0f} MB "
+        f"(payloads of {payload / 1024:.1f} KB)"
     )
 
     memo = DriftMemo()
