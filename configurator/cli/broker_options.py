@@ -84,7 +84,8 @@ def refused(url: str, reason: str) -> CliError:
     """The broker turned this client away: waiting longer would not change that."""
     return CliError(
         f"the broker at {url} refused the connection ({reason}): check --username and "
-        "--password-file (`robotconf up` prints both for its broker)"
+        "--password-file (for robotconf up's broker, give no broker options: run the command "
+        "in up's repository, or with --repo)"
     )
 
 

@@ -103,7 +103,8 @@ def test_a_desk_file_whose_up_is_gone_is_not_trusted(lab: GitLab, tmp_path: Path
         up.kill()  # no chance to remove its desk file
     assert (lab.root / ".robotconf" / "up" / "desk.json").exists()
     status = desk(lab, "status", "--wait", "1")
-    assert status.returncode == 2
+    # Whatever answers on 1883 then (nothing, or another broker), not the dead up's broker.
+    assert status.returncode != 0
     assert "desk.json is stale: the robotconf up that wrote it" in status.stderr, status.stderr
 
 
