@@ -29,7 +29,10 @@ class BrokerStartError(Exception):
 
 
 def port_is_free(host: str, port: int) -> bool:
+    """True when a server may listen on `port`: bound as amqtt binds it (SO_REUSEADDR), so that
+    the TIME-WAIT connections a broker just stopped leaves behind do not count as taken."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((host, port))
         except OSError:
@@ -78,8 +81,8 @@ def _version() -> str:
 
 
 class EmbeddedBroker:
-    """An amqtt broker on 127.0.0.1 that takes only clients giving `login`; the port is 1883
-    when free, else any free one."""
+    """An amqtt broker on 127.0.0.1 that takes only clients giving `login`; the port is `port`
+    when given, else `preferred` (1883) when free, else any free one."""
 
     def __init__(
         self,
@@ -87,12 +90,14 @@ class EmbeddedBroker:
         host: str = "127.0.0.1",
         port: int | None = None,
         *,
+        preferred: int = DEFAULT_PORT,
         connect_timeout: float = CONNECT_TIMEOUT,
         max_clients: int = MAX_CLIENTS,
     ) -> None:
         self.login = login
         self.host = host
         self.port = port or 0
+        self.preferred = preferred
         self.connect_timeout = connect_timeout
         self.max_clients = max_clients
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -125,8 +130,8 @@ class EmbeddedBroker:
         logging.getLogger("transitions").setLevel(logging.ERROR)
         candidates = [self.port] if self.port else []
         if not candidates:
-            if port_is_free(self.host, DEFAULT_PORT):
-                candidates.append(DEFAULT_PORT)
+            if port_is_free(self.host, self.preferred):
+                candidates.append(self.preferred)
             candidates += [free_port(self.host), free_port(self.host)]
         last: BaseException | None = None
         for port in candidates:

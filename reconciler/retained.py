@@ -166,6 +166,7 @@ class RetainedView:
         # says so at once instead of waiting for an answer that will not come.
         self.refused: str | None = None
         self.connections = 0
+        self.reached = False  # a TCP connection was made, whether or not MQTT answered on it
         # MQTT 5's No Local: what this client publishes on `filters` is not sent back to it
         # (its copy is updated at the PUBACK instead); retained messages still come at each
         # subscription, so a reconnect still reads back what is published.
@@ -184,6 +185,7 @@ class RetainedView:
         self._client.on_subscribe = self._handle_subscribe
         self._client.on_message = self._handle_message
         self._client.on_connect_fail = self._handle_connect_fail
+        self._client.on_socket_open = self._handle_socket_open
         self._started = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -233,6 +235,18 @@ class RetainedView:
                 return False
             self._synced.wait(0.05 if left is None else min(0.05, left))
         return True
+
+    def silence(self) -> str:
+        """Why nothing is known yet, in words: the last error, or a listener that took the
+        connection and never answered MQTT's CONNECT (not a broker, or a wedged one)."""
+        if self.last_error:
+            return self.last_error
+        if self.reached:
+            return (
+                f"{self.connection.address.url} accepted a connection but never answered "
+                "MQTT's CONNECT: is it an MQTT broker?"
+            )
+        return "no answer"
 
     def snapshot(self) -> dict[str, bytes]:
         with self._lock:
@@ -360,6 +374,10 @@ class RetainedView:
             self.last_error = f"broker refused a subscription: {failed[0]}"
             log.warning("%s", self.last_error)
         client.publish(self.marker_topic, str(self._generation).encode(), qos=1)
+
+    @_guarded
+    def _handle_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
+        self.reached = True
 
     @_guarded
     def _handle_connect_fail(self, client: paho.Client, userdata: Any) -> None:

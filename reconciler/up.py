@@ -30,11 +30,19 @@ import yaml
 from agent.parent_death import ENV as DIE_WITH_PARENT
 from agent.workdir import LOCK_FILE, WorkdirLock
 from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.up_desk import UpDesk, remove_desk, write_desk
 from configurator.mqtt import Connection
 from configurator.render import FleetRender
 from configurator.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from configurator.source import SourceError
-from configurator.wire import ReconcilerReason, ReconcilerStatus, Topics, redact_url, short_rev
+from configurator.wire import (
+    BROKER_ENV,
+    ReconcilerReason,
+    ReconcilerStatus,
+    Topics,
+    redact_url,
+    short_rev,
+)
 from reconciler.controller import Controller
 from reconciler.desired import DesiredBuilder
 from reconciler.fleet_status import change_key, open_view
@@ -58,6 +66,8 @@ AGENT_STOP_TIMEOUT = 5.0  # the stand-in brain stops at once; this bounds a stub
 RESYNC_INTERVAL = 10.0
 REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REFUSED.value}
 REFUSED_DIAGNOSTICS = 3  # the first ones say what to fix; `robotconf validate` lists them all
+GIVEN_BROKER_WAIT = 10.0  # a given broker that has not answered by then is an error, not a wait
+DEFAULT_PORT = 1883
 
 
 @dataclass
@@ -73,6 +83,8 @@ class UpSetup:
     # The build of `head` above, kept: the controller's first build of it reuses every file
     # and robot instead of building the commit a second time.
     builder: DesiredBuilder = field(default_factory=DesiredBuilder)
+    port: int = DEFAULT_PORT  # the embedded broker's, when free
+    broker_origin: str = "--broker"  # where a given broker came from, for messages
 
 
 def _git_repo(root: Path) -> Any:
@@ -142,6 +154,8 @@ def agent_yaml(
         "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
         "workdir": str(workdir / robot_id),
         "stop_timeout": AGENT_STOP_TIMEOUT,
+        # The stand-in brain re-reads its request on SIGHUP: a settings-only commit reloads it.
+        "reload": {"signal": "SIGHUP"},
     }
     # A given broker may need the same credentials and TLS settings as `up` itself.
     if connection.username:
@@ -372,42 +386,68 @@ def _run_up(
     recover_agents(setup.workdir, say)
     for note in setup.notes:
         say(f"note: {note}")
-
-    broker: Any = None
-    login: Any = None  # the embedded broker's BrokerLogin
-    if given_broker:
-        url = given_broker
-        say(f"broker: {redact_url(url)} (given)")
-    else:
-        from reconciler.broker import BrokerStartError, EmbeddedBroker
-        from reconciler.broker_login import broker_login
-
-        login = broker_login(setup.workdir / "broker")
-        broker = EmbeddedBroker(login)
-        try:
-            broker.start()
-        except BrokerStartError as exc:
-            raise CliError(f"{exc}; or pass --broker mqtt://HOST:PORT") from None
-        url = broker.url
-        taken = "" if broker.port == 1883 else " (port 1883 is taken)"
-        say(
-            f"broker: embedded amqtt at {url}{taken}, for user {login.username} only: its "
-            f"password is in {login.password_file} (0600), readable by you alone"
-        )
+    broker, login, url = _start_broker(setup, given_broker, say)
     try:
         connection = connect(url)
-    except CliError:
+        if login is not None:  # up's reconciler, its agents and the operator: one login
+            connection = dataclasses.replace(
+                connection, username=login.username, password_file=login.password_file
+            )
+        if broker is None:
+            _given_answers(connection, prefix, setup.broker_origin)
+        return _serve(setup, connection, prefix, signing, screen)
+    finally:
         if broker is not None:
             broker.stop()
-        raise
-    if login is not None:  # up's reconciler, its agents and the operator: one login
-        connection = dataclasses.replace(
-            connection, username=login.username, password_file=login.password_file
-        )
-    signer, public_key = None, None
+        say("stopped")
+
+
+def _start_broker(
+    setup: UpSetup, given_broker: str | None, say: Callable[[str], None]
+) -> tuple[Any, Any, str]:
+    """The embedded broker and its login (None, None with a given broker), and the URL."""
+    if given_broker:
+        say(f"broker: {redact_url(given_broker)} (given by {setup.broker_origin})")
+        return None, None, given_broker
+    from reconciler.broker import BrokerStartError, EmbeddedBroker
+    from reconciler.broker_login import broker_login
+
+    login = broker_login(setup.workdir / "broker")
+    broker = EmbeddedBroker(login, preferred=setup.port)
+    try:
+        broker.start()
+    except BrokerStartError as exc:
+        raise CliError(f"{exc}; or pass --broker mqtt://HOST:PORT") from None
+    taken = "" if broker.port == setup.port else f" (port {setup.port} is taken)"
+    say(
+        f"broker: embedded amqtt at {broker.url}{taken}, for user {login.username} only: its "
+        f"password is in {login.password_file} (0600), readable by you alone"
+    )
+    return broker, login, broker.url
+
+
+def _given_answers(connection: Connection, prefix: str, origin: str) -> None:
+    """Raises CliError when a given broker does not answer within GIVEN_BROKER_WAIT: a stale
+    $ROBOTCONF_BROKER must not leave `up` waiting for ever with nothing started."""
+    probe = RetainedView(connection, [], f"{prefix}/sync", role="up-probe")
+    with probe:
+        if probe.wait_synced(GIVEN_BROKER_WAIT, or_refused=True):
+            return
+    unset = f"; unset {BROKER_ENV} to run up's own broker" if origin == f"${BROKER_ENV}" else ""
+    raise CliError(
+        f"the broker {connection.address.url} (given by {origin}) did not answer within "
+        f"{GIVEN_BROKER_WAIT:g} s ({probe.silence()}): start it or give another{unset}"
+    )
+
+
+def _serve(
+    setup: UpSetup, connection: Connection, prefix: str, signing: bool, screen: UpScreen
+) -> ExitCode:
+    say = screen.say
+    signer, public_key, private_key = None, None, None
     if signing:
         keys = _demo_keys(setup.workdir / "keys")
-        signer, public_key = make_signer(keys.private), keys.public
+        signer, public_key, private_key = make_signer(keys.private), keys.public, keys.private
         say(f"signing: every request is signed; agents verify with {public_key}")
 
     stop = threading.Event()
@@ -436,21 +476,10 @@ def _run_up(
         f"reconciling {setup.root} branch '{setup.branch}' (head {short_rev(setup.head)}), "
         f"{len(setup.fleet.requests)} robot(s); agent files and logs in {setup.workdir}"
     )
-    shown = redact_url(url)  # a password in the URL stays out of the terminal
-    options = f"--broker {shown}" + (
-        f" --username {login.username} --password-file {_shown_path(login.password_file)}"
-        if login is not None
-        else ""
-    )
-    header = [
-        f"robotconf up: broker {shown}, branch '{setup.branch}' of {setup.root}",
-        f"  another terminal: robotconf status {options}    Ctrl-C stops everything",
-        "  (robotconf logs ROBOT and robotconf restart ROBOT take the same options)",
-        *[f"  note: {n}" for n in setup.notes],
-        "",
-    ]
-    say(f"another terminal: robotconf status {options}   Ctrl-C stops everything")
-    say("robotconf logs ROBOT and robotconf restart ROBOT take the same options")
+    desk = write_desk(setup.root, up_desk(setup, connection, prefix, private_key))
+    header = banner(setup, connection, desk)
+    for line in header[1:3]:
+        say(line.strip())
     thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
     thread.start()
     view.start()
@@ -461,14 +490,63 @@ def _run_up(
     finally:
         screen.end()
         say("stopping: agents and their brains ...")
+        remove_desk(setup.root, os.getpid())
         agents.stop()
         view.stop()
         controller.stop()
         thread.join(10)
-        if broker is not None:
-            broker.stop()
-        say("stopped")
     return ExitCode.OK
+
+
+def up_desk(
+    setup: UpSetup, connection: Connection, prefix: str, private_key: Path | None
+) -> UpDesk:
+    """What the desk commands need to reach this `up`: the URL without credentials, and the
+    paths of the password file and signing key (the secrets stay in their 0600 files)."""
+
+    def absolute(path: Path | None) -> Path | None:
+        return None if path is None else path.absolute()
+
+    return UpDesk(
+        broker=connection.address.url,
+        prefix=prefix,
+        pid=os.getpid(),
+        lock=(setup.workdir / "up.lock").absolute(),
+        username=connection.username or connection.address.username,
+        password_file=absolute(connection.password_file),
+        signing_key=absolute(private_key),
+        ca_file=absolute(connection.ca_file),
+        cert_file=absolute(connection.cert_file),
+        key_file=absolute(connection.key_file),
+        insecure=connection.insecure,
+    )
+
+
+def desk_commands(root: Path) -> list[str]:
+    """What to type in another terminal: no options from within the repository; from
+    elsewhere, --repo naming it (that is where the desk file is looked for)."""
+    here = Path.cwd().absolute()
+    inside = here == root or root in here.parents
+    where = "" if inside else f" --repo {_shown_path(root)}"
+    return [
+        f"robotconf status{where}",
+        f"robotconf logs ROBOT{where}",
+        f"robotconf restart ROBOT{where}",
+    ]
+
+
+def banner(setup: UpSetup, connection: Connection, desk: Path) -> list[str]:
+    """The lines above the live fleet: where the broker is, and what to type elsewhere."""
+    commands = "    ".join(desk_commands(setup.root))
+    return [
+        f"robotconf up: broker {redact_url(connection.url)}, branch '{setup.branch}' of "
+        f"{setup.root}",
+        f"  another terminal: {commands}    (Ctrl-C stops everything)",
+        f"  they find this up's broker, login and signing key in {_shown_path(desk)} "
+        "while it runs; no options needed",
+        *[f"  note: {n}" for n in setup.notes],
+        "",
+    ]
 
 
 def _loop(
@@ -500,7 +578,7 @@ def _loop(
                 say(f"agent {robot_id} exited ({code}); see {log_file}")
         if not view.synced and not waiting_said and time.monotonic() - started > 5:
             waiting_said = True
-            say(f"waiting for the broker at {view.connection.address.url} ({view.last_error})")
+            say(f"waiting for the broker at {view.connection.address.url} ({view.silence()})")
         if view.synced and serving is not None and serving.fleet is not None:
             retained = parse_retained(view.snapshot(), topics)
             fleet = FleetStatus(

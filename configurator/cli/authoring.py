@@ -9,7 +9,7 @@ import click
 
 from configurator.autofill import autofill as fill_capability
 from configurator.autofill import to_yaml
-from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.broker_options import BrokerOptions, desk_broker_options
 from configurator.cli.draft import from_broker, from_file, robot_namespace, usable
 from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.options import repo_option
@@ -56,7 +56,7 @@ from configurator.workspace import check
     show_default=True,
     help="with --robot: seconds to wait for the broker",
 )
-@broker_options
+@desk_broker_options
 def autofill(
     repo: Path,
     platform_name: str,

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,6 +36,10 @@ class BrokerOptions:
     cert_file: Path | None
     key_file: Path | None
     insecure: bool
+    # From a running `robotconf up`'s desk file, when no broker was given: its signing key
+    # (for `restart`) and where the broker came from (for messages).
+    signing_key: Path | None = None
+    origin: str | None = None
 
     def connection(self, url: str | None = None) -> Connection:
         """The connection to `url` (default: --broker, else the default broker), checked now
@@ -78,17 +84,62 @@ def refused(url: str, reason: str) -> CliError:
     """The broker turned this client away: waiting longer would not change that."""
     return CliError(
         f"the broker at {url} refused the connection ({reason}): check --username and "
-        "--password-file (`robotconf up` prints both for its broker)"
+        "--password-file (for robotconf up's broker, give no broker options: run the command "
+        "in up's repository, or with --repo)"
+    )
+
+
+def _given(name: str) -> bool:
+    """True when option `name` was given on the command line or by its environment variable."""
+    source = click.get_current_context().get_parameter_source(name)
+    return source not in (None, click.core.ParameterSource.DEFAULT)
+
+
+def with_up_desk(mqtt: BrokerOptions, start: Path) -> BrokerOptions:
+    """`mqtt`, completed from the desk file of a `robotconf up` running in `start` (or above)
+    when no broker was given (--broker, $ROBOTCONF_BROKER); options given still win."""
+    from configurator.cli.up_desk import find_desk
+
+    if _given("broker"):
+        return mqtt
+    desk, note = find_desk(start)
+    if note is not None:
+        sys.stderr.write(f"robotconf: note: {note}\n")
+    if desk is None:
+        return mqtt
+    return dataclasses.replace(
+        mqtt,
+        broker=desk.broker,
+        prefix=mqtt.prefix if _given("prefix") else desk.prefix,
+        username=mqtt.username or desk.username,
+        password_file=mqtt.password_file or desk.password_file,
+        ca_file=mqtt.ca_file or desk.ca_file,
+        cert_file=mqtt.cert_file or desk.cert_file,
+        key_file=mqtt.key_file or desk.key_file,
+        insecure=mqtt.insecure or desk.insecure,
+        signing_key=desk.signing_key,
+        origin=f"robotconf up's broker (pid {desk.pid})",
     )
 
 
 def broker_options(command: F) -> F:
     """Declares the broker options and hands them to `command` as one `mqtt: BrokerOptions`."""
+    return _declare(command, find_up=False)
 
+
+def desk_broker_options(command: F) -> F:
+    """The broker options of a desk command: without a broker given, a running `robotconf up`'s
+    broker, found from --repo or the current folder (configurator/cli/up_desk.py)."""
+    return _declare(command, find_up=True)
+
+
+def _declare(command: F, *, find_up: bool) -> F:
     @functools.wraps(command)
     def gathered(*args: Any, **kwargs: Any) -> Any:
         escape_stray_records()  # these commands read what robots publish
         mqtt = BrokerOptions(**{name: kwargs.pop(name) for name in _BROKER_FIELDS})
+        if find_up:
+            mqtt = with_up_desk(mqtt, kwargs.get("repo") or Path.cwd())
         return command(*args, mqtt=mqtt, **kwargs)
 
     path = click.Path(path_type=Path)

@@ -18,7 +18,7 @@ def online_robot(desk: RobotDesk, wait: float, why_online: str) -> RobotSeen:
             raise refused(url, desk.view.refused)
         raise CliError(
             f"no answer from the broker at {url} within {wait:g} s "
-            f"({desk.view.last_error or 'no answer'}); is it running? (--broker URL)"
+            f"({desk.view.silence()}); is it running? (--broker URL)"
         )
     robot = desk.robot()
     if robot is None:

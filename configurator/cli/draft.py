@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from configurator.cli.broker_options import BrokerOptions, broker_options, refused
+from configurator.cli.broker_options import BrokerOptions, desk_broker_options, refused
 from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.options import repo_option
 from configurator.diagnostics import Diagnostic, did_you_mean, format_text
@@ -66,7 +66,7 @@ def from_broker(mqtt: BrokerOptions, robot_id: str, wait: float) -> RobotInterfa
                 raise refused(connection.address.url, view.refused)
             raise CliError(
                 f"no answer from {connection.address.url} within {wait:g} s "
-                f"({view.last_error or 'no answer'}); is the broker running? (--broker, --wait)"
+                f"({view.silence()}); is the broker running? (--broker, --wait)"
             )
         payload = view.get(topic)
     if payload is None:
@@ -244,7 +244,7 @@ def _report(result: Draft, origin: str, found: RobotInterfaces) -> None:
 @click.command("draft")
 @click.argument("robot_id", metavar="ROBOT")
 @repo_option
-@broker_options
+@desk_broker_options
 @click.option(
     "--platform", "platform_name", required=True, help="the robot's platform (models/platforms/P)"
 )

@@ -8,12 +8,14 @@ import secrets
 import sys
 import threading
 import time
+from pathlib import Path
 
 import click
 
-from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.broker_options import BrokerOptions, desk_broker_options
 from configurator.cli.desk import online_robot
 from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.options import repo_option
 from configurator.textsafe import printable
 from configurator.types import is_robot_id
 from configurator.wire import LOG_FOLLOW_TTL, MAX_TAIL_LINES, AgentState, LogsChunk, LogsRequest
@@ -70,7 +72,8 @@ def _say_presence(desk: RobotDesk) -> None:
 
 @click.command("logs")
 @click.argument("robot_id", metavar="ROBOT")
-@broker_options
+@repo_option
+@desk_broker_options
 @click.option(
     "--lines",
     "-n",
@@ -87,7 +90,9 @@ def _say_presence(desk: RobotDesk) -> None:
     show_default=True,
     help="give up when the broker or the robot has not answered after S seconds",
 )
-def logs(robot_id: str, mqtt: BrokerOptions, lines: int, follow: bool, wait: float) -> ExitCode:
+def logs(
+    robot_id: str, repo: Path, mqtt: BrokerOptions, lines: int, follow: bool, wait: float
+) -> ExitCode:
     """Show a robot's brain log, with its agent's events (starts, exits, restarts, refusals).
 
     The request goes through the broker to the robot's agent, which answers on
@@ -95,7 +100,9 @@ def logs(robot_id: str, mqtt: BrokerOptions, lines: int, follow: bool, wait: flo
     every 10 s, and the agent stops streaming 30 s after the last ask. Lines are redacted on
     the robot (agent.yaml's env: values and their encodings, the broker password, private
     keys), cut at 64 KiB, and sent at about 100 lines a second, shared fairly between who asks.
-    Needs the broker's `operator` user (robotconf
+    On a running `robotconf up`'s fleet, with no broker given, its broker and login are found
+    in .robotconf/up/desk.json (from --repo or the current folder). Needs the broker's
+    `operator` user (robotconf
     broker-config) where the broker has an ACL. Exit 0 when the log was shown, 1 when the robot
     is unknown, offline or does not answer, 2 when the broker cannot be reached.
     """

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import click
 
-from configurator.cli.broker_options import BrokerOptions, broker_options
+from configurator.cli.broker_options import BrokerOptions, desk_broker_options
 from configurator.cli.desk import online_robot
 from configurator.cli.errors import CliError, ExitCode
+from configurator.cli.options import repo_option
 from configurator.launch import REQUESTER_PATTERN, RestartRequest
 from configurator.textsafe import printable
 from configurator.types import is_robot_id
@@ -54,12 +55,14 @@ def _confirmed(desk: RobotDesk, issued_at: float, wait: float) -> AgentStatus | 
 
 @click.command("restart")
 @click.argument("robot_id", metavar="ROBOT")
-@broker_options
+@repo_option
+@desk_broker_options
 @click.option(
     "--signing-key",
     type=click.Path(path_type=Path, dir_okay=False),
     default=None,
-    help="the Launch Requests' private key: needed when the robots verify signatures",
+    help="the Launch Requests' private key: needed when the robots verify signatures "
+    "(default: a running robotconf up's, when no broker is given)",
 )
 @click.option("--as", "as_name", default=None, help="who asks (default: --username, else $USER)")
 @click.option(
@@ -71,6 +74,7 @@ def _confirmed(desk: RobotDesk, issued_at: float, wait: float) -> AgentStatus | 
 )
 def restart(
     robot_id: str,
+    repo: Path,
     mqtt: BrokerOptions,
     signing_key: Path | None,
     as_name: str | None,
@@ -81,9 +85,11 @@ def restart(
     SIGTERM, then SIGKILL after the stop timeout). No commit is needed.
 
     The restart goes through the broker on <prefix>/robots/ROBOT/restart, signed with
-    --signing-key when given (an agent that verifies Launch Requests carries out only a signed
-    restart, once, and only within 5 minutes of when it was issued). Needs the broker's
-    `operator` (or `reconciler`) user where the broker has an ACL. `robotconf status` shows who
+    --signing-key when given (on a running `robotconf up`'s fleet, with no broker given, its
+    broker, login and key are found in .robotconf/up/desk.json; an agent that verifies Launch
+    Requests carries out only a signed restart, once, and only within 5 minutes of when it
+    was issued). Needs the broker's `operator` (or `reconciler`) user where the broker has an
+    ACL. `robotconf status` shows who
     asked and when. Exit 0 when the robot confirmed it, 1 when the robot is unknown, offline,
     has nothing to restart or did not confirm, 2 when the broker cannot be reached.
     """
@@ -91,6 +97,7 @@ def restart(
         raise CliError(f"{robot_id!r} is not a robot id", ExitCode.FINDINGS)
     by = requester(as_name, mqtt.username)
     key = None
+    signing_key = signing_key or mqtt.signing_key  # up's own, found with its broker
     if signing_key is not None:
         from configurator.signing import SigningKeyError, load_private_key
 

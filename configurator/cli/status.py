@@ -11,7 +11,7 @@ import click
 from rich.live import Live
 from rich.text import Text
 
-from configurator.cli.broker_options import BrokerOptions, broker_options, refused
+from configurator.cli.broker_options import BrokerOptions, desk_broker_options, refused
 from configurator.cli.errors import CliError, ExitCode
 from configurator.cli.fleet_view import fleet_status_view
 from configurator.cli.options import repo_option, rev_option
@@ -31,7 +31,7 @@ def _verdict(fleet: FleetStatus) -> ExitCode:
 @click.command("status")
 @repo_option
 @rev_option
-@broker_options
+@desk_broker_options
 @click.option("--watch", "follow", is_flag=True, help="keep showing until interrupted")
 @click.option("--json", "as_json", is_flag=True, help="machine-readable output")
 @click.option(
@@ -70,7 +70,7 @@ def status(
         if not view.wait_synced(wait, or_refused=True):
             if view.refused is not None:
                 raise refused(connection.address.url, view.refused)
-            reason = view.last_error or "no answer"
+            reason = view.silence()
             raise CliError(
                 f"no retained messages from {connection.address.url} within {wait:g} s "
                 f"({reason}); is the broker running? (--broker URL, --wait S)"

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 from rich.console import Group, RenderableType
 from rich.live import Live
 from rich.panel import Panel
@@ -16,6 +18,7 @@ from configurator.cli.errors import ExitCode
 from configurator.cli.fleet_view import fleet_status_view
 from configurator.cli.options import repo_option
 from configurator.cli.terminal import is_terminal, safe, terminal_console
+from configurator.wire import BROKER_ENV
 from reconciler.verdicts import FleetStatus
 
 
@@ -97,18 +100,35 @@ class Screen:
 @click.option("--branch", default=None, help="branch to reconcile (default: the current)")
 @click.option("--workdir", default=None, help="where agents keep their files")
 @click.option(
+    "--port",
+    type=click.IntRange(1, 65535),
+    default=1883,
+    show_default=True,
+    help="the embedded broker's port; a free one when it is taken (said, and found by the "
+    "desk commands)",
+)
+@click.option(
     "--no-signing",
     is_flag=True,
     help="do not sign requests (by default up signs them with a key kept in its workdir)",
 )
 def up(
-    repo: Path, mqtt: BrokerOptions, branch: str | None, workdir: str | None, no_signing: bool
+    repo: Path,
+    mqtt: BrokerOptions,
+    branch: str | None,
+    workdir: str | None,
+    port: int,
+    no_signing: bool,
 ) -> ExitCode:
     """The whole loop on this machine: broker, reconciler, one agent per robot, live status;
-    Ctrl-C stops everything."""
+    Ctrl-C stops everything. In another terminal, within the repository, `robotconf status`,
+    `robotconf logs ROBOT` and `robotconf restart ROBOT` need no options: they find this up's
+    broker, login and signing key in .robotconf/up/desk.json while it runs."""
     from reconciler.up import prepare, run_up
 
-    setup = prepare(repo, branch, workdir)
+    source = click.get_current_context().get_parameter_source("broker")
+    origin = f"${BROKER_ENV}" if source is ParameterSource.ENVIRONMENT else "--broker"
+    setup = dataclasses.replace(prepare(repo, branch, workdir), port=port, broker_origin=origin)
     mqtt.connection()  # the URL, prefix and credentials are checked before anything starts
     screen = Screen(live=is_terminal())
     return run_up(setup, mqtt.broker, mqtt.connection, mqtt.prefix, not no_signing, screen)
