@@ -116,7 +116,8 @@ class Supervisor:
         self.message = "waiting for a launch request"
         self.rejection: str | None = None
         self.shutting_down = False
-        # The last restart asked for from the desk and carried out: who asked, issued when.
+        # The last restart asked for from the desk and carried out (or deferred by the hold
+        # file, and so carried out by max_defer): who asked, issued when.
         self.restart_requested_by: str | None = None
         self.restart_requested_at: float | None = None
         self._started_at = 0.0
@@ -316,6 +317,10 @@ class Supervisor:
         if self.phase == AgentState.DEFERRED or (
             self.phase != AgentState.STOPPING and self._holds()
         ):
+            # Accepted, and carried out by max_defer at the latest: the status names it now,
+            # so that the desk sees its restart taken (and `deferred`).
+            self.restart_requested_by = requested_by
+            self.restart_requested_at = issued_at
             self._pending_restart = (requested_by, issued_at)  # the newest ask waits
             if self.phase == AgentState.DEFERRED:
                 return self._still_deferred(now), None

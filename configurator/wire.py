@@ -230,8 +230,9 @@ class AgentStatus(_Message):
     message: str = ""
     warnings: list[str] = Field(default_factory=list)
     seq: int = 0
-    # The last restart asked for from the desk (`robotconf restart`) and carried out: who
-    # asked (as the request says) and when it was issued (unix time).
+    # The last restart asked for from the desk (`robotconf restart`) and carried out, or
+    # deferred by the brain's hold file (state `deferred`): who asked (as the request says)
+    # and when it was issued (unix time).
     restart_requested_by: str | None = None
     restart_requested_at: float | None = None
     # Why the robot's interfaces could not be read (agent.yaml `interfaces`), while they

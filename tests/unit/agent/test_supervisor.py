@@ -555,13 +555,13 @@ def test_a_stop_for_a_robot_leaving_the_fleet_is_deferred() -> None:
     assert sup.state == AgentState.IDLE
 
 
-def test_a_restart_from_the_desk_is_deferred_and_said_carried_out_only_then() -> None:
+def test_a_restart_from_the_desk_is_deferred_then_carried_out() -> None:
     sup, hold = holding()
     effects, problem = sup.restart("alice", 1234.5, 5.0)
     assert (effects, problem) == ([], None)
     assert sup.state == AgentState.DEFERRED
     assert "restart requested by alice deferred" in sup.message
-    assert sup.status().restart_requested_by is None
+    assert sup.status().restart_requested_by == "alice"  # taken: the desk sees it deferred
     hold.there = False
     assert sup.tick(sup.deadline or 0.0) == [Terminate(100)]
     assert sup.status().restart_requested_by == "alice"
