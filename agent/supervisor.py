@@ -266,11 +266,8 @@ class Supervisor:
         how = describe_exit(code)
         if self.phase == AgentState.DEFERRED:
             # Nothing runs to protect any more: what waited goes ahead at once (a crash is
-            # never deferred), the desk's restart included.
-            waiting = self._pending_restart
+            # never deferred), as after a stop: the desired request starts, or none.
             self._end_deferral()
-            if waiting is not None and self.desired is not None:
-                self.restart_requested_by, self.restart_requested_at = waiting
             self.phase = AgentState.STOPPING
         if self.phase == AgentState.STOPPING or self.shutting_down:
             if self.shutting_down:
@@ -484,9 +481,7 @@ class Supervisor:
             return []
         if desired is None:
             return self._begin_stop(now, f"stopping: no launch request for this robot ({why})")
-        if restart is not None:
-            self.restart_requested_by, self.restart_requested_at = restart
-        elif self._reload_would_do(desired.request):
+        if restart is None and self._reload_would_do(desired.request):
             self.phase = AgentState.RUNNING  # the same process runs on, signalled
             effects = self._reload(desired)
             self.message += f" ({why})"
