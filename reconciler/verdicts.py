@@ -177,10 +177,10 @@ def verdict(desired: DesiredRobot | None, robot: RobotSeen) -> tuple[Verdict, st
         return Verdict.OFFLINE, (status.message if status else "") or "its agent has never reported"
     if state in (AgentState.FAILED, AgentState.REJECTED, AgentState.BACKOFF, AgentState.EXITED):
         return Verdict.DEGRADED, status.message or f"brain service {state.value}"
-    if robot.launch_digest != desired.digest:
-        return Verdict.PROGRESSING, "the desired request is not published yet"
     if state is AgentState.DEFERRED:  # says what waits for the brain's hold file, since when
         return Verdict.PROGRESSING, status.message or "deferred by its brain's hold file"
+    if robot.launch_digest != desired.digest:
+        return Verdict.PROGRESSING, "the desired request is not published yet"
     if status.digest != desired.digest:
         return Verdict.PROGRESSING, f"{state.value}, not yet on the desired request"
     if state is AgentState.RUNNING:
