@@ -30,7 +30,11 @@ def _parser() -> argparse.ArgumentParser:
         description="Receive this robot's Launch Request over MQTT; supervise its brain service.",
         epilog="With `interfaces: {interval: SECONDS}` in agent.yaml the agent also reports the "
         "robot's ROS topics, services and actions (`ros2 ... list -t`, or `interfaces.command`) "
-        "on <prefix>/robots/<id>/interfaces; off unless configured.",
+        "on <prefix>/robots/<id>/interfaces; off unless configured. A busy brain defers a "
+        "stop, restart or reload by creating the file named in its $ROBOTCONF_HOLD_FILE: the "
+        "state is `deferred` until it removes it, or for agent.yaml's `max_defer` seconds at "
+        "most (default 300; 0 ignores the file); a crash restart and this agent's own stop "
+        "are never deferred.",
     )
     parser.add_argument(
         "--config",

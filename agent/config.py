@@ -210,6 +210,12 @@ def _domain_id_problem(value: str) -> str | None:
     return None
 
 
+# Five minutes: a manoeuvre, a docking, a tray delivered; long enough for a task's safe point,
+# short enough that a brain that forgets its hold file does not keep a fix from the robot long.
+DEFAULT_MAX_DEFER = 300.0
+MAX_MAX_DEFER = 86_400.0  # a day: beyond that a hold is a robot out of the fleet, not a task
+
+
 class AgentConfig(StrictModel):
     broker: str = Field(default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER))
     prefix: str = DEFAULT_PREFIX
@@ -218,6 +224,9 @@ class AgentConfig(StrictModel):
     workdir: Path = Field(strict=False)
     stop_timeout: float = Field(default=10.0, gt=0)
     startsecs: float = Field(default=1.0, ge=0)
+    # Seconds a stop, restart or reload waits while the brain's hold file exists (README
+    # "Robots that are busy"); 0: the hold file is ignored.
+    max_defer: float = Field(default=DEFAULT_MAX_DEFER, ge=0, le=MAX_MAX_DEFER)
     restart: RestartConfig = Field(default_factory=lambda: RestartConfig())
     keepalive: int = Field(default=30, ge=5, le=3600)
     log: LogConfig = Field(default_factory=lambda: LogConfig())

@@ -49,6 +49,7 @@ from agent.supervisor import (
     describe_exit,
 )
 from agent.workdir import (
+    HOLD_FILE,
     ISSUED_FILE,
     LOG_FILE,
     PID_FILE,
@@ -58,6 +59,8 @@ from agent.workdir import (
     IssuedStore,
     RestartLedger,
     SeqStore,
+    hold_exists,
+    remove_hold,
     write_atomic,
 )
 from configurator.interfaces import RobotInterfaces
@@ -88,6 +91,7 @@ def policy_of(config: AgentConfig) -> Policy:
         startsecs=config.startsecs,
         stop_timeout=config.stop_timeout,
         reload_signal=None if config.reload is None else signal.Signals[config.reload.signal],
+        max_defer=config.max_defer,
     )
 
 
@@ -103,7 +107,11 @@ class Agent:
         self.issued = IssuedStore(self.workdir / ISSUED_FILE)
         self.restarts = RestartLedger(self.workdir)
         self.refusals = Throttle(REFUSAL_LOG_EVERY, limit=5)
-        self.supervisor = Supervisor(config.robot_id, policy_of(config))
+        self.hold_file = self.workdir / HOLD_FILE
+        self.supervisor = Supervisor(
+            config.robot_id, policy_of(config), held=lambda: hold_exists(self.hold_file)
+        )
+        self._was_deferred = False
         self.brain_log = process.BrainLog(
             self.workdir / LOG_FILE, config.log.max_bytes, config.log.backups
         )
@@ -138,6 +146,7 @@ class Agent:
                 **config.env,
                 "ROBOTCONF_LAUNCH_REQUEST": str(self.workdir / REQUEST_FILE),
                 "ROBOTCONF_ROBOT_ID": config.robot_id,
+                "ROBOTCONF_HOLD_FILE": str(self.hold_file),
             }
         )
         self.interfaces: InterfaceProbe | None = None
@@ -213,10 +222,21 @@ class Agent:
             handled |= self._read_interfaces(probe_ready, now)
         self._maybe_rotate_log(now)
         self._send_logs(now)
+        self._tell_deferral()
         report = self._held_until
         if handled or (report is not None and now >= report):
             # The status changes with events and deadlines, nothing else.
             self._publish_if_changed()
+
+    def _tell_deferral(self) -> None:
+        """A line in the agent's and the brain's log as a deferral begins and as it ends."""
+        deferred = self.supervisor.phase is AgentState.DEFERRED
+        if deferred == self._was_deferred:
+            return
+        self._was_deferred = deferred
+        line = self.supervisor.message
+        (log.warning if "ran out" in line else log.info)("%s", line)
+        self.brain_log.note(line)
 
     def watches(self) -> dict[int, tuple[int, object]]:
         """fd -> (selector events, identity): the inbox, the broker socket, the brain's exit.
@@ -515,6 +535,9 @@ class Agent:
         now = time.monotonic()
         path = self.workdir / REQUEST_FILE
         argv = process.substitute(self.config.command, path)
+        problem = remove_hold(self.hold_file)
+        if problem is not None:
+            log.warning("%s; it defers this brain's stops until it is gone", problem)
         try:
             self._install(request)
             log_fd = self.brain_log.open_for_child()

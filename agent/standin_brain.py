@@ -1,6 +1,7 @@
 """A stand-in brain service for demos and tests: `python -m agent.standin_brain REQUEST.json`.
 
-It loads nothing real: it prints what a brain would load, runs until signalled, reloads on SIGHUP.
+It loads nothing real: it prints what a brain would load, runs until signalled, reloads on
+SIGHUP; asked to, it holds its agent off with the hold file (`--hold`, `--hold-while`).
 """
 
 from __future__ import annotations
@@ -61,7 +62,39 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--exit-after", type=float, metavar="S", help="exit by itself after S s")
     parser.add_argument("--exit-code", type=int, default=0, help="code for --exit-after")
     parser.add_argument("--ignore-sigterm", action="store_true", help="only SIGKILL stops it")
+    # Busy on demand: the hold file ($ROBOTCONF_HOLD_FILE) defers the agent's stops and reloads.
+    parser.add_argument(
+        "--hold", type=float, metavar="S", help="hold the agent off for S s after starting"
+    )
+    parser.add_argument(
+        "--hold-while",
+        type=Path,
+        metavar="MARKER",
+        help="hold the agent off from starting while the file MARKER exists",
+    )
     return parser
+
+
+HOLD_VARIABLE = "ROBOTCONF_HOLD_FILE"
+HOLD_LOOK_EVERY = 0.05  # seconds between looks at --hold-while's marker
+
+
+def hold(path: Path, seconds: float | None, marker: Path | None, stop: threading.Event) -> None:
+    """Creates the hold file, then removes it once `seconds` have passed or `marker` is
+    gone (or the brain stops): what a real brain does around a task it must not leave."""
+    path.touch()
+    print(f"stand-in brain: busy, holding the agent off ({path})", flush=True)
+    deadline = None if seconds is None else time.monotonic() + seconds
+    while not stop.is_set():
+        if deadline is not None and time.monotonic() >= deadline:
+            break
+        if marker is not None and not marker.exists():
+            break
+        stop.wait(HOLD_LOOK_EVERY)
+    with contextlib.suppress(FileNotFoundError):
+        path.unlink()
+    with contextlib.suppress(OSError):
+        print("stand-in brain: done, hold released", flush=True)
 
 
 def _read(path: Path) -> LaunchRequest:
@@ -139,6 +172,11 @@ def main(argv: list[str]) -> int:
         print(f"stand-in brain: crashing with code {code}, as {CRASH_KEY} asks", flush=True)
         return code
 
+    held = os.environ.get(HOLD_VARIABLE)
+    if held and (args.hold is not None or args.hold_while is not None):
+        threading.Thread(
+            target=hold, args=(Path(held), args.hold, args.hold_while, stop), daemon=True
+        ).start()
     deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
     while not stop.is_set():
         if reloads:

@@ -58,6 +58,8 @@ class Policy:
     startsecs: float = 1.0
     stop_timeout: float = 10.0
     reload_signal: signal.Signals | None = None  # None: every new request restarts
+    max_defer: float = 0.0  # seconds the hold file may defer a stop; 0: never deferred
+    hold_poll: float = 0.25  # seconds between looks at the hold file while deferred
 
     def backoff(self, streak: int) -> float:
         """Delay before restart number `streak + 1` of a run of failures."""
@@ -68,6 +70,11 @@ class Policy:
 class _Assignment:
     request: LaunchRequest
     warnings: list[str] = field(default_factory=list)
+
+
+def _clock(at: float) -> str:
+    """A wall-clock time as a status message shows it: `21:04:05 UTC`."""
+    return time.strftime("%H:%M:%S UTC", time.gmtime(at))
 
 
 def describe_exit(code: int) -> str:
@@ -84,11 +91,18 @@ class Supervisor:
     """One robot's brain: what should run, what runs, and what to do about the difference."""
 
     def __init__(
-        self, robot_id: str, policy: Policy, wall_clock: Callable[[], float] = time.time
+        self,
+        robot_id: str,
+        policy: Policy,
+        wall_clock: Callable[[], float] = time.time,
+        held: Callable[[], bool] = lambda: False,
     ) -> None:
         self.robot_id = robot_id
         self.policy = policy
         self._wall = wall_clock
+        # Whether the brain's hold file exists: like the wall clock, the one look at the world
+        # this state machine takes, and only when a running brain would be stopped or reloaded.
+        self._held = held
         self.phase = AgentState.IDLE
         self.desired: _Assignment | None = None  # the accepted request, if any
         self.brain: _Assignment | None = None  # the request the brain runs / last ran
@@ -102,11 +116,18 @@ class Supervisor:
         self.message = "waiting for a launch request"
         self.rejection: str | None = None
         self.shutting_down = False
-        # The last restart asked for from the desk and carried out: who asked, issued when.
+        # The last restart asked for from the desk and carried out (or deferred by the hold
+        # file, and so carried out by max_defer): who asked, issued when.
         self.restart_requested_by: str | None = None
         self.restart_requested_at: float | None = None
         self._started_at = 0.0
         self._killed = False
+        # While DEFERRED: the phase it interrupted, the monotonic time it proceeds anyway, since
+        # when (wall clock), and a restart from the desk that waits (who asked, issued when).
+        self._phase_before = AgentState.RUNNING
+        self._defer_until: float | None = None
+        self._deferred_since: float | None = None
+        self._pending_restart: tuple[str, float] | None = None
         self._since = round(self._wall(), 3)
         self._reported = self.state
 
@@ -144,6 +165,8 @@ class Supervisor:
             warnings=list(brain.warnings) if brain else [],
             restart_requested_by=self.restart_requested_by,
             restart_requested_at=self.restart_requested_at,
+            deferred_since=self._deferred_since,
+            max_defer=self.policy.max_defer if self._deferred_since is not None else None,
         )
 
     # ------------------------------------------------------------ events
@@ -155,9 +178,17 @@ class Supervisor:
             return []
         if self.desired is not None and self.desired.request.digest == request.digest:
             return []  # same content: a retained redelivery or a commit that changed nothing
-        if self._reloadable(request):
-            return self._reload(request, warnings)
-        self.desired = _Assignment(request, list(warnings))
+        assignment = _Assignment(request, list(warnings))
+        if self.phase == AgentState.DEFERRED:
+            self.desired = assignment  # the newest request replaces the one that waited
+            return self._still_deferred(now)
+        reloadable = self._reloadable(request)
+        if self._holds():
+            self.desired = assignment
+            return self._defer(now)
+        if reloadable:
+            return self._reload(assignment)
+        self.desired = assignment
         self.restarts = 0
         self.reloads = 0
         self.streak = 0
@@ -190,9 +221,13 @@ class Supervisor:
         """The empty retained payload: nothing assigned, stop."""
         self._set_rejection(None)
         self.desired = None
+        if self.phase == AgentState.DEFERRED:
+            return self._still_deferred(now)
         if self.pid is not None:
             if self.phase == AgentState.STOPPING:
                 return []
+            if self._holds():
+                return self._defer(now)
             return self._begin_stop(now, "stopping: no launch request for this robot")
         self.deadline = None
         self.brain = None
@@ -229,6 +264,11 @@ class Supervisor:
         self.exit_code = code
         self.deadline = None
         how = describe_exit(code)
+        if self.phase == AgentState.DEFERRED:
+            # Nothing runs to protect any more: what waited goes ahead at once (a crash is
+            # never deferred), as after a stop: the desired request starts, or none.
+            self._end_deferral()
+            self.phase = AgentState.STOPPING
         if self.phase == AgentState.STOPPING or self.shutting_down:
             if self.shutting_down:
                 self._enter(AgentState.IDLE, f"brain stopped ({how})")
@@ -271,6 +311,17 @@ class Supervisor:
             return [], "the agent is shutting down"
         if self.desired is None:
             return [], "nothing to restart: no launch request is assigned to this robot"
+        if self.phase == AgentState.DEFERRED or (
+            self.phase != AgentState.STOPPING and self._holds()
+        ):
+            # Accepted, and carried out by max_defer at the latest: the status names it now,
+            # so that the desk sees its restart taken (and `deferred`).
+            self.restart_requested_by = requested_by
+            self.restart_requested_at = issued_at
+            self._pending_restart = (requested_by, issued_at)  # the newest ask waits
+            if self.phase == AgentState.DEFERRED:
+                return self._still_deferred(now), None
+            return self._defer(now), None
         self.restart_requested_by = requested_by
         self.restart_requested_at = issued_at
         self.restarts = 0
@@ -288,6 +339,8 @@ class Supervisor:
         if self.deadline is None or now < self.deadline:
             return []
         self.deadline = None
+        if self.phase == AgentState.DEFERRED:
+            return self._look_at_hold(now)
         if self.phase == AgentState.STARTING and self.pid is not None:
             self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
         elif self.phase == AgentState.STOPPING and self.pid is not None and not self._killed:
@@ -309,6 +362,7 @@ class Supervisor:
             return [Kill(self.pid)]
         self.shutting_down = True
         self.deadline = None
+        self._end_deferral()  # the agent's own stop is never deferred (README, busy robots)
         if self.pid is not None:
             return self._begin_stop(now, "agent shutting down: stopping the brain")
         return []
@@ -332,17 +386,127 @@ class Supervisor:
             and brain.request.restart_digest == request.restart_digest
         )
 
-    def _reload(self, request: LaunchRequest, warnings: list[str]) -> list[Effect]:
+    def _reload(self, assignment: _Assignment) -> list[Effect]:
         assert self.pid is not None and self.brain is not None
         assert self.policy.reload_signal is not None
+        request = assignment.request
         self._before_reload = self.brain
-        self.desired = self.brain = _Assignment(request, list(warnings))
+        self.desired = self.brain = assignment
         self.reloads += 1
         # The state stays `running` (and so does `since`): the same process runs on.
         self.message = (
             f"reloaded {request.digest} (pid {self.pid}, {self.policy.reload_signal.name})"
         )
         return [Reload(self.pid, self.policy.reload_signal, request)]
+
+    # ------------------------------------------------------------ deferral (the hold file)
+
+    def _holds(self) -> bool:
+        """A running brain, not yet being stopped, asks for time with its hold file."""
+        return (
+            self.policy.max_defer > 0
+            and self.pid is not None
+            and self.phase in (AgentState.STARTING, AgentState.RUNNING)
+            and self._held()
+        )
+
+    def _defer(self, now: float) -> list[Effect]:
+        """Into DEFERRED: the brain runs on; `tick` looks at the hold file until it is gone
+        or max_defer has passed, whichever comes first."""
+        self._phase_before = self.phase
+        self._defer_until = now + self.policy.max_defer
+        self._enter(AgentState.DEFERRED, "")
+        self._deferred_since = self._since
+        return self._still_deferred(now)
+
+    def _still_deferred(self, now: float) -> list[Effect]:
+        """Something changed what waits (the newest ask wins); nothing left waiting resumes."""
+        what = self._waiting()
+        if what is None:
+            self._resume()
+            return []
+        since = self._deferred_since or 0.0
+        self.message = (
+            f"{what} deferred by the brain's hold file since {_clock(since)}; proceeds at "
+            f"{_clock(since + self.policy.max_defer)} at the latest (max_defer "
+            f"{self.policy.max_defer:g} s)"
+        )
+        assert self._defer_until is not None
+        self.deadline = min(now + self.policy.hold_poll, self._defer_until)
+        return []
+
+    def _waiting(self) -> str | None:
+        """What the hold file defers, in words; None when nothing does any more."""
+        desired, brain = self.desired, self.brain
+        if desired is None:
+            return "stop (no launch request for this robot)"
+        if self._pending_restart is not None:
+            return f"restart requested by {self._pending_restart[0]}"
+        if brain is not None and brain.request.digest == desired.request.digest:
+            return None
+        if self._reload_would_do(desired.request):
+            return f"reload to request {desired.request.digest}"
+        return f"restart for request {desired.request.digest}"
+
+    def _reload_would_do(self, request: LaunchRequest) -> bool:
+        brain = self.brain
+        return (
+            self.policy.reload_signal is not None
+            and self._phase_before == AgentState.RUNNING
+            and brain is not None
+            and brain.request.restart_digest is not None
+            and brain.request.restart_digest == request.restart_digest
+        )
+
+    def _look_at_hold(self, now: float) -> list[Effect]:
+        assert self._defer_until is not None
+        if not self._held():
+            return self._proceed(now, "the brain removed its hold file")
+        if now >= self._defer_until:
+            return self._proceed(
+                now,
+                f"deferral ran out after {self.policy.max_defer:g} s (max_defer) with the "
+                "hold file still there",
+            )
+        self.deadline = min(now + self.policy.hold_poll, self._defer_until)
+        return []
+
+    def _proceed(self, now: float, why: str) -> list[Effect]:
+        """What waited goes ahead: a stop, the desk's restart, a reload or a restart."""
+        what, restart = self._waiting(), self._pending_restart
+        self._end_deferral()
+        desired, brain = self.desired, self.brain
+        if what is None or brain is None or self.pid is None:
+            self._resume()
+            return []
+        if desired is None:
+            return self._begin_stop(now, f"stopping: no launch request for this robot ({why})")
+        if restart is None and self._reload_would_do(desired.request):
+            self.phase = AgentState.RUNNING  # the same process runs on, signalled
+            effects = self._reload(desired)
+            self.message += f" ({why})"
+            self._touch()
+            return effects
+        self.restarts = 0
+        self.streak = 0
+        if brain.request.digest != desired.request.digest:
+            self.reloads = 0
+        return self._begin_stop(now, f"{what} ({why}): stopping the brain")
+
+    def _resume(self) -> None:
+        """Back to what the brain was doing: nothing waits any more."""
+        self._end_deferral()
+        if self._phase_before == AgentState.STARTING and self.pid is not None:
+            self.deadline = self._started_at + self.policy.startsecs
+            self._enter(AgentState.STARTING, f"started pid {self.pid}")
+        else:
+            self.deadline = None
+            self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
+
+    def _end_deferral(self) -> None:
+        self._defer_until = None
+        self._deferred_since = None
+        self._pending_restart = None
 
     def _spawn(self, now: float) -> list[Effect]:
         assert self.desired is not None

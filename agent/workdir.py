@@ -25,6 +25,37 @@ LOCK_FILE = "agent.lock"
 ISSUED_FILE = "newest-issued-at"
 RESTART_ISSUED_FILE = "newest-restart-issued-at"  # the restarts' watermark (RestartLedger)
 RESTARTS_AHEAD_FILE = "restarts-ahead"  # restarts carried out that were dated ahead of the clock
+HOLD_FILE = "brain.hold"  # the brain's "not now" (ROBOTCONF_HOLD_FILE): defers a stop
+
+
+def hold_exists(path: Path) -> bool:
+    """Whether the brain holds: `path` exists as anything at all (a file, a directory, a
+    symlink, even a dangling one), looked at with lstat and never followed or read. A look
+    that fails for another reason than absence counts as held: max_defer bounds it."""
+    try:
+        os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def remove_hold(path: Path) -> str | None:
+    """Removes a hold a previous brain left (it must not defer its successor's first stop);
+    what went wrong, if anything. A directory is removed only when empty: never a tree."""
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        return None
+    except IsADirectoryError:
+        try:
+            os.rmdir(path)
+        except OSError as exc:
+            return f"cannot remove the hold directory {path}: {exc.strerror}"
+    except OSError as exc:
+        return f"cannot remove the hold file {path}: {exc.strerror}"
+    return None
 
 
 class SeqStore:

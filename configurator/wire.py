@@ -169,11 +169,20 @@ class AgentState(str, Enum):
     FAILED = "failed"
     BACKOFF = "backoff"
     REJECTED = "rejected"
+    # A stop, restart or reload waits while the brain's hold file exists (agent.yaml
+    # `max_defer`): the brain runs on, on the request it ran before.
+    DEFERRED = "deferred"
 
 
 # A brain is up, or about to be, in these states: the robot runs (or is made to run) something.
 ACTIVE_STATES = frozenset(
-    {AgentState.STARTING, AgentState.RUNNING, AgentState.STOPPING, AgentState.BACKOFF}
+    {
+        AgentState.STARTING,
+        AgentState.RUNNING,
+        AgentState.STOPPING,
+        AgentState.BACKOFF,
+        AgentState.DEFERRED,
+    }
 )
 
 
@@ -221,13 +230,18 @@ class AgentStatus(_Message):
     message: str = ""
     warnings: list[str] = Field(default_factory=list)
     seq: int = 0
-    # The last restart asked for from the desk (`robotconf restart`) and carried out: who
-    # asked (as the request says) and when it was issued (unix time).
+    # The last restart asked for from the desk (`robotconf restart`) and carried out, or
+    # deferred by the brain's hold file (state `deferred`): who asked (as the request says)
+    # and when it was issued (unix time).
     restart_requested_by: str | None = None
     restart_requested_at: float | None = None
     # Why the robot's interfaces could not be read (agent.yaml `interfaces`), while they
     # cannot: the interfaces topic keeps the last lists read. Absent from older agents.
     interfaces_error: str | None = None
+    # While `deferred`: since when (unix time, the agent's clock) and the most it defers
+    # (agent.yaml `max_defer`, seconds) before it proceeds anyway.
+    deferred_since: float | None = None
+    max_defer: float | None = None
 
 
 def is_online(status: AgentStatus | None) -> bool:

@@ -4,7 +4,7 @@ Each event is told once per transition, never per resync: a refused commit once 
 a halted or rolled back rollout once per revision, a robot once as it drifts and once as it
 fits again, a robot once as it degrades or goes offline and once as it is back in sync
 (running the desired request for SETTLE seconds: a brain in a crash loop runs a moment before
-each crash, and that is no recovery).
+each crash, and that is no recovery), a robot once as its brain's hold file defers a stop.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ class Kind(str, enum.Enum):
     ROBOT_IN_SYNC = "robot_in_sync"
     ROBOT_DRIFTED = "robot_drifted"
     ROBOT_DRIFT_CLEARED = "robot_drift_cleared"
+    ROBOT_DEFERRED = "robot_deferred"
 
 
 _ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLLED_BACK}
@@ -90,6 +91,7 @@ class Told:
     rollouts: tuple[tuple[str, str], ...] = ()  # (revision, state) told, oldest first
     alerting: Mapping[str, Kind] = field(default_factory=dict)  # robot -> degraded or offline
     drifted: frozenset[str] = frozenset()  # robots told drifted, not yet told fitting again
+    deferred: frozenset[str] = frozenset()  # robots told deferred, still deferred
 
 
 def _remember(items: tuple[Any, ...], item: Any) -> tuple[Any, ...]:
@@ -153,7 +155,34 @@ def transitions(
     if seen.drift is not None:
         told, drift_events = _drift_transitions(told, seen, branch, at)
         events += drift_events
+    if seen.robots is not None:
+        told, deferral_events = _deferral_transitions(told, seen.robots, branch, at)
+        events += deferral_events
     return told, events
+
+
+def _deferral_transitions(
+    told: Told, robots: Mapping[str, AgentStatus], branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """Into `deferred` (its brain's hold file holds off a stop, restart or reload), once per
+    deferral; whether it is assigned or leaving the fleet (its stop waits too). Its end needs
+    no word of its own: what waited happens, and the robot's other events follow it."""
+    events: list[Event] = []
+    deferred = {r for r, status in robots.items() if status.state is AgentState.DEFERRED}
+    for robot_id in sorted(deferred - told.deferred):
+        status = robots[robot_id]
+        events.append(
+            Event(
+                Kind.ROBOT_DEFERRED,
+                f"{robot_id} is deferred: {status.message}",
+                at,
+                branch,
+                status.revision,
+                robot_id,
+                AgentState.DEFERRED.value,
+            )
+        )
+    return replace(told, deferred=frozenset(deferred)), events
 
 
 DRIFT_ITEMS_TOLD = 5  # drift items an event's message names; the rest are counted

@@ -264,6 +264,7 @@ class _Rollout:
         # broker, it gives the robots the whole wave_timeout again rather than blame them for
         # what it could not see.
         deadline = max(started_at, memory.watching_since) + policy.wave_timeout
+        deadline = deferral_deadline(memory, members, statuses, now, deadline, policy)
         judged: dict[str, Health] = {}
         recheck: float | None = None
 
@@ -364,6 +365,32 @@ class _Rollout:
             counts={"healthy": len(healthy), "failed": len(failed), "pending": len(pending)},
             message=message,
         )
+
+
+def deferral_deadline(
+    memory: WaveMemory,
+    members: list[str],
+    statuses: Mapping[str, AgentStatus],
+    now: float,
+    deadline: float,
+    policy: RolloutPolicy,
+) -> float:
+    """The wave's deadline with its busy robots: a robot whose brain holds off the new request
+    (state `deferred`) is neither healthy nor failed while it defers — its agent proceeds by
+    its max_defer at the latest — and the wave gives it wave_timeout again from the last look
+    that saw it deferring, or just done deferring, to start and settle. Going dark still fails
+    it (`_health`): it may have died of the new request."""
+    for robot in members:
+        status = statuses.get(robot)
+        if status is not None and status.state is AgentState.DEFERRED:
+            memory.deferring.add(robot)
+            memory.deferred_at = now
+        elif robot in memory.deferring:
+            memory.deferring.discard(robot)
+            memory.deferred_at = now
+    if memory.deferred_at is None:
+        return deadline
+    return max(deadline, memory.deferred_at + policy.wave_timeout)
 
 
 def _health(

@@ -116,6 +116,8 @@ class RobotRow:
     restart_requested_by: str | None = None
     restart_requested_at: float | None = None
     drift: Drift = UNKNOWN  # its reported interfaces against its desired request
+    # While `deferred`: since when its brain's hold file defers a stop (the agent's clock).
+    deferred_since: float | None = None
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -130,6 +132,7 @@ class RobotRow:
             "published_digest": self.published,
             "reported_digest": self.reported,
             "state": self.state,
+            "deferred_since": self.deferred_since,
             "restarts": self.restarts,
             "reloads": self.reloads,
             "warnings": self.warnings,
@@ -163,6 +166,8 @@ def verdict(desired: DesiredRobot | None, robot: RobotSeen) -> tuple[Verdict, st
     if desired is None:
         if state in ACTIVE_STATES and robot.launch_digest is not None:
             return Verdict.PROGRESSING, "not in fleet.yaml: its request is still published"
+        if state is AgentState.DEFERRED:
+            return Verdict.PROGRESSING, "not in fleet.yaml: its brain's hold file defers its stop"
         if state in ACTIVE_STATES:
             return Verdict.PROGRESSING, "not in fleet.yaml: its brain is being stopped"
         return Verdict.UNASSIGNED, "not in fleet.yaml"
@@ -172,6 +177,8 @@ def verdict(desired: DesiredRobot | None, robot: RobotSeen) -> tuple[Verdict, st
         return Verdict.OFFLINE, (status.message if status else "") or "its agent has never reported"
     if state in (AgentState.FAILED, AgentState.REJECTED, AgentState.BACKOFF, AgentState.EXITED):
         return Verdict.DEGRADED, status.message or f"brain service {state.value}"
+    if state is AgentState.DEFERRED:  # says what waits for the brain's hold file, since when
+        return Verdict.PROGRESSING, status.message or "deferred by its brain's hold file"
     if robot.launch_digest != desired.digest:
         return Verdict.PROGRESSING, "the desired request is not published yet"
     if status.digest != desired.digest:
@@ -245,6 +252,7 @@ def build_rows(
                 restart_requested_by=status.restart_requested_by if status else None,
                 restart_requested_at=status.restart_requested_at if status else None,
                 drift=robot_drift(robot_id, want, robot, memo),
+                deferred_since=status.deferred_since if status else None,
             )
         )
     if memo is not None:

@@ -38,6 +38,10 @@ class WaveRecord(BaseModel):
     failed: str = Field("", description="failed the wave: stays failed")
     rejecting: str = Field("", description="rejected a request already as the wave began")
     doubted: str = Field("", description="seen, then dark when the statuses were learned anew")
+    deferring: str = Field("", description="seen deferring (its brain's hold file) at last look")
+    deferred_at: float | None = Field(
+        None, description="when a robot was last seen deferring, or done deferring"
+    )
 
 
 @dataclass
@@ -54,6 +58,8 @@ class WaveMemory:
     failed: set[str] = field(default_factory=set)
     rejecting: set[str] = field(default_factory=set)
     doubted: set[str] = field(default_factory=set)
+    deferring: set[str] = field(default_factory=set)
+    deferred_at: float | None = None
 
     def record(self) -> WaveRecord:
         members = self.members
@@ -68,6 +74,8 @@ class WaveMemory:
             failed=_bits(members, self.failed),
             rejecting=_bits(members, self.rejecting),
             doubted=_bits(members, self.doubted),
+            deferring=_bits(members, self.deferring),
+            deferred_at=self.deferred_at,
         )
 
 
@@ -104,6 +112,8 @@ def memory_of(
             failed=_members(members, record.failed),
             rejecting=_members(members, record.rejecting),
             doubted=_members(members, record.doubted),
+            deferring=_members(members, record.deferring),
+            deferred_at=record.deferred_at,
         )
     except ValueError:
         return None

@@ -89,8 +89,9 @@ def restart(
     broker, login and key are found in .robotconf/up/desk.json; an agent that verifies Launch
     Requests carries out only a signed restart, once, and only within 5 minutes of when it
     was issued). Needs the broker's `operator` (or `reconciler`) user where the broker has an
-    ACL. `robotconf status` shows who
-    asked and when. Exit 0 when the robot confirmed it, 1 when the robot is unknown, offline,
+    ACL. `robotconf status` shows who asked and when. A busy robot (its brain's hold file)
+    confirms it `deferred`: it is carried out once the brain releases the file, or after
+    agent.yaml's max_defer. Exit 0 when the robot confirmed it, 1 when the robot is unknown, offline,
     has nothing to restart or did not confirm, 2 when the broker cannot be reached.
     """
     if not is_robot_id(robot_id):

@@ -114,3 +114,26 @@ def test_sighup_rereads_the_request_and_a_broken_one_keeps_the_old(tmp_path: Pat
     assert kept.startswith(f"stand-in brain: cannot reload {request_file}")
     assert kept.endswith(f"keeping {second.digest}")
     assert "SIGTERM received, stopping" in rest and proc.returncode == 0
+
+
+def test_hold_for_seconds_ends_by_removing_the_hold_file(tmp_path: Path) -> None:
+    request_file = tmp_path / "launch-request.json"
+    request_file.write_bytes(make_request().payload())
+    hold = tmp_path / "brain.hold"
+    env = {**os.environ, "ROBOTCONF_HOLD_FILE": str(hold)}
+    proc = subprocess.Popen(
+        [*STANDIN, str(request_file), "--hold", "0.5"], stdout=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        assert proc.stdout is not None
+        lines = iter(proc.stdout.readline, "")
+        assert any("busy, holding the agent off" in line for line in lines)
+        assert any("done, hold released" in line for line in lines)
+        assert not hold.exists()
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=TIMEOUT)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0

@@ -467,3 +467,140 @@ def test_a_restart_with_nothing_assigned_or_while_shutting_down_does_nothing() -
     sup.shutdown(1.0)
     effects, problem = sup.restart("alice", 1.0, 1.5)
     assert effects == [] and problem == "the agent is shutting down"
+
+
+# ---------------------------------------------------------------- busy robots: the hold file
+
+
+class Hold:
+    """The brain's hold file, as the supervisor asks about it."""
+
+    def __init__(self) -> None:
+        self.there = False
+
+    def __call__(self) -> bool:
+        return self.there
+
+
+def holding(pid: int = 100, **policy: Any) -> tuple[Supervisor, Hold]:
+    """Running A as `pid` with max_defer 30 s, its brain holding."""
+    hold = Hold()
+    settings: dict[str, Any] = {"startsecs": 1.0, "stop_timeout": 10.0, "max_defer": 30.0}
+    settings.update(policy)
+    sup = Supervisor("tb3-01", Policy(**settings), wall_clock=Clock(), held=hold)
+    running(sup, pid)
+    hold.there = True
+    return sup, hold
+
+
+def test_a_new_request_waits_while_the_brain_holds_then_goes_ahead_once_released() -> None:
+    sup, hold = holding()
+    assert sup.accept(LOGIC, [], 5.0) == []
+    status = sup.status()
+    assert status.state == AgentState.DEFERRED and status.pid == 100
+    assert status.digest == A.digest  # the brain still runs the old request
+    assert status.deferred_since == status.since and status.max_defer == 30.0
+    assert f"restart for request {LOGIC.digest} deferred by the brain's hold file" in (
+        status.message
+    )
+    assert sup.tick(5.0 + sup.policy.hold_poll) == []  # still held: looked at again later
+    assert sup.state == AgentState.DEFERRED
+    hold.there = False
+    assert sup.tick(sup.deadline or 0.0) == [Terminate(100)]
+    assert sup.state == AgentState.STOPPING and "removed its hold file" in sup.message
+    assert sup.status().deferred_since is None
+    assert sup.exited(100, -15, 7.0) == [Spawn(LOGIC)]
+
+
+def test_max_defer_passed_goes_ahead_and_says_so() -> None:
+    sup, _ = holding(max_defer=20.0)
+    sup.accept(LOGIC, [], 5.0)
+    now = 5.0
+    while sup.state == AgentState.DEFERRED:
+        assert sup.deadline is not None and sup.deadline <= 25.0
+        now = sup.deadline
+        effects = sup.tick(now)
+    assert now == 25.0 and effects == [Terminate(100)]
+    assert "deferral ran out after 20 s (max_defer)" in sup.status().message
+
+
+def test_a_newer_request_replaces_the_one_that_waits_and_keeps_the_deadline() -> None:
+    sup, _ = holding()
+    sup.accept(LOGIC, [], 5.0)
+    other = make_request(logic="follow_by_spinning", variant=3)
+    assert sup.accept(other, [], 10.0) == []
+    assert other.digest in sup.message and LOGIC.digest not in sup.message
+    while sup.state == AgentState.DEFERRED:  # max_defer counts from the first deferral
+        effects = sup.tick(sup.deadline or 0.0)
+    assert effects == [Terminate(100)]
+    assert sup.exited(100, -15, 36.0) == [Spawn(other)]
+
+
+def test_back_to_the_running_request_ends_the_deferral_with_nothing_done() -> None:
+    sup, _ = holding()
+    sup.accept(LOGIC, [], 5.0)
+    assert sup.accept(A, [], 6.0) == []
+    assert sup.state == AgentState.RUNNING and sup.deadline is None
+    assert sup.status().deferred_since is None
+
+
+def test_a_stop_for_a_robot_leaving_the_fleet_is_deferred() -> None:
+    sup, hold = holding()
+    assert sup.clear(5.0) == []
+    assert sup.state == AgentState.DEFERRED
+    assert sup.message.startswith("stop (no launch request for this robot) deferred")
+    hold.there = False
+    assert sup.tick(sup.deadline or 0.0) == [Terminate(100)]
+    sup.exited(100, -15, 6.0)
+    assert sup.state == AgentState.IDLE
+
+
+def test_a_restart_from_the_desk_is_deferred_then_carried_out() -> None:
+    sup, hold = holding()
+    effects, problem = sup.restart("alice", 1234.5, 5.0)
+    assert (effects, problem) == ([], None)
+    assert sup.state == AgentState.DEFERRED
+    assert "restart requested by alice deferred" in sup.message
+    assert sup.status().restart_requested_by == "alice"  # taken: the desk sees it deferred
+    hold.there = False
+    assert sup.tick(sup.deadline or 0.0) == [Terminate(100)]
+    assert sup.status().restart_requested_by == "alice"
+    assert sup.exited(100, -15, 6.0) == [Spawn(A)]
+
+
+def test_a_reload_is_deferred_then_signals() -> None:
+    sup, hold = holding(reload_signal=HUP)
+    assert sup.accept(B, [], 5.0) == []
+    assert sup.state == AgentState.DEFERRED
+    assert f"reload to request {B.digest} deferred" in sup.message
+    hold.there = False
+    assert sup.tick(sup.deadline or 0.0) == [Reload(100, HUP, B)]
+    status = sup.status()
+    assert status.state == AgentState.RUNNING and status.digest == B.digest
+    assert status.reloads == 1
+
+
+def test_a_crash_while_deferred_is_not_deferred() -> None:
+    sup, _ = holding()
+    sup.accept(LOGIC, [], 5.0)
+    assert sup.exited(100, 1, 6.0) == [Spawn(LOGIC)]  # the hold file is still there
+    assert sup.status().deferred_since is None
+
+
+def test_a_crash_restart_is_never_deferred() -> None:
+    sup, _ = holding(backoff_initial=1.0)
+    sup.exited(100, 1, 6.0)
+    assert sup.state == AgentState.BACKOFF
+    assert sup.tick(7.0) == [Spawn(A)]
+
+
+def test_the_agents_own_shutdown_is_not_deferred() -> None:
+    sup, _ = holding()
+    sup.accept(LOGIC, [], 5.0)
+    assert sup.shutdown(6.0) == [Terminate(100)]
+    assert sup.state == AgentState.STOPPING
+
+
+def test_max_defer_zero_ignores_the_hold_file() -> None:
+    sup, _ = holding(max_defer=0.0)
+    assert sup.accept(LOGIC, [], 5.0) == [Terminate(100)]

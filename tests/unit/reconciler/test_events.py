@@ -346,3 +346,23 @@ def test_a_robot_is_told_once_into_drift_and_once_out_of_it() -> None:
         "r1 drifted: lacks /scan (sensor_msgs/msg/LaserScan), needed by patrol_with_lidar via "
         "mapping scan"
     )
+
+
+def test_a_robot_deferring_is_told_once_per_deferral_assigned_or_leaving() -> None:
+    held = robot(AgentState.DEFERRED, message="restart for request sha256:2 deferred by ...")
+    leaving = Seen(ready(), {"r1": robot(AgentState.DEFERRED)}, {})  # its stop waits
+    steps = run(
+        [
+            robots(robot(AgentState.RUNNING)),
+            robots(held),
+            robots(held),  # a resync
+            robots(robot(AgentState.RUNNING, D2)),
+            robots(held),  # another deferral
+            leaving,
+        ]
+    )
+    assert kinds(steps) == [[], [Kind.ROBOT_DEFERRED], [], [], [Kind.ROBOT_DEFERRED], []]
+    told = steps[1][0]
+    assert (told.robot, told.reason, told.revision) == ("r1", "deferred", GOOD)
+    assert told.message == "r1 is deferred: restart for request sha256:2 deferred by ..."
+    assert kinds(run([leaving])) == [[Kind.ROBOT_DEFERRED]]

@@ -278,3 +278,42 @@ def test_a_wave_read_back_out_of_range_is_brought_into_range(
     below = first.status.model_copy(update={"wave": -5})
     again = step(head, stable, held(stable), {}, below, T0 + 1)
     assert again.status is not None and again.status.wave == 0
+
+
+def test_a_deferred_robot_is_pending_past_the_timeout_then_has_it_again_to_settle(
+    two: tuple[FleetRender, FleetRender],
+) -> None:
+    stable, head = two
+    first = step(head, stable, held(stable))
+    launches = {**held(stable), **held(head, CANARY)}
+    # Its brain holds off the new request: it runs the old one, deferred.
+    busy = running(stable, CANARY, AgentState.DEFERRED)
+    waiting = step(head, stable, launches, busy, first, T0 + 50)
+    later = step(head, stable, launches, busy, waiting, T0 + 150)  # past wave_timeout (100)
+    assert later.status is not None and later.status.state == "Progressing"
+    assert later.status.pending == CANARY and later.status.counts["failed"] == 0
+    assert later.recheck_at == T0 + 250
+    # Released at T0 + 200: starting the new request, it has wave_timeout again to settle.
+    starting = running(head, CANARY, AgentState.STARTING)
+    going = step(head, stable, launches, starting, later, T0 + 200)
+    assert going.status is not None and going.status.state == "Progressing"
+    healthy = step(
+        head, stable, launches, running(head, CANARY), going, T0 + 290, {"tb3-01": T0 + 210}
+    )
+    assert healthy.status is not None and healthy.status.wave == 1
+    # Not healthy by then after all: failed, as any robot is at its timeout.
+    stuck = step(head, stable, launches, starting, going, T0 + 300)
+    assert stuck.status is not None and stuck.status.state == "RolledBack"
+
+
+def test_a_deferred_robot_that_goes_dark_has_failed(
+    two: tuple[FleetRender, FleetRender],
+) -> None:
+    stable, head = two
+    first = step(head, stable, held(stable))
+    launches = {**held(stable), **held(head, CANARY)}
+    busy = step(head, stable, launches, running(stable, CANARY, AgentState.DEFERRED), first, T0 + 5)
+    will = running(stable, CANARY, AgentState.OFFLINE)
+    dark = step(head, stable, launches, will, busy, T0 + 10)
+    gone = step(head, stable, launches, will, dark, T0 + 10 + 3)
+    assert gone.status is not None and gone.status.state == "RolledBack"

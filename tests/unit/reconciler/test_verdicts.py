@@ -262,3 +262,24 @@ def test_a_selector_option_is_key_equals_value() -> None:
     for bad in ("ring", "ring=", "=x", "a b=c", "ring=can ary"):
         with pytest.raises(CliError):
             parse_selector((bad,))
+
+
+def test_a_deferred_robot_is_progressing_and_says_what_waits_since_when() -> None:
+    waits = "restart for request sha256:2 deferred by the brain's hold file since 21:04:05 UTC"
+    status = AgentStatus(
+        robot_id="r1", state=AgentState.DEFERRED, digest=D1, message=waits, deferred_since=5.0
+    )
+    moving = RobotSeen(launch_digest=D2, status=status)
+    assert moving.online and moving.brain_active  # online, its brain runs the old request
+    assert verdict(want(D2), moving) == (Verdict.PROGRESSING, waits)
+    # A restart from the desk waits: on the desired request, still not done.
+    assert verdict(want(D1), RobotSeen(launch_digest=D1, status=status))[0] is (Verdict.PROGRESSING)
+    leaving = RobotSeen(launch_digest=None, status=status)
+    assert verdict(None, leaving) == (
+        Verdict.PROGRESSING,
+        "not in fleet.yaml: its brain's hold file defers its stop",
+    )
+    rows = build_rows({"r1": want(D2)}, Retained(robots={"r1": moving}))
+    assert rows[0].as_json()["deferred_since"] == 5.0 and rows[0].state == "deferred"
+    text = fleet_status_text(FleetStatus(rows, None, "test"))
+    assert " deferred " in text and "since 21:04:05 UTC" in text
