@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import pytest
 
+from configurator.plan import format_plan_text, make_plan, plan_as_json
 from configurator.render import FleetRender
 from configurator.types import RolloutPolicy
 from configurator.wire import AgentStatus
 from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
+from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout import CANARY, ROBOTS, T0, fleet, held, published, running
 from tests.unit.reconciler.test_rollout_memory import offline, state
@@ -146,4 +148,22 @@ def step(  # the memory tests' step, with the robots' dark times
             watching_since,
             dark_since or {},
         )
+    )
+
+
+def test_status_and_plan_show_the_skipped_robots_and_the_policy(lab: Lab) -> None:
+    stable, head = two(lab, "skip")
+    off = {**running(stable, ROBOTS[1:]), **offline(CANARY, T0 - 3600)}
+    first = step(head, stable, held(stable), off)
+    assert first.status is not None
+    line = rollout_line(first.status)
+    assert "0 healthy, 0 failed, 2 pending, 1 offline;" in line
+    assert line.endswith("; offline (get it when back): tb3-01")
+    assert first.status.model_dump(mode="json")["offline"] == ["tb3-01"]
+    assert head.rollout is not None
+    plan = make_plan(stable, head, head.rollout)
+    assert plan_as_json(plan)["offline"] == "skip"
+    assert format_plan_text(plan).splitlines()[1] == (
+        "rollout in waves: canary, half, all; robots that are off are skipped, and get it when"
+        " they reconnect"
     )
