@@ -355,12 +355,14 @@ class _Rollout:
     def _behind(self, wave: int, judged: Mapping[str, Health]) -> set[str]:
         """Robots of the waves up to `wave` (not judged in it) that are offline and do not
         report running the head's request: passed by while they were off, they get it when
-        they reconnect."""
+        they reconnect (listed until then, after the rollout completed too)."""
         statuses, head = self.seen.statuses, self.seen.head
         if statuses is None:
             return set()
         behind = set()
-        for robot in self.changed:
+        # Every robot, not only the changed ones: once complete, the head is the stable
+        # revision and nothing is changed, but a robot that was off is still behind.
+        for robot in head.requests.keys() - head.suspended:
             status = statuses.get(robot)
             if robot in judged or self.waves.get(robot, self.count) > wave or is_online(status):
                 continue
