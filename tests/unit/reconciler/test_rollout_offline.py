@@ -167,3 +167,11 @@ def test_status_and_plan_show_the_skipped_robots_and_the_policy(lab: Lab) -> Non
         "rollout in waves: canary, half, all; robots that are off are skipped, and get it when"
         " they reconnect"
     )
+
+
+def test_a_bad_offline_value_is_one_error_at_its_line(lab: Lab) -> None:
+    fleet(lab, "a", offline="skip")
+    lab.replace("configs/fleet.yaml", "offline: skip", "offline: ignore")
+    d = lab.only("RC103")
+    assert d.line == lab.line_of("configs/fleet.yaml", "offline: ignore")
+    assert "'skip'" in d.message and "'wait'" in d.message and "'fail'" in d.message
