@@ -4,6 +4,8 @@ are back, and a robot killed after its wave was published fails it even under sk
 
 from __future__ import annotations
 
+import json
+
 from configurator.wire import ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_rollout import (
@@ -59,6 +61,8 @@ def test_robots_off_before_a_commit_do_not_hold_it_up(fleet: Fleet) -> None:
     never_rolled_back(fleet, fleet.requests(stable))
     text = fleet.status_cli().stdout
     assert f"{len(off)} offline" in text and "offline (get it when back): tb3-01" in text
+    report = json.loads(fleet.status_cli("--json").stdout)
+    assert report["reconciler"]["rollout"]["offline"] == off
     # Back on: the canary gets the revision its wave reached, retained for it.
     back_on(fleet, CANARY)
     new = fleet.requests(head)
