@@ -118,3 +118,27 @@ def test_a_robot_back_mid_rollout_gets_the_revision_its_wave_reached(fleet: Flee
     done = fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
     assert offline_robots(done) == []
     fleet.watch.wait_running(new)
+
+
+def test_a_skipped_robot_back_while_its_wave_runs_is_judged_with_it(fleet: Fleet) -> None:
+    """Health-gated: back while its wave is still on probation, it is one of the wave's robots
+    again; dying on the new request fails the wave."""
+    with_policy(fleet, policy(20, None))
+    kill_robot(fleet, "tb3-05")  # in the last wave
+    head = rename_all(fleet, "v2")
+    new = fleet.requests(head)
+    wait_published(fleet, "tb3-02", new["tb3-02"])  # the last wave is out, tb3-05 skipped
+    skipped = fleet.watch.wait_reconciler(
+        lambda s: (
+            offline_robots(s) == ["tb3-05"]
+            and s.rollout is not None
+            and s.rollout.wave_name == "all"
+        ),
+        "tb3-05 skipped",
+    )
+    assert skipped.rollout is not None and skipped.rollout.state == "Progressing"
+    back_on(fleet, "tb3-05")
+    wait_for(lambda: running_digest(fleet, "tb3-05", new["tb3-05"]), "tb3-05 back, on the head")
+    kill_robot(fleet, "tb3-05")
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
+    assert status.rollout is not None and status.rollout.failed == ["tb3-05"]
