@@ -8,7 +8,7 @@ import pytest
 from configurator.plan import format_plan_text, make_plan, plan_as_json
 from configurator.render import FleetRender
 from configurator.types import RolloutPolicy
-from configurator.wire import AgentStatus
+from configurator.wire import AgentState, AgentStatus
 from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
 from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab
@@ -175,3 +175,20 @@ def test_a_bad_offline_value_is_one_error_at_its_line(lab: Lab) -> None:
     d = lab.only("RC103")
     assert d.line == lab.line_of("configs/fleet.yaml", "offline: ignore")
     assert "'skip'" in d.message and "'wait'" in d.message and "'fail'" in d.message
+
+
+def test_a_share_of_failures_counts_only_the_robots_that_were_on(lab: Lab) -> None:
+    stable, head = two(lab, "skip")
+    assert head.rollout is not None
+    head.rollout = head.rollout.model_copy(update={"max_failures": "50%"})
+    off = {**running(stable, ROBOTS[2:]), **offline(["tb3-02"], T0 - 3600)}
+    first = step(head, stable, held(stable), {**off, **running(stable, CANARY)})
+    launches = {**held(stable), **held(head, CANARY)}
+    second = step(head, stable, launches, {**off, **running(head, CANARY)}, first, T0 + 10)
+    assert second.status is not None and second.status.wave == 1
+    # Of the wave's two robots one is off: 50% of the one that was on tolerates no failure.
+    crashed = {**off, **running(head, CANARY), **running(head, ["tb3-03"], AgentState.BACKOFF)}
+    launches = held(head, HALF) | held(stable, ["tb3-04", "tb3-05"])
+    result = step(head, stable, launches, crashed, second, T0 + 11)
+    assert state(result) == "RolledBack" and result.status is not None
+    assert result.status.failed == ["tb3-03"] and result.status.offline == ["tb3-02"]
