@@ -49,6 +49,7 @@ class Plan:
     changes: list[RobotChange]  # in robot id order; with waves, in wave order first
     unchanged: int
     waves: list[str] | None = None  # the head's rollout waves in order; None: all at once
+    offline: str | None = None  # the head's rollout.offline: what robots that are off do
     # robot -> its drift against the head's request, for the robots that would get a new one,
     # when the robots' interfaces were read (`plan --broker`); None: not read, nothing said
     drift: dict[str, Drift] | None = None
@@ -148,7 +149,7 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
         change.wave = None if index is None else names[index]
     # Removed robots (and any no wave takes) last: they are in no wave of the head.
     changes.sort(key=lambda c: (placed.get(c.robot_id, len(names)), c.robot_id))
-    return Plan(base.revision, head.revision, changes, unchanged, names)
+    return Plan(base.revision, head.revision, changes, unchanged, names, rollout.offline)
 
 
 Reported = Mapping[str, tuple[Report | None, str | None]]  # robot -> (report, error)
@@ -236,10 +237,21 @@ def _wave_heading(waves: list[str], wave: str | None) -> str:
     return f"wave {wave} ({waves.index(wave) + 1} of {len(waves)}):"
 
 
+_OFFLINE = {
+    "skip": "robots that are off are skipped, and get it when they reconnect",
+    "wait": "robots that are off are waited for up to wave_timeout",
+    "fail": "robots that are off count as failed",
+}
+
+
+def _offline_text(plan: Plan) -> str:
+    return f"; {_OFFLINE[plan.offline]}" if plan.offline in _OFFLINE else ""
+
+
 def format_plan_text(plan: Plan) -> str:
     lines = [f"plan {_short(plan.base)} -> {_short(plan.head)}: {_counts(plan)}"]
     if plan.waves is not None:
-        lines.append(f"rollout in waves: {', '.join(plan.waves)}")
+        lines.append(f"rollout in waves: {', '.join(plan.waves)}{_offline_text(plan)}")
     heading: str | None = None
     for c in plan.changes:
         if plan.waves is not None and _wave_heading(plan.waves, c.wave) != heading:
@@ -257,7 +269,8 @@ def format_plan_markdown(plan: Plan) -> str:
         "",
     ]
     if plan.waves is not None:
-        lines += [f"Rollout in waves: {' → '.join(markdown_text(w) for w in plan.waves)}.", ""]
+        waves_text = " → ".join(markdown_text(w) for w in plan.waves)
+        lines += [f"Rollout in waves: {waves_text}{_offline_text(plan)}.", ""]
     if not plan.changes:
         lines.append("No robot's Launch Request changes: no robot restarts.")
         return "\n".join(lines) + "\n"
@@ -309,10 +322,11 @@ def _change_json(c: RobotChange, waves: bool, drift: dict[str, Drift] | None) ->
 
 
 def plan_as_json(plan: Plan) -> dict[str, Any]:
-    """For scripts; `waves` and each change's `wave` only when the head has a rollout policy;
-    each change's `interfaces` and `drift` only when the robots' interfaces were read."""
+    """For scripts; `waves`, `offline` and each change's `wave` only when the head has a rollout
+    policy; each change's `interfaces` and `drift` only when the robots' interfaces were read."""
     found: dict[str, Any] = {"base": plan.base, "head": plan.head, "unchanged": plan.unchanged}
     if plan.waves is not None:
         found["waves"] = plan.waves
+        found["offline"] = plan.offline
     found["changes"] = [_change_json(c, plan.waves is not None, plan.drift) for c in plan.changes]
     return found

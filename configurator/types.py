@@ -290,6 +290,14 @@ class RolloutPolicy(StrictModel):
         "rollback", description="rollback: the moved robots get the last complete revision"
     )
     paused: bool = Field(False, description="no wave advances until a commit sets it false")
+    offline: Literal["skip", "wait", "fail"] = Field(
+        "skip",
+        description="what a robot offline when its wave is published does to the wave: skip (the "
+        "default: a robot on its charger never holds a commit up; the wave goes on without it "
+        "and it gets the revision its wave reached when it reconnects, still health-gated), wait "
+        "(up to wave_timeout) or fail (it counts as failed at once). A robot that goes dark after "
+        "its wave published its request has failed, whatever this says",
+    )
 
 
 class Fleet(StrictModel):

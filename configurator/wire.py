@@ -361,8 +361,14 @@ class RolloutStatus(_Message):
     healthy: list[str] = Field(default_factory=list, description="of the current wave")
     failed: list[str] = Field(default_factory=list, description="of the current wave")
     pending: list[str] = Field(default_factory=list, description="of the current wave")
+    offline: list[str] = Field(
+        default_factory=list,
+        description="offline robots of this wave and the waves before that do not run the "
+        "revision yet: skipped (rollout.offline: skip), they get it when they reconnect",
+    )
     counts: dict[str, int] = Field(
-        default_factory=dict, description="healthy, failed and pending robots of the wave"
+        default_factory=dict,
+        description="healthy, failed and pending robots of the wave, and offline ones as listed",
     )
     message: str = ""
 

@@ -277,6 +277,7 @@ def _rollout_condition(seen: Observation, step: RolloutStep) -> Condition:
         f"wave {rollout.wave + 1}/{rollout.waves} ({rollout.wave_name}): "
         f"{counts.get('healthy', 0)} healthy, {counts.get('failed', 0)} failed, "
         f"{counts.get('pending', 0)} pending"
+        + (f", {counts['offline']} offline" if counts.get("offline") else "")
     )
     if rollout.state == "RolledBack":
         message = f"rollout of {head} rolled back: {rollout.message}"

@@ -43,6 +43,9 @@ class Health(str, Enum):
     FAILED = "failed"  # failed, backed off, exited or refused it; went dark; timed out
     PENDING = "pending"  # on its way
     ABSENT = "absent"  # never seen online with it: pending, never failed; waited for until timeout
+    # Offline (dark for DARK_GRACE) and never seen online since its wave published its request,
+    # under `offline: skip`: the wave goes on without it; it gets the request when it is back.
+    OFFLINE = "offline"
 
 
 @dataclass(frozen=True)
@@ -190,11 +193,13 @@ class _Rollout:
             started_at = now if started_at is None else started_at
             judged, recheck, deadline, memory = self._judge(wave, started_at, begins)
             failed = [r for r, h in judged.items() if h is Health.FAILED]
-            budget = failure_budget(self.policy.max_failures, len(judged)) or 0
+            # A share of the robots that took part: four robots on chargers do not widen it.
+            taking_part = sum(1 for h in judged.values() if h is not Health.OFFLINE)
+            budget = failure_budget(self.policy.max_failures, taking_part) or 0
             if len(failed) > budget:
                 return self._failed(wave, started_at, judged)
             done = known and (
-                all(h in (Health.HEALTHY, Health.FAILED) for h in judged.values())
+                all(h in (Health.HEALTHY, Health.FAILED, Health.OFFLINE) for h in judged.values())
                 or (all(h is not Health.PENDING for h in judged.values()) and now >= deadline)
             )
             if done and wave == self.count - 1:
@@ -291,6 +296,10 @@ class _Rollout:
                     memory,
                 )
             )
+            if health is Health.ABSENT and robot not in self.seen.held:
+                health = self._offline(robot, now >= dark_at, memory)
+                if health is Health.ABSENT and policy.offline != "wait":
+                    soon(dark_at)  # dark a moment ago (a reconnecting agent): offline once it lasts
             dark = robot in memory.seen and not is_online(statuses.get(robot))
             if health is Health.PENDING and dark and now < dark_at and robot not in memory.doubted:
                 soon(dark_at)  # dark a moment ago: gone once it has lasted
@@ -303,6 +312,17 @@ class _Rollout:
                 soon(deadline)
             judged[robot] = health
         return judged, recheck, deadline, memory
+
+    def _offline(self, robot: str, lasted: bool, memory: WaveMemory) -> Health:
+        """A robot never seen online since its wave published its request, dark now: what
+        `rollout.offline` makes of it once it has been dark for DARK_GRACE. One seen since (online
+        as the wave was published, or later) is never this: gone dark, it failed (_health)."""
+        if not lasted or self.policy.offline == "wait":
+            return Health.ABSENT
+        if self.policy.offline == "fail":
+            memory.failed.add(robot)
+            return Health.FAILED
+        return Health.OFFLINE
 
     def _memory(
         self,
@@ -333,6 +353,24 @@ class _Rollout:
 
     # ------------------------------------------------------------------ status
 
+    def _behind(self, wave: int, judged: Mapping[str, Health]) -> set[str]:
+        """Robots of the waves up to `wave` (not judged in it) that are offline and do not
+        report running the head's request: passed by while they were off, they get it when
+        they reconnect (listed until then, after the rollout completed too)."""
+        statuses, head = self.seen.statuses, self.seen.head
+        if statuses is None:
+            return set()
+        behind = set()
+        # Every robot, not only the changed ones: once complete, the head is the stable
+        # revision and nothing is changed, but a robot that was off is still behind.
+        for robot in head.requests.keys() - head.suspended:
+            status = statuses.get(robot)
+            if robot in judged or self.waves.get(robot, self.count) > wave or is_online(status):
+                continue
+            if status is None or status.digest != head.requests[robot].digest:
+                behind.add(robot)
+        return behind
+
     def _stable_revision(self) -> str | None:
         stable = self.seen.stable
         return stable.revision if stable is not None else None
@@ -351,6 +389,8 @@ class _Rollout:
         healthy, failed = robots(Health.HEALTHY), robots(Health.FAILED)
         pending = robots(Health.PENDING, Health.ABSENT)
         index = max(0, min(wave, self.count - 1))
+        offline = sorted(set(robots(Health.OFFLINE)) | self._behind(wave, judged))
+        counts = {"healthy": len(healthy), "failed": len(failed), "pending": len(pending)}
         return RolloutStatus(
             revision=self.seen.head.revision,
             stable_revision=self._stable_revision(),
@@ -362,7 +402,8 @@ class _Rollout:
             healthy=healthy[:MAX_LISTED],
             failed=failed[:MAX_LISTED],
             pending=pending[:MAX_LISTED],
-            counts={"healthy": len(healthy), "failed": len(failed), "pending": len(pending)},
+            offline=offline[:MAX_LISTED],
+            counts={**counts, "offline": len(offline)} if offline else counts,
             message=message,
         )
 

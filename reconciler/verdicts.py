@@ -350,6 +350,11 @@ def short_rev(revision: str | None) -> str:
     return clean(_short_rev(revision))
 
 
+def _offline_count(rollout: RolloutStatus) -> str:
+    offline = rollout.counts.get("offline", 0)
+    return f", {offline} offline" if offline else ""
+
+
 def rollout_line(rollout: RolloutStatus) -> str:
     """The rollout in one line: revision, state, where, who is healthy, failed, pending, why."""
     counts = rollout.counts
@@ -357,10 +362,14 @@ def rollout_line(rollout: RolloutStatus) -> str:
         f"rollout: {short_rev(rollout.revision)} {clean(rollout.state)}, "
         f"wave {rollout.wave + 1}/{rollout.waves} ({clean(rollout.wave_name)}): "
         f"{counts.get('healthy', 0)} healthy, {counts.get('failed', 0)} failed, "
-        f"{counts.get('pending', 0)} pending; stable {short_rev(rollout.stable_revision)}"
+        f"{counts.get('pending', 0)} pending{_offline_count(rollout)}; "
+        f"stable {short_rev(rollout.stable_revision)}"
     )
     if rollout.failed:
         line += f"; failed: {clean(', '.join(rollout.failed[:5]))}"
+    if rollout.offline:
+        more = ", ..." if counts.get("offline", 0) > 5 else ""
+        line += f"; offline (get it when back): {clean(', '.join(rollout.offline[:5]))}{more}"
     if rollout.message:
         line += f" — {clean(rollout.message)}"
     return line

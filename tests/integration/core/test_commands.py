@@ -79,7 +79,7 @@ def test_plan_lists_the_wave_of_each_change_by_the_head_s_policy(lab: Lab) -> No
     done = lab.run("plan", "--base", "HEAD", "--format", "json")
     assert done.returncode == 1, done.stderr
     plan = json.loads(done.stdout)
-    assert plan["waves"] == ["canary", "half", "all"]
+    assert plan["waves"] == ["canary", "half", "all"] and plan["offline"] == "skip"
     assert [(c["robot_id"], c["wave"]) for c in plan["changes"]] == [("tb3-01", "canary")]
     assert "wave canary (1 of 3):\n  ~ tb3-01" in lab.run("plan", "--base", "HEAD").stdout
 

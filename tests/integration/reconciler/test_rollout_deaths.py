@@ -31,11 +31,11 @@ from tests.support.watch import wait_for
 LAST = "tb3-06"  # in the last wave, with the canary's scenario
 
 
-def policy(healthy_after: float, wave_timeout: float) -> str:
+def policy(healthy_after: float, wave_timeout: float, offline: str = "skip") -> str:
     return (
         "rollout:\n  waves: [{name: canary, selector: {ring: canary}}, {name: all}]\n"
         f"  healthy_after: {healthy_after}\n  max_failures: 0\n"
-        f"  wave_timeout: {wave_timeout}\n  on_failure: rollback\n"
+        f"  wave_timeout: {wave_timeout}\n  on_failure: rollback\n  offline: {offline}\n"
     )
 
 
@@ -84,8 +84,10 @@ def never_rolled_back(fleet: Fleet, stable: dict[str, RenderedRequest]) -> None:
         assert request.digest not in live_digests(fleet, robot), f"{robot} was rolled back"
 
 
-def start(fleet: Fleet, healthy_after: float, wave_timeout: float) -> dict[str, RenderedRequest]:
-    stable = with_policy(fleet, policy(healthy_after, wave_timeout))
+def start(
+    fleet: Fleet, healthy_after: float, wave_timeout: float, offline: str = "skip"
+) -> dict[str, RenderedRequest]:
+    stable = with_policy(fleet, policy(healthy_after, wave_timeout, offline))
     fleet.watch.live_launches.clear()
     return fleet.requests(stable)
 
@@ -128,7 +130,7 @@ def test_a_robot_killed_at_the_gate_fails_the_wave_it_was_just_sent(fleet: Fleet
 
 
 def test_a_robot_dead_before_its_wave_is_waited_for_then_passed_over(fleet: Fleet) -> None:
-    stable = start(fleet, healthy_after=0.5, wave_timeout=3)
+    stable = start(fleet, healthy_after=0.5, wave_timeout=3, offline="wait")
     kill_robot(fleet, CANARY)
     head = rename_all(fleet, "v2")
     status = fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")

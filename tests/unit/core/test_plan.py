@@ -61,7 +61,8 @@ def test_text_groups_the_changes_under_their_waves(plan: Plan) -> None:
     lines = format_plan_text(plan).splitlines()
     assert lines[0].endswith(": 3 changed, 1 added, 1 removed, 2 unchanged")
     assert lines[1:] == [
-        "rollout in waves: canary, half, all",
+        "rollout in waves: canary, half, all; robots that are off are skipped, and get it when"
+        " they reconnect",
         "wave canary (1 of 3):",
         "  ~ tb3-01  delivery-gazebo: scenario.logic_settings.follow_with_poses.move_speed"
         " [reload]",
@@ -77,7 +78,7 @@ def test_text_groups_the_changes_under_their_waves(plan: Plan) -> None:
 
 def test_markdown_has_a_wave_column(plan: Plan) -> None:
     text = format_plan_markdown(plan)
-    assert "Rollout in waves: canary → half → all." in text
+    assert "Rollout in waves: canary → half → all; robots that are off are skipped" in text
     rows = [line for line in text.splitlines() if line.startswith("| ")]
     assert rows[0] == "| wave | robot | change | scenario | changed fields |"
     assert [row.split(" | ")[:2] for row in rows[2:]] == [

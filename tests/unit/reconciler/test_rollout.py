@@ -23,12 +23,17 @@ rollout:
   wave_timeout: 100
   on_failure: %s
   paused: %s
+  offline: %s
 """
 T0 = 1_000_000.0
 
 
 def fleet(
-    lab: Lab, version: str, on_failure: str = "rollback", paused: bool = False
+    lab: Lab,
+    version: str,
+    on_failure: str = "rollback",
+    paused: bool = False,
+    offline: str = "wait",  # these tests judge robots the reconciler waits for
 ) -> FleetRender:
     robots = "".join(
         f"  {robot}: {{scenario: {SCENARIOS[i % 4]}, name: bot {version}, "
@@ -37,7 +42,7 @@ def fleet(
         + "}\n"
         for i, robot in enumerate(ROBOTS)
     )
-    text = "robots:\n" + robots + POLICY % (on_failure, "true" if paused else "false")
+    text = "robots:\n" + robots + POLICY % (on_failure, "true" if paused else "false", offline)
     lab.write("configs/fleet.yaml", text)
     checked = lab.check()
     assert checked.ok, checked.errors
