@@ -91,8 +91,8 @@ def restart(
     was issued). Needs the broker's `operator` (or `reconciler`) user where the broker has an
     ACL. `robotconf status` shows who asked and when. A busy robot (its brain's hold file)
     confirms it `deferred`: it is carried out once the brain releases the file, or after
-    agent.yaml's max_defer. Exit 0 when the robot confirmed it, 1 when the robot is unknown, offline,
-    has nothing to restart or did not confirm, 2 when the broker cannot be reached.
+    agent.yaml's max_defer. Exit 0 when the robot confirmed it, 1 when the robot is unknown,
+    offline, has nothing to restart or did not confirm, 2 when the broker cannot be reached.
     """
     if not is_robot_id(robot_id):
         raise CliError(f"{robot_id!r} is not a robot id", ExitCode.FINDINGS)
