@@ -106,7 +106,7 @@ def queued_messages(robots: int) -> int:
     return max(QUEUE_FLOOR, -(-need // 1000) * 1000)
 
 
-def _queue_lines(robots: int) -> list[str]:
+def queue_lines(robots: int) -> list[str]:
     return [
         f"# Per-client queue, for a fleet of {robots} robot(s). A client reading the whole fleet",
         "# (the reconciler, `robotconf status`, the desk) is sent every retained message at once",
@@ -133,7 +133,7 @@ def render_conf(listener: Listener, service_port: int, files: Path, robots: int 
         "# `mosquitto -c <this file>`.",
         "per_listener_settings true",
         "",
-        *_queue_lines(robots),
+        *queue_lines(robots),
         "",
         "# Robots: each logs in with its robot id, which becomes its client id too.",
         *_listener_lines(listener, listener.port, files),

@@ -390,6 +390,8 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
         )
     if status.rollout is not None:
         lines.append(rollout_line(status.rollout))
+    if status.broker_dropped:
+        lines.append(f"  its reads are lossy: {clean(status.broker_dropped)}")
     return lines + diagnostic_lines(status, 10)
 
 
