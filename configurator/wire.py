@@ -393,8 +393,8 @@ class ReconcilerStatus(_Message):
     interval: float | None = Field(None, description="seconds between heartbeats")
     broker_dropped: str | None = Field(
         None,
-        description="why the reconciler's reads of the broker are known to lack retained "
-        "messages it holds (a per-client queue limit: max_queued_messages)",
+        description="how the reconciler knows that its reads of the broker lack retained "
+        "messages the broker dropped (a per-client queue limit: max_queued_messages)",
     )
     ignored_payloads: dict[str, int] = Field(
         default_factory=dict, description="unreadable MQTT payloads skipped, by topic kind"

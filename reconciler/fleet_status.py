@@ -110,16 +110,18 @@ def unknown_when_lost(
             row,
             verdict=Verdict.UNKNOWN,
             reason="the broker dropped its retained status on the way here",
+            state="unknown",
         )
         if row.verdict is Verdict.OFFLINE and topics.status(row.robot_id) not in messages
         else row
         for row in fleet.rows
     ]
     unknown = sum(row.verdict is Verdict.UNKNOWN for row in rows)
+    reconciler = "" if fleet.reconciler else " (the reconciler's status may be one of them)"
     said = (
         f"the broker dropped retained messages: {unknown} of {len(rows)} robots unknown"
-        f"{'' if fleet.reconciler else ', the reconciler too'}; raise max_queued_messages "
-        f"(robotconf broker-config sets it for the fleet). {lost}"
+        f"{reconciler}; raise its max_queued_messages (robotconf broker-config sets it for "
+        f"the fleet). How it is known: {lost}"
     )
     return replace(fleet, rows=rows, lost=said)
 

@@ -172,7 +172,7 @@ class RetainedView:
         # says so at once instead of waiting for an answer that will not come.
         self.refused: str | None = None
         self.connections = 0
-        # Why this snapshot is known to lack retained messages the broker holds (it dropped
+        # How this snapshot is known to lack retained messages the broker holds (it dropped
         # them: a queue limit), or None; each connection starts a new snapshot.
         self.lost: str | None = None
         self._received = 0  # messages received, to tell a quiet connection from a busy one
@@ -263,14 +263,20 @@ class RetainedView:
             self.connection, sample, self._marker_base, f"{self.role}-check", timeout
         )
         if found and self.lost is None:
-            self.lost = (
-                f"the broker dropped retained messages sent to this client: {len(found)} of "
-                f"{len(sample)} topic(s) missing from the whole-fleet read are there when read "
-                "alone (a per-client queue limit: max_queued_messages; robotconf broker-config "
-                "sets it for the fleet)"
+            self._found_lost(
+                f"{len(found)} of {len(sample)} topic(s) missing from its read were there "
+                "when read alone"
             )
-            log.warning("%s", self.lost)
         return len(found or {})
+
+    def _found_lost(self, evidence: str) -> None:
+        self.lost = evidence
+        log.warning(
+            "the broker dropped retained messages sent to %s (%s): raise its "
+            "max_queued_messages (robotconf broker-config sets it for the fleet)",
+            self.client_id,
+            evidence,
+        )
 
     # ------------------------------------------------------------------ publishing
 
@@ -415,12 +421,9 @@ class RetainedView:
         if self._synced.is_set() or text.partition(".")[0] != generation:
             return  # a late copy, or one of an earlier connection
         if text != generation:
-            self.lost = (
-                f"the broker dropped messages sent to this client: {self._received:,} retained "
-                "message(s) arrived and its sync marker did not (a per-client queue limit: "
-                "max_queued_messages; robotconf broker-config sets it for the fleet)"
+            self._found_lost(
+                f"its sync marker was dropped after {self._received:,} retained message(s)"
             )
-            log.warning("%s", self.lost)
         self._synced.set()
         if self._on_synced is not None:
             self._on_synced()

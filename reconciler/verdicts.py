@@ -391,7 +391,10 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
     if status.rollout is not None:
         lines.append(rollout_line(status.rollout))
     if status.broker_dropped:
-        lines.append(f"  its reads are lossy: {clean(status.broker_dropped)}")
+        lines.append(
+            f"  the broker dropped retained messages sent to it ({clean(status.broker_dropped)}):"
+            " raise its max_queued_messages (robotconf broker-config sets it for the fleet)"
+        )
     return lines + diagnostic_lines(status, 10)
 
 
