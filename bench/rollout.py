@@ -1,7 +1,7 @@
 """Rollout latency: from `git commit` until every robot reports `running` with its new digest.
 
-For each fleet size, on a fresh Mosquitto (its own port; default limits except a larger
-per-client queue, which the floor's single subscriber needs) and a fresh git repository
+For each fleet size, on a fresh Mosquitto (its own port; default limits except the
+per-client queue `robotconf broker-config` sets for the fleet's size) and a fresh git repository
 holding the example lab with N robots spread over its five scenarios:
 
   rollout    `robotconf reconcile` (a real subprocess) watches the repository; every round
@@ -61,6 +61,7 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
+from configurator.brokerconf import queue_lines  # noqa: E402
 from configurator.render import render_fleet  # noqa: E402
 from configurator.wire import AgentStatus  # noqa: E402
 from configurator.workspace import check  # noqa: E402
@@ -90,18 +91,16 @@ WAVE_GAP_TARGET = 0.1  # seconds from a wave's last healthy robot to the next wa
 class Broker:
     """A Mosquitto of the benchmark's own, on a free port."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, robots: int) -> None:
         binary = find_mosquitto()
         if binary is None:
             raise SystemExit("mosquitto is not installed (./dev setup installs it)")
         self.port = free_port()
         conf = folder / "mosquitto.conf"
-        conf.write_text(
-            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
-            # The floor's single subscriber gets N QoS 1 messages at once.
-            "max_queued_messages 100000\n",
-            encoding="utf-8",
-        )
+        # The queue `robotconf broker-config` sets for a fleet of this size: the floor's single
+        # subscriber gets N QoS 1 messages at once, and every whole-fleet reader all of them.
+        lines = [f"listener {self.port} 127.0.0.1", "allow_anonymous true", "persistence false"]
+        conf.write_text("\n".join([*lines, *queue_lines(robots)]) + "\n", encoding="utf-8")
         self.log = (folder / "mosquitto.log").open("wb")
         self.proc = subprocess.Popen(
             [binary, "-c", str(conf)], stdout=self.log, stderr=self.log, start_new_session=True
@@ -515,7 +514,7 @@ def measure(size: int, options: Options) -> Result:
     with work_folder(f"rollout-{size}-", base, options.keep) as tmp:
         folder = Path(tmp)
         lab = make_lab(folder, size, options.mode)
-        broker = Broker(folder)
+        broker = Broker(folder, size)
         fleet: subprocess.Popen[bytes] | None = None
         reconciler: subprocess.Popen[bytes] | None = None
         converged = Convergence()

@@ -14,10 +14,16 @@ On the repository bench/generate.py writes (a git repository here, watched local
             a new request, no other robot does): from right before `git commit` until the
             subscriber has seen every one of those robots' new requests, i.e. the broker took
             them; p50 and max over --rounds; the commit itself is timed too
+  read      a whole-fleet reader (`robotconf status`'s view: every robot topic and the
+            reconciler's status) right after the first publish: how many retained messages it
+            got of the assigned robots' requests and the reconciler's status, in how long, and
+            whether it knows of any dropped (the broker runs with the per-client queue
+            `robotconf broker-config` sets for the fleet, not Mosquitto's default of 1,000)
   memory    the reconciler's resident memory after the first publish and after the rounds
             (VmRSS), and its peak (VmHWM)
 
-Targets: change p50 <= 0.3 s; publish <= 1.5x the floor; RSS <= 150 MB. Exit 0 when they are
+Targets: change p50 <= 0.3 s; publish <= 1.5x the floor; RSS <= 150 MB; the reader gets every
+message and knows of no loss. Exit 0 when they are
 met, 1 when one is missed.
 
     python bench/scale.py [--robots 10000] [--rounds 9] [--keep] [--json F]
@@ -128,6 +134,22 @@ def publishing_time(log: Path) -> float:
     return float(found.group(1))
 
 
+def whole_fleet_read(url: str) -> tuple[float, int, str | None]:
+    """`robotconf status`'s view of the broker: seconds until synced, messages, loss known."""
+    from configurator.mqtt import Connection
+    from reconciler.fleet_status import open_view
+
+    view = open_view(Connection(url), "robotconf")
+    started = time.perf_counter()
+    view.start()
+    try:
+        if not view.wait_synced(TIMEOUT):
+            raise RuntimeError("the whole-fleet reader never synced")
+        return time.perf_counter() - started, len(view.snapshot()), view.lost
+    finally:
+        view.stop()
+
+
 def memory(pid: int) -> tuple[float, float]:
     """(VmRSS, VmHWM) in MB."""
     text = Path(f"/proc/{pid}/status").read_text()
@@ -154,6 +176,9 @@ class Result:
     change_max_s: float = 0.0
     commit_p50_s: float = 0.0
     affected: list[int] = field(default_factory=list)
+    read_s: float = 0.0
+    read_messages: int = 0
+    read_lost: str | None = None
     rss_first_mb: float = 0.0
     rss_after_mb: float = 0.0
     peak_mb: float = 0.0
@@ -180,7 +205,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
     generate.generate(lab, generate.Sizes(robots=robots), use_git=True)
     by_scenario = assignments(lab)
     assigned = sum(len(r) for r in by_scenario.values())
-    broker = Broker(folder)
+    broker = Broker(folder, robots)
     launches = Launches(broker.port)
     reconciler: subprocess.Popen[bytes] | None = None
     try:
@@ -194,12 +219,14 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
         publish = publishing_time(folder / "reconciler.log")
         time.sleep(2.0)
         rss_first, _ = memory(reconciler.pid)
+        read = whole_fleet_read(broker.url)
         sample = next(iter(seen.values()))[1]
         payloads = {f"bench/floor/{i}": sample for i in range(assigned)}
         floors = [floor(broker.port, payloads) for _ in range(3)]
         result = Result(
             robots, assigned, first, publish, statistics.median(floors), 0.0,
             rss_first_mb=rss_first, delivered_s=delivered,
+            read_s=read[0], read_messages=read[1], read_lost=read[2],
         )  # fmt: skip
         result.publish_ratio = result.publish_s / result.floor_s
         print(
@@ -269,6 +296,9 @@ def main(argv: list[str]) -> int:
         f"  one-scenario change     p50 {result.change_p50_s:.3f} s  max "
         f"{result.change_max_s:.3f} s  (target p50 <= {CHANGE_TARGET} s; git commit itself "
         f"{result.commit_p50_s:.3f} s)\n"
+        f"  whole-fleet read        {result.read_messages} retained messages in "
+        f"{result.read_s:.2f} s (of {result.assigned} requests and the reconciler's status); "
+        f"loss known: {result.read_lost or 'none'}\n"
         f"  reconciler memory       {result.rss_first_mb:.0f} MB after the first publish, "
         f"{result.rss_after_mb:.0f} MB after the rounds, peak {result.peak_mb:.0f} MB "
         f"(target <= {RSS_TARGET_MB:.0f} MB)"
@@ -279,6 +309,8 @@ def main(argv: list[str]) -> int:
         result.change_p50_s <= CHANGE_TARGET
         and result.publish_ratio <= PUBLISH_TARGET
         and max(result.rss_first_mb, result.rss_after_mb) <= RSS_TARGET_MB
+        and result.read_lost is None
+        and result.read_messages >= result.assigned + 1
     )
     return 0 if met else 1
 

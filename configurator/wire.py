@@ -411,6 +411,11 @@ class ReconcilerStatus(_Message):
     since: float = Field(default_factory=now)
     heartbeat: float | None = Field(None, description="unix time this status was published")
     interval: float | None = Field(None, description="seconds between heartbeats")
+    broker_dropped: str | None = Field(
+        None,
+        description="how the reconciler knows that its reads of the broker lack retained "
+        "messages the broker dropped (a per-client queue limit: max_queued_messages)",
+    )
     ignored_payloads: dict[str, int] = Field(
         default_factory=dict, description="unreadable MQTT payloads skipped, by topic kind"
     )

@@ -141,6 +141,7 @@ class Controller:
         # connect time, and this one must name the revision applied last.
         presence = Presence(connection, self.topics.reconciler_status, "reconciler-will")
         self.writer = StatusWriter(self.view, self.topics, presence, self.ignored, on_reconciled)
+        self.writer.lost = self._lost
         self.followed = Followed(source.branch, source.description, interval)
         # The robots' statuses, followed live only while the head has a rollout policy: the
         # waves are gated by them. Without one they are only sampled (`_sample_active`).
@@ -410,6 +411,11 @@ class Controller:
             memo=self._interfaces_memo,
         )
         return {r: robot.interfaces for r, robot in seen.robots.items() if robot.interfaces}
+
+    def _lost(self) -> str | None:
+        """Why one of this reconciler's reads is known to lack retained messages, or None."""
+        views = [self.view, self.health, self.interfaces]
+        return next((v.lost for v in views if v is not None and v.lost is not None), None)
 
     def _on_interfaces(self) -> None:
         """Network thread: a robot's interfaces changed; a robot held for drift may fit now."""

@@ -7,6 +7,7 @@ import json
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 from configurator.drift import DriftMemo
@@ -20,11 +21,14 @@ from reconciler.retained import RetainedView
 from reconciler.verdicts import (
     DesiredRobot,
     FleetStatus,
+    Verdict,
     build_rows,
     desired_from_fleet,
     desired_from_retained,
     short_rev,
 )
+
+CONFIRM_TIMEOUT = 5.0  # seconds for the few topics a lossy-looking read is checked with
 
 Desired = tuple[dict[str, DesiredRobot] | None, str, list[str]]
 
@@ -77,6 +81,7 @@ def fleet_status(
     desired: DesiredCache,
     memos: dict[bool, ReadMemo] | None = None,
     drift: DriftMemo | None = None,
+    lost: str | None = None,
 ) -> FleetStatus:
     """`memos` (one per way of reading requests, in full or not): what was read of each
     payload, kept for the next call (`--watch` reads only what changed); `drift`: each robot's
@@ -91,7 +96,52 @@ def fleet_status(
     if robots is None:
         robots = desired_from_retained(retained)
     rows = build_rows(robots, retained, drift)
-    return FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
+    fleet = FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
+    return fleet if lost is None else unknown_when_lost(fleet, messages, topics, lost)
+
+
+def unknown_when_lost(
+    fleet: FleetStatus, messages: dict[str, bytes], topics: Topics, lost: str
+) -> FleetStatus:
+    """A read the broker cut short (`lost`, why) calls no robot Offline for want of a status:
+    such a robot is Unknown, and the report says how many and what to do."""
+    rows = [
+        replace(
+            row,
+            verdict=Verdict.UNKNOWN,
+            reason="the broker dropped its retained status on the way here",
+            state="unknown",
+        )
+        if row.verdict is Verdict.OFFLINE and topics.status(row.robot_id) not in messages
+        else row
+        for row in fleet.rows
+    ]
+    unknown = sum(row.verdict is Verdict.UNKNOWN for row in rows)
+    reconciler = "" if fleet.reconciler else " (the reconciler's status may be one of them)"
+    said = (
+        f"the broker dropped retained messages: {unknown} of {len(rows)} robots unknown"
+        f"{reconciler}; raise its max_queued_messages (robotconf broker-config sets it for "
+        f"the fleet). How it is known: {lost}"
+    )
+    return replace(fleet, rows=rows, lost=said)
+
+
+def confirm_loss(
+    view: RetainedView, fleet: FleetStatus, messages: dict[str, bytes], topics: Topics
+) -> str | None:
+    """Why the view's snapshot is known to be lossy, or None: the view's own account, else
+    a few of the topics it lacks (the reconciler's status, assigned robots' statuses) read
+    again alone: a fleet that is really off holds none of them."""
+    if view.lost is None:
+        silent = [
+            topics.status(row.robot_id)
+            for row in fleet.rows
+            if row.verdict is Verdict.OFFLINE and topics.status(row.robot_id) not in messages
+        ]
+        if topics.reconciler_status not in messages:
+            silent.insert(0, topics.reconciler_status)
+        view.confirm_missing(silent, CONFIRM_TIMEOUT)
+    return view.lost
 
 
 def open_view(
@@ -135,7 +185,7 @@ def watch(
     while not stop.is_set():
         changed.clear()
         if view.synced:
-            fleet = fleet_status(view.snapshot(), topics, desired, memos, drift)
+            fleet = fleet_status(view.snapshot(), topics, desired, memos, drift, view.lost)
             key = change_key(fleet)
             if key != shown:
                 shown = key

@@ -124,6 +124,8 @@ class StatusWriter:
         self.status: ReconcilerStatus | None = None  # the last one written (or found)
         self._payload: bytes | None = None  # what was published last, to know its echo
         self._will_key: tuple[object, ...] | None = None
+        # Why a read of the broker is known to be lossy (the controller asks all its views).
+        self.lost: Callable[[], str | None] = lambda: view.lost
 
     def is_echo(self, payload: bytes) -> bool:
         return payload == self._payload
@@ -144,7 +146,11 @@ class StatusWriter:
         (`heartbeat`) so that readers can tell a live reconciler from a dead one. `since`
         moves only when the content does."""
         status = status.model_copy(
-            update={"heartbeat": now(), "ignored_payloads": self.ignored.counts()}
+            update={
+                "heartbeat": now(),
+                "ignored_payloads": self.ignored.counts(),
+                "broker_dropped": self.lost(),
+            }
         )
         retained = self.retained()
         if retained is not None and same_content(retained, status):

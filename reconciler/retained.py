@@ -101,6 +101,10 @@ def _guarded(handler: Callable[P, None]) -> Callable[P, None]:
 # Messages in flight at once when publishing many: enough to keep a broker busy (a PUBACK
 # comes back within a millisecond on a LAN), few enough that what paho holds stays small.
 PUBLISH_WINDOW = 2000
+# Seconds without a message before a snapshot's marker is sent again (it may have been dropped).
+MARKER_QUIET = 0.5
+# Topics missing from a snapshot read again, alone, to tell a lossy read from absent robots.
+CONFIRM_SAMPLE = 100
 
 
 def _settled(info: paho.MQTTMessageInfo, deadline: float) -> None:
@@ -144,6 +148,8 @@ class RetainedView:
         self.filters = list(filters)
         self.client_id = client_id(role)
         self.marker_topic = f"{marker_topic}/{self.client_id}"
+        self._marker_base = marker_topic
+        self.role = role
         self._on_change = on_change
         self._on_synced = on_synced
         self._on_topic = on_topic
@@ -167,6 +173,10 @@ class RetainedView:
         self.refused: str | None = None
         self.connections = 0
         self.reached = False  # a TCP connection was made, whether or not MQTT answered on it
+        # How this snapshot is known to lack retained messages the broker holds (it dropped
+        # them: a queue limit), or None; each connection starts a new snapshot.
+        self.lost: str | None = None
+        self._received = 0  # messages received, to tell a quiet connection from a busy one
         # MQTT 5's No Local: what this client publishes on `filters` is not sent back to it
         # (its copy is updated at the PUBACK instead); retained messages still come at each
         # subscription, so a reconnect still reads back what is published.
@@ -255,6 +265,32 @@ class RetainedView:
     def get(self, topic: str) -> bytes | None:
         with self._lock:
             return self._topics.get(topic)
+
+    def confirm_missing(self, topics: Sequence[str], timeout: float) -> int:
+        """How many of `topics`, absent from the snapshot, the broker does hold: a few of them
+        (CONFIRM_SAMPLE) read again over a connection of its own, whose handful of exact topics
+        no queue limit cuts. Any found proves the snapshot lossy, and `lost` says so."""
+        sample = [t for t in topics if self.get(t) is None][:CONFIRM_SAMPLE]
+        if not sample:
+            return 0
+        found = take_snapshot(
+            self.connection, sample, self._marker_base, f"{self.role}-check", timeout
+        )
+        if found and self.lost is None:
+            self._found_lost(
+                f"{len(found)} of {len(sample)} topic(s) missing from its read were there "
+                "when read alone"
+            )
+        return len(found or {})
+
+    def _found_lost(self, evidence: str) -> None:
+        self.lost = evidence
+        log.warning(
+            "the broker dropped retained messages sent to %s (%s): raise its "
+            "max_queued_messages (robotconf broker-config sets it for the fleet)",
+            self.client_id,
+            evidence,
+        )
 
     # ------------------------------------------------------------------ publishing
 
@@ -349,6 +385,7 @@ class RetainedView:
             self._synced.clear()
             self._connected = True
             self.connections += 1
+            self.lost = None
         self.last_error = self.refused = None
         # QoS 0: a snapshot is taken anew at every connection, so redelivery buys nothing,
         # while a broker may drop queued QoS 1 messages beyond its per-client queue limit
@@ -373,7 +410,37 @@ class RetainedView:
         if failed:
             self.last_error = f"broker refused a subscription: {failed[0]}"
             log.warning("%s", self.last_error)
-        client.publish(self.marker_topic, str(self._generation).encode(), qos=1)
+        generation = self._generation
+        client.publish(self.marker_topic, str(generation).encode(), qos=1)
+        threading.Thread(target=self._watch_marker, args=(generation,), daemon=True).start()
+
+    def _watch_marker(self, generation: int) -> None:
+        """Mosquitto drops what is beyond its per-client queue limit, the marker too: once
+        nothing has arrived for MARKER_QUIET seconds, the marker goes again, numbered. Order
+        is kept per client, so the numbered one coming back without the first proves that
+        the broker dropped messages (see `_handle_marker`)."""
+        retries, seen = 0, -1
+        while self._started and generation == self._generation and not self._synced.is_set():
+            time.sleep(MARKER_QUIET)
+            received = self._received
+            if received == seen and generation == self._generation and self._connected:
+                retries += 1
+                payload = f"{generation}.{retries}".encode()
+                self._client.publish(self.marker_topic, payload, qos=1)
+            seen = received
+
+    def _handle_marker(self, payload: bytes) -> None:
+        generation = str(self._generation)
+        text = payload.decode("ascii", "replace")
+        if self._synced.is_set() or text.partition(".")[0] != generation:
+            return  # a late copy, or one of an earlier connection
+        if text != generation:
+            self._found_lost(
+                f"its sync marker was dropped after {self._received:,} retained message(s)"
+            )
+        self._synced.set()
+        if self._on_synced is not None:
+            self._on_synced()
 
     @_guarded
     def _handle_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
@@ -399,11 +466,9 @@ class RetainedView:
         self, client: paho.Client, userdata: Any, message: paho.MQTTMessage
     ) -> None:
         if message.topic == self.marker_topic:
-            if message.payload == str(self._generation).encode():
-                self._synced.set()
-                if self._on_synced is not None:
-                    self._on_synced()
+            self._handle_marker(bytes(message.payload))
             return
+        self._received += 1
         payload = message.payload
         if len(payload) > self.max_payload:
             # Dropped at once: a robot that publishes 100 MB must not make us hold it.

@@ -126,7 +126,7 @@ class Telemetry:
             )
             self.notifier.tell(events)
         if self.metrics is not None and robots is not None and drift is not None:
-            self.metrics.verdicts(verdict_counts(desired, robots))
+            self.metrics.verdicts(verdict_counts(desired, robots, self.view.lost is not None))
             self.metrics.drift(drift)
 
     def _drifts(self, desired: Mapping[str, DesiredRobot], seen: Retained) -> dict[str, Drift]:
@@ -166,10 +166,12 @@ class Telemetry:
 
 
 def verdict_counts(
-    desired: Mapping[str, DesiredRobot], robots: Mapping[str, AgentStatus]
+    desired: Mapping[str, DesiredRobot], robots: Mapping[str, AgentStatus], lost: bool = False
 ) -> dict[Verdict, int]:
     """Robots per verdict as `robotconf status` judges them, from their statuses alone: a
-    desired request counts as published (the launch topics are the reconciler's own view)."""
+    desired request counts as published (the launch topics are the reconciler's own view).
+    `lost`: the read is known to lack statuses the broker dropped; a robot without one is
+    Unknown, not Offline, as `status` has it."""
     counts: collections.Counter[Verdict] = collections.Counter()
     for robot_id in set(desired) | set(robots):
         want = desired.get(robot_id)
@@ -178,5 +180,8 @@ def verdict_counts(
             launch_retained=want is not None,
             status=robots.get(robot_id),
         )
-        counts[verdict(want, seen)[0]] += 1
+        judged = verdict(want, seen)[0]
+        if lost and judged is Verdict.OFFLINE and robot_id not in robots:
+            judged = Verdict.UNKNOWN
+        counts[judged] += 1
     return dict(counts)

@@ -34,6 +34,9 @@ from reconciler.observed import Retained, RobotSeen
 
 class Verdict(str, enum.Enum):
     DEGRADED = "Degraded"  # assigned, but its brain failed, crashed or was refused
+    # Assigned, and the broker holds no status of it that could be read: it dropped retained
+    # messages on their way to this reader (a queue limit), so Offline would be a guess.
+    UNKNOWN = "Unknown"
     OFFLINE = "Offline"  # assigned, but its agent is not connected
     PROGRESSING = "Progressing"  # on its way: not published yet, starting, stopping
     SUSPENDED = "Suspended"  # fleet.yaml says leave it as it is
@@ -287,6 +290,7 @@ class FleetStatus:
     desired_from: str  # where the desired state came from, in words
     notes: list[str] = field(default_factory=list)
     ignored: dict[str, int] = field(default_factory=dict)  # unreadable payloads, by kind
+    lost: str | None = None  # why the read is known to lack retained messages the broker holds
     checked_at: float = field(default_factory=time.time)
 
     @property
@@ -331,6 +335,7 @@ class FleetStatus:
             "robots": [r.as_json() for r in self.rows],
             "notes": self.notes,
             "ignored_payloads": self.ignored,
+            "broker_dropped": self.lost,
         }
 
 
@@ -402,6 +407,11 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
         )
     if status.rollout is not None:
         lines.append(rollout_line(status.rollout))
+    if status.broker_dropped:
+        lines.append(
+            f"  the broker dropped retained messages sent to it ({clean(status.broker_dropped)}):"
+            " raise its max_queued_messages (robotconf broker-config sets it for the fleet)"
+        )
     return lines + diagnostic_lines(status, 10)
 
 

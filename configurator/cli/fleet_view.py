@@ -20,6 +20,7 @@ DRIFT_LINES = 20  # drift items listed under the table; the rest are counted
 
 _STYLE = {
     Verdict.DEGRADED: "bold red",
+    Verdict.UNKNOWN: "bold yellow",
     Verdict.OFFLINE: "red",
     Verdict.PROGRESSING: "yellow",
     Verdict.SUSPENDED: "blue",
@@ -95,6 +96,8 @@ def fleet_status_view(fleet: FleetStatus) -> Group:
     """The whole report as rich renderables (for a terminal or a live screen)."""
     lines = reconciler_lines(fleet.reconciler, fleet.checked_at)
     lines.append(f"desired: {fleet.desired_from}")
+    if fleet.lost is not None:
+        lines.append(f"warning: {fleet.lost}")
     lines += [f"note: {n}" for n in fleet.notes]
     if fleet.ignored:
         kinds = ", ".join(f"{n} {kind}" for kind, n in sorted(fleet.ignored.items()))

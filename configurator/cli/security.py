@@ -149,7 +149,7 @@ def broker_config(
     service_port = service_port or port + 1
     acl = render_acl(prefix, robots, users)
     # The broker host may keep the files elsewhere than where they are written now.
-    conf = render_conf(listener, service_port, install_dir or out.resolve())
+    conf = render_conf(listener, service_port, install_dir or out.resolve(), len(robots))
     # Robots and services in separate files: each listener knows only its own users.
     passwd = {out / "passwd": set(robots), out / "passwd-services": users.names()}
 

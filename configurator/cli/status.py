@@ -18,7 +18,14 @@ from configurator.cli.options import repo_option, rev_option
 from configurator.cli.terminal import is_terminal, plain_text, show, terminal_console
 from configurator.types import is_robot_id
 from configurator.wire import Topics
-from reconciler.fleet_status import DesiredCache, fleet_status, open_view, watch
+from reconciler.fleet_status import (
+    DesiredCache,
+    confirm_loss,
+    fleet_status,
+    open_view,
+    unknown_when_lost,
+    watch,
+)
 from reconciler.lifecycle import on_stop_signals
 from reconciler.retained import RetainedView
 from reconciler.verdicts import FleetStatus
@@ -76,7 +83,12 @@ def status(
                 f"({reason}); is the broker running? (--broker URL, --wait S)"
             )
         if not follow:
-            fleet = fleet_status(view.snapshot(), topics, desired).select(selector)
+            messages = view.snapshot()
+            fleet = fleet_status(messages, topics, desired)
+            lost = confirm_loss(view, fleet, messages, topics)
+            if lost is not None:
+                fleet = unknown_when_lost(fleet, messages, topics, lost)
+            fleet = fleet.select(selector)
             if as_json:
                 print(json.dumps(fleet.as_json(), indent=2))
             else:

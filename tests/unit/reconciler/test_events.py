@@ -305,6 +305,9 @@ def test_verdict_counts_judge_robots_from_their_statuses() -> None:
         Verdict.OFFLINE: 1,  # r4 never reported
         Verdict.UNASSIGNED: 1,
     }
+    # A read the broker is known to have cut short: r4's status may have been dropped.
+    lost = verdict_counts(desired, statuses, lost=True)
+    assert lost[Verdict.UNKNOWN] == 1 and Verdict.OFFLINE not in lost
 
 
 def test_a_robot_is_told_once_into_drift_and_once_out_of_it() -> None:
