@@ -157,22 +157,7 @@ def _scenario_schema(repo: Repository) -> dict[str, Any]:
     sets = sorted({s for e in repo.environments.values() for s in e.model.knowledge_sets})
     if sets:
         props["knowledge_sets"]["items"] = {"enum": sets}
-    robot_settings = sorted(
-        {s for p in repo.platforms.values() for t in p.templates.values() for s in t.model.settings}
-    )
-    if robot_settings:
-        props["robot_settings"]["propertyNames"] = {"enum": robot_settings}
-    logics_with_settings = sorted(
-        {
-            lname
-            for a in repo.actions.values()
-            for lname, logic in a.model.logics.items()
-            if logic.settings
-        }
-    )
-    if logics_with_settings:
-        props["logic_settings"]["propertyNames"] = {"enum": logics_with_settings}
-    _settings_per_capability(repo, schema)
+    _settings_schemas(repo, schema)
     goal = schema["$defs"]["Goal"]["properties"]
     tasks = {name: e.model.description for name, e in repo.tasks.items()}
     goal["task"] = _enum_or_nothing(tasks, "the task to achieve")
@@ -197,12 +182,78 @@ def _scenario_schema(repo: Repository) -> dict[str, Any]:
     return schema
 
 
+def _settings_schemas(repo: Repository, schema: dict[str, Any]) -> None:
+    """A scenario's robot_settings and logic_settings: the names that exist anywhere, and per
+    capability which it takes, with their types, bounds and hover texts."""
+    props = schema["properties"]
+    robot_settings = sorted(
+        {s for p in repo.platforms.values() for t in p.templates.values() for s in t.model.settings}
+    )
+    if robot_settings:
+        props["robot_settings"]["propertyNames"] = {"enum": robot_settings}
+    logics_with_settings = sorted(
+        {
+            lname
+            for a in repo.actions.values()
+            for lname, logic in a.model.logics.items()
+            if logic.settings
+        }
+    )
+    if logics_with_settings:
+        props["logic_settings"]["propertyNames"] = {"enum": logics_with_settings}
+    scalars = _any_scalar(props["robot_settings"].pop("additionalProperties"))
+    props["logic_settings"].pop("additionalProperties")
+    _settings_per_capability(repo, schema)
+    # Whatever the capability, values are scalars: checked after the capability's rules, so
+    # that yaml-language-server's hover, which shows the first title and description it meets,
+    # shows the setting's own (it checks properties before allOf: in `properties` these would
+    # come first, under the title "Robot Settings").
+    schema.setdefault("allOf", []).append(
+        {
+            "properties": {
+                "robot_settings": {"additionalProperties": scalars},
+                "logic_settings": {
+                    "additionalProperties": {"type": "object", "additionalProperties": scalars}
+                },
+            }
+        }
+    )
+
+
+def _any_scalar(schema: dict[str, Any]) -> dict[str, Any]:
+    """`{"anyOf": [{"type": T1}, {"type": T2}, …]}` as `{"type": [T1, T2, …]}`: the hover of
+    yaml-language-server shows an anyOf whose branches all match as their titles joined (as
+    "Robot Settings || Robot Settings || …")."""
+    branches = schema.get("anyOf")
+    if not branches or set(schema) != {"anyOf"} or any(set(b) != {"type"} for b in branches):
+        raise ValueError(f"not an anyOf of plain types: {schema}")  # the types changed
+    return {"type": [branch["type"] for branch in branches]}
+
+
 _JSON_TYPE = {"number": "number", "integer": "integer", "boolean": "boolean", "string": "string"}
 
 
-def setting_schema(definition: SettingDefinition) -> dict[str, Any]:
-    """One setting as JSON Schema: type, range or choices, default, and the unit in the words an
-    editor shows on hover."""
+def _facts(definition: SettingDefinition) -> list[tuple[str, str]]:
+    """(what, value) of a setting beside its description: unit, range, choices, default."""
+    facts: list[tuple[str, str]] = []
+    if definition.unit:
+        facts.append(("unit", definition.unit))
+    if definition.minimum is not None or definition.maximum is not None:
+        low = "-inf" if definition.minimum is None else f"{definition.minimum:g}"
+        high = "inf" if definition.maximum is None else f"{definition.maximum:g}"
+        facts.append(("range", f"{low} to {high}"))
+    if definition.type == "enum":
+        facts.append(("choices", ", ".join(json.dumps(c) for c in definition.choices or [])))
+    facts.append(("default", json.dumps(definition.default)))
+    return facts
+
+
+def setting_schema(
+    definition: SettingDefinition, name: str = "", owner: str = ""
+) -> dict[str, Any]:
+    """One setting as JSON Schema: type, range or choices, default; and for an editor's hover
+    its own title and description (unit, range, choices, default), so that the hover names the
+    setting rather than the object it sits in. `owner` says whose setting it is."""
     found: dict[str, Any] = {"default": definition.default}
     if definition.type == "enum":
         found["enum"] = list(definition.choices or [])
@@ -212,24 +263,30 @@ def setting_schema(definition: SettingDefinition) -> dict[str, Any]:
         found["minimum"] = definition.minimum
     if definition.maximum is not None:
         found["maximum"] = definition.maximum
-    words = [definition.description or ""]
-    if definition.unit:
-        words.append(f"in {definition.unit}")
-    if definition.minimum is not None or definition.maximum is not None:
-        low = "" if definition.minimum is None else f"{definition.minimum:g}"
-        high = "" if definition.maximum is None else f"{definition.maximum:g}"
-        words.append(f"from {low or '-inf'} to {high or 'inf'}")
-    if definition.type == "enum":
-        words.append("one of " + ", ".join(json.dumps(c) for c in definition.choices or []))
-    words.append(f"default {json.dumps(definition.default)}")
-    found["description"] = "; ".join(w for w in words if w)
+    facts = _facts(definition)
+    about = (definition.description or "").strip()
+    words = [about.rstrip(".")] if about else []
+    words += [f"in {value}" if what == "unit" else f"{what} {value}" for what, value in facts]
+    found["description"] = "; ".join(words)
+    if name:
+        found["title"] = f"{name} ({definition.unit})" if definition.unit else name
+    lines = [about, ""] if about else []
+    lines += [f"- {what}: `{value}`" for what, value in facts]
+    if owner:
+        lines += ["", owner]
+    found["markdownDescription"] = "\n".join(lines)
     return found
 
 
-def _settings_object(definitions: dict[str, SettingDefinition]) -> dict[str, Any]:
-    return {
+def _settings_object(
+    definitions: dict[str, SettingDefinition], owner: str, title: str = ""
+) -> dict[str, Any]:
+    found: dict[str, Any] = {"title": title} if title else {}
+    return found | {
         "type": "object",
-        "properties": {name: setting_schema(d) for name, d in sorted(definitions.items())},
+        "properties": {
+            name: setting_schema(d, name, owner) for name, d in sorted(definitions.items())
+        },
         "additionalProperties": False,
     }
 
@@ -250,14 +307,17 @@ def _settings_per_capability(repo: Repository, schema: dict[str, Any]) -> None:
         robot: dict[str, Any] = {"type": "object", "maxProperties": 0}
         if resolved.template is not None and entry.model.robot_template is not None:
             key = f"robot-settings.{entry.model.platform}.{entry.model.robot_template}"
-            defs.setdefault(key, _settings_object(resolved.template.settings))
+            owner = f"A robot setting of {entry.model.robot_template} ({entry.model.platform})."
+            defs.setdefault(key, _settings_object(resolved.template.settings, owner))
             robot = {"$ref": _ref(key)}
         logics: dict[str, Any] = {}
         for selection in sorted(
             resolved.all_selections(), key=lambda s: (s.action_name, s.logic_name)
         ):
             key = f"logic-settings.{selection.action_name}.{selection.logic_name}"
-            defs.setdefault(key, _settings_object(selection.logic.settings))
+            owner = f"A setting of logic {selection.logic_name} (action {selection.action_name})."
+            title = f"Settings of {selection.logic_name} (action {selection.action_name})"
+            defs.setdefault(key, _settings_object(selection.logic.settings, owner, title))
             logics[selection.logic_name] = {"$ref": _ref(key)}
         rules.append(
             {

@@ -84,6 +84,8 @@ class Step:
     published: int  # launch requests handed to the broker
     cleared: int  # launch topics cleared
     seconds: float  # how long the step took, report included
+    # The status the broker held when this reconciler started (a previous one's), if any.
+    found: ReconcilerStatus | None = None
 
 
 class Outcome(enum.Enum):
@@ -176,6 +178,7 @@ class Controller:
         self._last_log: str | None = None
         self._waiting_logged = False
         self._recovered = False
+        self._found: ReconcilerStatus | None = None  # the retained status found at start
         self._fetch_error: str | None = None
 
     # ------------------------------------------------------------------ loop
@@ -274,6 +277,7 @@ class Controller:
                     len(actions.publish) if actions else 0,
                     len(actions.clear) if actions else 0,
                     seconds,
+                    self._found,
                 )
             )
         except Exception:
@@ -618,6 +622,7 @@ class Controller:
         previous = self.writer.retained()
         if previous is None:
             return
+        self._found = previous
         if self.writer.status is None:
             self.writer.status = previous
         revision = previous.last_applied_revision

@@ -1,6 +1,7 @@
 """Alert events, pure: (what was told so far, what is seen now) -> the transitions to tell.
 
 Each event is told once per transition, never per resync: a refused commit once per revision,
+the branch's recovery once after it (the next head that applies),
 a halted or rolled back rollout once per revision, a robot once as it drifts and once as it
 fits again, a robot once as it degrades or goes offline and once as it is back in sync
 (running the desired request for SETTLE seconds: a brain in a crash loop runs a moment before
@@ -21,11 +22,14 @@ from configurator.wire import AgentState, AgentStatus, ReconcilerReason, Reconci
 SETTLE = 5.0  # seconds a robot told degraded or offline runs the desired request before in sync
 REMEMBERED = 64  # revisions remembered as told: a commit refused long ago is not told again
 _REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REFUSED.value}
+# States in which the branch's head is accepted: applied, or being applied (a rollout).
+_APPLYING = {"Ready", "Progressing"}
 _DEGRADED = {AgentState.FAILED, AgentState.BACKOFF, AgentState.REJECTED}
 
 
 class Kind(str, enum.Enum):
     COMMIT_REFUSED = "commit_refused"
+    COMMIT_RECOVERED = "commit_recovered"
     ROLLOUT_HALTED = "rollout_halted"
     ROLLOUT_ROLLED_BACK = "rollout_rolled_back"
     ROBOT_DEGRADED = "robot_degraded"
@@ -51,6 +55,7 @@ class Event:
     revision: str | None = None
     robot: str | None = None
     reason: str | None = None  # the reconciler's reason, or the robot's state
+    refused_revision: str | None = None  # commit_recovered: the revision told refused before
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -61,6 +66,7 @@ class Event:
             "robot": self.robot,
             "reason": self.reason,
             "message": self.message,
+            "refused_revision": self.refused_revision,
         }
 
     def text(self) -> str:
@@ -88,10 +94,68 @@ class Told:
     """What was told so far: the memory that makes events transitions."""
 
     refused: tuple[str, ...] = ()  # revisions told refused, oldest first
+    unrecovered: str | None = None  # the revision told refused last, until the branch applies
     rollouts: tuple[tuple[str, str], ...] = ()  # (revision, state) told, oldest first
     alerting: Mapping[str, Kind] = field(default_factory=dict)  # robot -> degraded or offline
     drifted: frozenset[str] = frozenset()  # robots told drifted, not yet told fitting again
     deferred: frozenset[str] = frozenset()  # robots told deferred, still deferred
+
+
+def resumed(told: Told, found: ReconcilerStatus | None) -> Told:
+    """What a restarted reconciler knows was told, from the status it found on the broker: a
+    refusal there was told by the one before, so it is not told again, and its recovery is
+    told when the branch applies. (A clean stop or a Last Will leaves `Offline`, which names no
+    refusal: the new reconciler tells the refusal again if the head is still refused.)"""
+    if found is None or found.reason not in _REFUSED or not found.failed_revision:
+        return told
+    revision = found.failed_revision
+    refused = told.refused if revision in told.refused else _remember(told.refused, revision)
+    return replace(told, refused=refused, unrecovered=revision)
+
+
+def _refusal(told: Told, status: ReconcilerStatus, at: float) -> tuple[Told, list[Event]]:
+    """A refused head, once per revision; remembered until the branch applies again."""
+    revision = status.failed_revision
+    if status.reason not in _REFUSED or not revision:
+        return told, []
+    if revision in told.refused:
+        return told, []
+    told = replace(told, refused=_remember(told.refused, revision), unrecovered=revision)
+    message = f"{short_rev(revision)} on {status.branch} refused ({status.reason}): "
+    event = Event(
+        Kind.COMMIT_REFUSED,
+        message + status.message,
+        at,
+        status.branch,
+        revision,
+        reason=status.reason,
+    )
+    return told, [event]
+
+
+def _recovery(told: Told, status: ReconcilerStatus, at: float) -> tuple[Told, list[Event]]:
+    """The branch applies again after a refusal: a later head was accepted (applied, or being
+    rolled out). Once: the memory is cleared with it."""
+    refused = told.unrecovered
+    if refused is None or status.state not in _APPLYING or status.reason in _REFUSED:
+        return told, []
+    if status.last_attempted_revision == refused:  # still the refused head
+        return told, []
+    revision = status.last_applied_revision
+    message = (
+        f"{short_rev(revision)} on {status.branch} applies ({status.reason}) after "
+        f"{short_rev(refused)} was refused"
+    )
+    event = Event(
+        Kind.COMMIT_RECOVERED,
+        message,
+        at,
+        status.branch,
+        revision,
+        reason=status.reason,
+        refused_revision=refused,
+    )
+    return replace(told, unrecovered=None), [event]
 
 
 def _remember(items: tuple[Any, ...], item: Any) -> tuple[Any, ...]:
@@ -116,21 +180,10 @@ def transitions(
     events: list[Event] = []
     status = seen.status
     branch = status.branch if status is not None else None
-    if status is not None and status.reason in _REFUSED and status.failed_revision:
-        revision = status.failed_revision
-        if revision not in told.refused:
-            told = replace(told, refused=_remember(told.refused, revision))
-            events.append(
-                Event(
-                    Kind.COMMIT_REFUSED,
-                    f"{short_rev(revision)} on {branch} refused ({status.reason}): "
-                    f"{status.message}",
-                    at,
-                    branch,
-                    revision,
-                    reason=status.reason,
-                )
-            )
+    if status is not None:
+        told, refusal = _refusal(told, status, at)
+        told, recovery = _recovery(told, status, at)
+        events += refusal + recovery
     rollout = status.rollout if status is not None else None
     if rollout is not None and rollout.state in _ROLLOUT_KINDS:
         key = (rollout.revision, rollout.state)

@@ -21,8 +21,12 @@ from prometheus_client import (
 )
 
 from configurator.drift import Drift
+from configurator.wire import ReconcilerReason
+from reconciler.decide import state_of
 from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
+from reconciler.notify import OUTCOMES
 from reconciler.verdicts import Verdict
+from reconciler.webhook import SERVERS, UNKNOWN, Outcome
 
 INTERFACES_VERDICTS = ("reported", "unknown", "error")
 # A scrape is a GET without a body, one or two Prometheus servers at a time; an idle connection
@@ -87,15 +91,37 @@ class Metrics:
             ["interfaces"],
             registry=r,
         )
+        self._known_series()
+        self._applied: str | None = None
+        self._lock = threading.Lock()
+        self._server: BoundedHTTPServer | None = None
+
+    def _known_series(self) -> None:
+        """Every series whose labels are known at start exists from the first scrape, at 0:
+        `rate()` and `increase()` see the first error, and an alert needs no `absent()`."""
         for verdict in Verdict:
             self.robots.labels(verdict.value).set(0)
         for kind in INTERFACES_VERDICTS:
             self.interfaces.labels(kind).set(0)
         for action in ("publish", "clear"):
             self.publishes.labels(action)
-        self._applied: str | None = None
-        self._lock = threading.Lock()
-        self._server: BoundedHTTPServer | None = None
+        for reason in ReconcilerReason:
+            if state_of(reason) == "Stalled":
+                self.errors.labels(reason.value)
+
+    def receivers(self, names: list[str]) -> None:
+        """--notify's receivers, each with its outcomes at 0 (told before they serve)."""
+        for name in names:
+            for outcome in OUTCOMES:
+                self.notifications.labels(name, outcome)
+
+    def webhook_servers(self) -> None:
+        """--webhook's series at 0: each git server's outcomes, and the refusals of requests
+        from no known server (the only outcome they can have)."""
+        for server in SERVERS:
+            for outcome in Outcome:
+                self.webhooks.labels(server.name, outcome.value)
+        self.webhooks.labels(UNKNOWN, Outcome.REFUSED.value)
 
     def serve(self, host: str, port: int, limits: Limits = LIMITS) -> None:
         """Listens now (OSError when it cannot) and serves on a thread of its own."""

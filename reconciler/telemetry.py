@@ -19,7 +19,7 @@ from configurator.mqtt import Connection
 from configurator.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
-from reconciler.events import Seen, Told, transitions
+from reconciler.events import Seen, Told, resumed, transitions
 from reconciler.observed import ReadMemo, Retained, RobotSeen, parse_retained
 from reconciler.retained import RetainedView
 from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
@@ -50,6 +50,7 @@ class Telemetry:
         self._lock = threading.Lock()
         self._step: Step | None = None
         self._told = Told()
+        self._resumed = False  # the status found at start is read into `_told` once
         # robot -> ((digest, the agent's since), first seen running it by our clock)
         self._running_since: dict[str, tuple[tuple[str, float], float]] = {}
         self._desired: tuple[str | None, dict[str, DesiredRobot]] = (None, {})
@@ -93,6 +94,10 @@ class Telemetry:
                 error=step.reason.value if state_of(step.reason) == "Stalled" else None,
             )
         with self._lock:
+            if not self._resumed:
+                # The first step's: a later step may be all `_look` sees.
+                self._resumed = True
+                self._told = resumed(self._told, step.found)
             self._step = step
         self._wake.set()
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -10,6 +13,40 @@ import pytest
 from tests.support.lab import Lab
 from tests.support.mosquitto import Mosquitto, find_mosquitto
 from tests.support.watch import FleetWatch
+
+_SESSION_TMP_PREFIX = "robotconf-tests-"
+_session_tmp = pytest.StashKey[Path]()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Every temporary file of the run, this process's and its children's (agents, brains,
+    reconcilers), goes to one folder of the run, checked empty at the end: a test that leaves
+    something in the system's temporary folder fails (`temporary_files_checked`).
+    Other processes on the machine (another run, another helper) write there too, so comparing
+    the system folder before and after could not tell whose entry is whose. pytest's own
+    tmp_path folders stay where they were (the last three runs, kept for debugging)."""
+    system = tempfile.gettempdir()
+    os.environ.setdefault("PYTEST_DEBUG_TEMPROOT", system)
+    folder = tempfile.mkdtemp(prefix=_SESSION_TMP_PREFIX, dir=system)
+    config.stash[_session_tmp] = Path(folder)
+    os.environ["TMPDIR"] = folder
+    tempfile.tempdir = folder
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    folder = config.stash.get(_session_tmp, None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def temporary_files_checked(pytestconfig: pytest.Config) -> Iterator[None]:
+    """Fails the run (an error at the last teardown) naming what tests left in the run's
+    temporary folder; pytest_unconfigure then removes it, so /tmp stays clean either way."""
+    yield
+    folder = pytestconfig.stash[_session_tmp]
+    left = sorted(entry.name for entry in folder.iterdir())
+    assert not left, f"tests left these in the temporary folder (use tmp_path): {left}"
 
 
 @pytest.fixture

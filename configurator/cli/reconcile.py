@@ -64,6 +64,8 @@ def make_telemetry(
     notifier = None
     if receivers:
         notifier = Notifier(receivers, metrics.notified if metrics is not None else None)
+        if metrics is not None:
+            metrics.receivers([receiver.name for receiver in receivers])
     return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
 
 
@@ -106,6 +108,8 @@ def start_webhook(
     receiver = WebhookServer(
         webhook.secret, branch, on_push, metrics.webhook if metrics is not None else None
     )
+    if metrics is not None:
+        metrics.webhook_servers()
     try:
         receiver.serve(webhook.host, webhook.port)
     except OSError as exc:

@@ -37,6 +37,7 @@ class LanguageServer:
         self.lock = threading.Condition()
         self.responses: dict[int, Any] = {}
         self.diagnostics: dict[str, list[dict[str, Any]]] = {}
+        self._ident = 1  # request ids: 1 is initialize's
         self.reader = threading.Thread(target=self._read, daemon=True)
         self.reader.start()
         self.request(
@@ -116,6 +117,20 @@ class LanguageServer:
         self.wait(lambda: uri in self.diagnostics, f"diagnostics for {path.name}")
         return self.diagnostics[uri]
 
+    def hover(self, path: Path, line: int, character: int) -> str:
+        """The hover's Markdown at a position of an open document ("" when there is none)."""
+        self._ident += 1
+        ident = self._ident
+        position = {"line": line, "character": character}
+        self.request(
+            ident,
+            "textDocument/hover",
+            {"textDocument": {"uri": path.as_uri()}, "position": position},
+        )
+        self.wait(lambda: ident in self.responses, "hover answer")
+        answer = self.responses.pop(ident)
+        return str(answer["contents"]["value"]) if answer else ""
+
     def close(self) -> None:
         self.proc.kill()
         self.proc.wait()
@@ -186,3 +201,33 @@ def test_the_editor_offers_only_rules_a_lab_may_tune(lab: Lab, server: LanguageS
     assert found and {d["range"]["start"]["line"] for d in found} == {line}, found
     loud = good.replace("RC608: off", "RC608: loud")
     assert server.check(path, loud, 3) != []
+
+
+def test_hovering_a_setting_shows_its_unit_range_default_and_choices(
+    lab: Lab, server: LanguageServer
+) -> None:
+    """A robot setting and a logic setting of the scenario's capability, hovered at their keys:
+    their own name, unit, range, choices and default, not the title of the object they are in."""
+    path = lab.path(SCENARIO)
+    text = lab.read(SCENARIO).replace(
+        "robot_settings: {max_linear_speed: 0.2,",
+        "robot_settings: {max_linear_speed: 0.2, camera_resolution: 640x480,",
+    )
+    assert server.check(path, text, 1) == []
+    lines = text.splitlines()
+
+    def hover(key: str) -> str:
+        line = next(n for n, words in enumerate(lines) if f"{key}:" in words)
+        return server.hover(path, line, lines[line].index(key) + 1)
+
+    speed = hover("max_linear_speed")
+    assert speed.startswith("#### max\\_linear\\_speed (m/s)"), speed
+    for fact in ("Waffle Pi's published limit", "unit: `m/s`", "range: `0 to 0.26`"):
+        assert fact in speed, speed
+    assert "default: `0.22`" in speed and "turtlebot3-waffle-pi" in speed
+    assert "Robot Settings" not in speed
+    camera = hover("camera_resolution")
+    assert '`"320x240", "640x480", "1280x720"`' in camera and 'default: `"640x480"`' in camera
+    move = hover("move_speed")
+    assert move.startswith("#### move\\_speed (m/s)") and "default: `0.15`" in move, move
+    assert "logic follow_with_poses (action Follow)" in move and "Logic Settings" not in move

@@ -19,11 +19,13 @@ import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
 from configurator.mqtt import Connection
-from configurator.wire import AgentState, AgentStatus, Topics
+from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, Topics
+from reconciler.decide import state_of
 from reconciler.events import Event, Kind
 from reconciler.notify import QUEUE, Notifier, Sender, parse_receiver
 from reconciler.source import LocalBranch
 from reconciler.telemetry import Telemetry
+from reconciler.verdicts import Verdict
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.agents import publish
 from tests.support.fleet import GitLab, Running, refused_reconcile, start_reconciler
@@ -176,9 +178,19 @@ def test_a_refused_commit_is_told_once_and_failing_receivers_delay_nothing(
         lab.write(FLEET, lab.read(FLEET).replace("  BAD ID!: {scenario: x}\n", ""))
         fixed = lab.commit("fix it")
         watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == fixed, "fixed")
+        # The branch's recovery is told once: not at start-up (nothing was refused then), not
+        # at every heartbeat.
+        wait_for(lambda: ok.events("commit_recovered"), "the recovery told")
+        resyncs(watch, 2)
+        (recovered,) = ok.events("commit_recovered")
+        assert (recovered["revision"], recovered["refused_revision"]) == (fixed, bad)
+        assert recovered["reason"] == "Applied" and recovered["branch"] == "main"
         worse = break_fleet(lab)
         wait_for(lambda: ok.events("commit_refused", revision=worse), "the second refusal")
-        wait_for(lambda: len(receivers["slack"].got()) == 2, "the Slack receiver told again")
+        # refused, recovered, refused again
+        slack = wait_for(lambda: receivers["slack"].got()[2:], "the Slack receiver told again")
+        assert receivers["slack"].got()[1]["text"].startswith("robotconf commit recovered: ")
+        assert len(slack) == 1, slack
         assert len(ok.events("commit_refused")) == 2
 
         metrics = scrape(port)
@@ -187,12 +199,40 @@ def test_a_refused_commit_is_told_once_and_failing_receivers_delay_nothing(
         assert (value(metrics, "robotconf_reconcile_duration_seconds_count") or 0) >= 5
         assert value(metrics, "robotconf_ready") == 0.0
         told = "robotconf_notifications_total"
-        assert value(metrics, told, receiver=f"#3 {ok.base}", outcome="sent") == 2.0
+        # refused, recovered, refused again
+        assert value(metrics, told, receiver=f"#3 {ok.base}", outcome="sent") == 3.0
         failed = value(metrics, told, receiver=f"#2 {receivers['500'].base}", outcome="failed")
         assert failed is not None and failed >= 1
     finally:
         assert reconciler.stop() == 0, reconciler.output()[-3000:]
     assert "/hook" not in reconciler.output()  # receivers are named without their path
+
+
+def test_a_restarted_reconciler_tells_the_recovery_of_the_refusal_it_finds(
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch, tmp_path: Any
+) -> None:
+    """The status a reconciler that died while refused left (Stalled, before any Last Will):
+    its successor, finding the branch fixed, tells the recovery once and not the refusal."""
+    bad, fixed = "b" * 40, lab.head()
+    found = ReconcilerStatus(
+        state="Stalled", ready=False, reason="BuildFailed", branch="main",
+        last_applied_revision=lab.first, last_attempted_revision=bad, failed_revision=bad,
+        message="configs/fleet.yaml:3: error RC101 …",
+    )  # fmt: skip
+    publish(mosquitto.url, Topics("robotconf").reconciler_status, found.model_dump_json().encode())
+    ok = Receiver()
+    reconciler = start_reconciler(
+        lab, mosquitto.url, tmp_path / "reconciler.log", "--interval", "1", "--notify", ok.url
+    )
+    try:
+        watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == fixed, "applied")
+        wait_for(lambda: ok.events("commit_recovered"), "the recovery told")
+        resyncs(watch, 2)
+        told = [(b["event"], b["revision"], b["refused_revision"]) for b in ok.got()]
+        assert told == [("commit_recovered", fixed, bad)]
+    finally:
+        ok.close()
+        assert reconciler.stop() == 0, reconciler.output()[-3000:]
 
 
 def test_a_hanging_receiver_holds_neither_the_loop_nor_the_others(
@@ -303,6 +343,47 @@ def test_robot_transitions_are_told_once_and_scraped(
     assert sorted(e["robot"] for e in back) == ["tb3-01", "tb3-06"], back
     assert all(e["revision"] == fixed for e in back)
     assert len(ok.events("robot_degraded")) == 2 and not ok.events("robot_offline")
+
+
+def test_a_fresh_reconciler_scrapes_every_known_series_at_zero(
+    lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch, tmp_path: Any
+) -> None:
+    """Before anything went wrong, each labelled family has its known series: every reason that
+    stalls the reconciler, each receiver's outcomes, each git server's, every verdict, every
+    kind of interfaces report, both publish actions. An alert on `increase()` sees the first."""
+    ok, port, hook = Receiver(), free_port(), free_port()
+    secret = tmp_path / "webhook.secret"
+    secret.write_text("s3cret\n", encoding="utf-8")
+    reconciler = start_reconciler(
+        lab, mosquitto.url, tmp_path / "reconciler.log", "--interval", "1",
+        "--notify", ok.url, "--metrics", f"127.0.0.1:{port}",
+        "--webhook", f"127.0.0.1:{hook}", "--webhook-secret-file", str(secret),
+    )  # fmt: skip
+    try:
+        watch.wait_reconciler(lambda s: s.ready, "applied")
+        metrics = scrape(port)
+    finally:
+        ok.close()
+        assert reconciler.stop() == 0, reconciler.output()[-3000:]
+    stalled = [r.value for r in ReconcilerReason if state_of(r) == "Stalled"]
+    assert {"BuildFailed", "BrokerUnavailable", "SourceUnavailable"} <= set(stalled)
+    for reason in stalled:
+        assert value(metrics, "robotconf_reconcile_errors_total", reason=reason) == 0.0, reason
+    for outcome in ("sent", "failed", "dropped"):
+        told = value(
+            metrics, "robotconf_notifications_total", receiver=f"#1 {ok.base}", outcome=outcome
+        )
+        assert told == 0.0, outcome
+    for server in ("github", "gitlab", "gitea", "forgejo"):
+        for outcome in ("fetch", "ignored", "refused"):
+            assert value(metrics, "robotconf_webhooks_total", server=server, outcome=outcome) == 0.0
+    assert value(metrics, "robotconf_webhooks_total", server="unknown", outcome="refused") == 0.0
+    for verdict in Verdict:
+        assert value(metrics, "robotconf_robots", verdict=verdict.value) is not None, verdict
+    for kind in ("reported", "unknown", "error"):
+        assert value(metrics, "robotconf_robot_interfaces", interfaces=kind) is not None, kind
+    for action in ("publish", "clear"):
+        assert value(metrics, "robotconf_publishes_total", action=action) is not None, action
 
 
 def scrape_or_none(port: int) -> dict[tuple[str, tuple[tuple[str, str], ...]], float] | None:

@@ -72,18 +72,22 @@ def test_a_wrong_enum_choice_is_flagged_and_hover_text_has_unit_range_and_defaul
         "max_linear_speed"
     ]
     assert "m/s" in speed["description"] and "default 0.22" in speed["description"]
+    # An editor's hover (tests/integration/core/test_editor_schemas.py) shows these two.
+    assert speed["title"] == "max_linear_speed (m/s)"
+    assert "- range: `0 to 0.26`\n- default: `0.22`" in speed["markdownDescription"]
+    drive = schema["$defs"]["robot-settings.ROS2.turtlebot3-waffle-pi"]["properties"]["drive_mode"]
+    assert '- choices: `"eco", "sport"`' in drive["markdownDescription"]
     assert speed["maximum"] == 0.26
 
 
 def test_robot_settings_need_a_template(lab: Lab) -> None:
     schema = scenario_schema(lab)
-    capability = next(
-        rule for rule in schema["allOf"] if "robot_settings" in rule["then"]["properties"]
-    )
+    rules = [rule for rule in schema["allOf"] if "if" in rule]  # one per capability
+    capability = next(rule for rule in rules if "robot_settings" in rule["then"]["properties"])
     assert capability["if"]["required"] == ["capability"]
     no_template = [
         rule
-        for rule in schema["allOf"]
+        for rule in rules
         if rule["then"]["properties"]["robot_settings"] == {"type": "object", "maxProperties": 0}
     ]
     for rule in no_template:

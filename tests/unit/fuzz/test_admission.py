@@ -7,6 +7,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -23,8 +24,16 @@ from tests.support.agents import make_request
 from tests.unit.fuzz.strategies import json_values, mutated
 
 ROBOT = RobotDescription(id="tb3-01", platform="ROS2", recommended_template="turtlebot3-camera")
-_keys = generate_keys(Path(tempfile.mkdtemp(prefix="robotconf-fuzz-keys-")))
-PRIVATE, PUBLIC = load_private_key(_keys.private), load_public_key(_keys.public)
+
+
+def _key_pair() -> tuple[Ed25519PrivateKey, Ed25519PublicKey]:
+    """A signing key pair kept in memory: its files are removed once read."""
+    with tempfile.TemporaryDirectory(prefix="robotconf-fuzz-keys-") as folder:
+        keys = generate_keys(Path(folder))
+        return load_private_key(keys.private), load_public_key(keys.public)
+
+
+PRIVATE, PUBLIC = _key_pair()
 SIGNED = sign(make_request(), PRIVATE, issued_at=1_700_000_000.0)
 
 

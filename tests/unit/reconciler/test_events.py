@@ -7,7 +7,7 @@ import json
 import pytest
 
 from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
-from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, transitions
+from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
 from reconciler.lifecycle import parse_address
 from reconciler.notify import parse_receiver
 from reconciler.telemetry import verdict_counts
@@ -70,6 +70,95 @@ def test_a_refused_commit_is_told_once_per_revision_whatever_comes_between() -> 
     assert (first.revision, first.reason, first.branch) == (BAD, "BuildFailed", "main")
     assert (second.revision, second.reason) == (WORSE, "EmptyFleetRefused")
     assert "RC101" in first.message and BAD[:12] in first.message
+
+
+FIX = "f" * 40
+
+
+def applying(revision: str, state: str = "Ready", reason: str = "Applied") -> ReconcilerStatus:
+    """The head `revision` accepted: applied (Ready), or being rolled out (Progressing)."""
+    return ReconcilerStatus(
+        state=state,  # type: ignore[arg-type]
+        ready=state == "Ready",
+        reason=reason,
+        branch="main",
+        last_applied_revision=revision,
+        last_attempted_revision=revision,
+    )
+
+
+def refused(revision: str, reason: str = "BuildFailed") -> ReconcilerStatus:
+    return stalled(revision, reason).model_copy(update={"last_attempted_revision": revision})
+
+
+def test_a_refused_branch_applying_again_is_told_once() -> None:
+    steps = run(
+        [
+            Seen(applying(GOOD)),
+            Seen(refused(BAD)),
+            Seen(refused(BAD)),  # a resync
+            Seen(applying(FIX)),
+            Seen(applying(FIX)),  # resyncs: heartbeats
+            Seen(applying(FIX)),
+        ]
+    )
+    assert kinds(steps) == [[], [Kind.COMMIT_REFUSED], [], [Kind.COMMIT_RECOVERED], [], []]
+    recovered = steps[3][0]
+    assert (recovered.revision, recovered.refused_revision) == (FIX, BAD)
+    assert (recovered.branch, recovered.reason) == ("main", "Applied")
+    assert FIX[:12] in recovered.message and BAD[:12] in recovered.message
+    assert recovered.as_json()["refused_revision"] == BAD
+
+
+def test_recovery_waits_for_the_head_to_be_accepted() -> None:
+    """Another stall after a refusal is no recovery; a rollout of a later head is (the branch
+    applies again); a second refusal before it is the one the recovery names."""
+    steps = run(
+        [
+            Seen(refused(BAD)),
+            Seen(stalled(BAD, "BrokerUnavailable")),
+            Seen(stalled(FIX, "SourceUnavailable")),
+            # a rollout already under way, the refused head still the head: not recovered
+            Seen(applying(GOOD, "Progressing", "Progressing").model_copy(
+                update={"last_attempted_revision": BAD})),
+            Seen(refused(WORSE, "EmptyFleetRefused")),
+            Seen(applying(FIX, "Progressing", "Progressing")),
+            Seen(applying(FIX)),
+        ]
+    )  # fmt: skip
+    assert kinds(steps) == [
+        [Kind.COMMIT_REFUSED],
+        [],
+        [],
+        [],
+        [Kind.COMMIT_REFUSED],
+        [Kind.COMMIT_RECOVERED],
+        [],
+    ]
+    assert steps[5][0].refused_revision == WORSE and steps[5][0].reason == "Progressing"
+
+
+def test_nothing_recovers_when_nothing_was_refused() -> None:
+    """At start-up, or after stalls that are not refusals."""
+    assert kinds(run([Seen(applying(GOOD)), Seen(applying(FIX))])) == [[], []]
+    steps = run([Seen(stalled(BAD, "SourceUnavailable")), Seen(applying(FIX))])
+    assert kinds(steps) == [[], []]
+
+
+def test_a_restarted_reconciler_resumes_a_refusal_found_on_the_broker() -> None:
+    """Found stalled on a refusal (the one before died before its Last Will said Offline): the
+    refusal is not told again, and the recovery is."""
+    told = resumed(Told(), refused(BAD))
+    told, events = transitions(told, Seen(refused(BAD)), 1.0)
+    assert events == []
+    told, events = transitions(told, Seen(applying(FIX)), 2.0)
+    assert [(e.kind, e.revision, e.refused_revision) for e in events] == [
+        (Kind.COMMIT_RECOVERED, FIX, BAD)
+    ]
+    # Found offline, ready, stalled otherwise, or nothing: nothing to resume.
+    offline = refused(BAD).model_copy(update={"state": "Offline", "reason": "Offline"})
+    for found in (None, applying(GOOD), stalled(BAD, "BrokerUnavailable"), offline):
+        assert resumed(Told(), found) == Told()
 
 
 def test_other_stalls_are_not_refusals() -> None:
@@ -212,6 +301,7 @@ def test_receivers_get_the_event_json_or_slack_text() -> None:
         "robot": None,
         "reason": "X",
         "message": "bbbb on main refused",
+        "refused_revision": None,
     }
     assert json.loads(slack.body(event)) == {
         "text": "robotconf commit refused: bbbb on main refused"

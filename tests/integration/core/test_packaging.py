@@ -1,0 +1,82 @@
+"""The project's own packaging builds without deprecation noise (what `./dev setup` runs)."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+from importlib.metadata import version
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+
+# pip's calls into the backend for `pip install -e .`, each in a process of its own; each read
+# pyproject.toml and printed setuptools' license deprecation once. Run offline with this venv's
+# setuptools, as `pip install --no-build-isolation` would.
+_HOOK = """
+import sys
+from setuptools import build_meta as backend
+print(getattr(backend, sys.argv[1])(*sys.argv[2:]))
+"""
+_HOOKS = (
+    ("get_requires_for_build_editable",),
+    ("prepare_metadata_for_build_editable", "meta"),
+    ("build_editable", "dist"),
+)
+
+
+def _required_setuptools() -> int:
+    # tomllib arrived in 3.11 and the project supports 3.10: the one line is enough.
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    found = re.search(r'^requires = \["setuptools>=(\d+)"\]$', text, re.MULTILINE)
+    assert found, "build-system requires one setuptools>=N"
+    return int(found.group(1))
+
+
+def _copy_project(dest: Path) -> Path:
+    """The files a build reads, copied so that the build's egg-info stays out of the checkout."""
+    dest.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy2(ROOT / name, dest / name)
+    for package in ("configurator", "reconciler", "agent"):
+        shutil.copytree(
+            ROOT / package, dest / package, ignore=shutil.ignore_patterns("__pycache__")
+        )
+    return dest
+
+
+def test_editable_build_prints_no_deprecation(tmp_path: Path) -> None:
+    needed = _required_setuptools()
+    have = version("setuptools")
+    if int(have.split(".")[0]) < needed:
+        pytest.skip(f"this venv's setuptools {have} predates {needed} (./dev setup installs it)")
+    project = _copy_project(tmp_path / "project")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
+    for hook, *folders in _HOOKS:
+        outputs = [tmp_path / folder for folder in folders]
+        for folder in outputs:
+            folder.mkdir()
+        done = subprocess.run(
+            [sys.executable, "-c", _HOOK, hook, *map(str, outputs)],
+            cwd=project,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
+        output = done.stdout + done.stderr
+        assert done.returncode == 0, output
+        assert "deprecat" not in output.lower(), f"{hook}:\n{output}"
+    (wheel,) = (tmp_path / "dist").glob("robotconf-*.whl")
+    with zipfile.ZipFile(wheel) as built:
+        (metadata,) = (n for n in built.namelist() if n.endswith(".dist-info/METADATA"))
+        text = built.read(metadata).decode()
+        licenses = [n for n in built.namelist() if n.endswith("licenses/LICENSE")]
+    assert "License-Expression: MIT" in text
+    assert licenses, "the wheel carries the license file"
