@@ -55,6 +55,25 @@ def did_you_mean(name: str, known: Iterable[str]) -> str:
     return f"; known: {shown}{more}"
 
 
+_KIND_OF = {str: "text", int: "a whole number", float: "a number"}
+
+
+def describe_value(value: object, *, kind: bool = True) -> str:
+    """A value as an error quotes it: `'fast' (text)`, `3 (a whole number)`, `a list`; with
+    `kind=False` (a value of the right type out of range) the scalar alone."""
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list | tuple):
+        return "a list"
+    if value is None:
+        return "nothing (null)"
+    if isinstance(value, bool):
+        return str(value).lower()
+    text = repr(value)
+    text = text if len(text) <= 40 else text[:37] + "..."
+    return f"{text} ({_KIND_OF.get(type(value), type(value).__name__)})" if kind else text
+
+
 def format_text(diagnostics: list[Diagnostic]) -> str:
     return "".join(f"{d}\n" for d in diagnostics)
 

@@ -10,7 +10,7 @@ from typing import Any, Union, get_args, get_origin
 from pydantic import BaseModel, ValidationError
 from pydantic_core import ErrorDetails
 
-from configurator.diagnostics import Diagnostic, Severity, did_you_mean
+from configurator.diagnostics import Diagnostic, Severity, describe_value, did_you_mean
 from configurator.yamlio import YamlDocument
 
 _EXPECTED = {
@@ -27,19 +27,6 @@ _EXPECTED = {
     "model_attributes_type": "a mapping (key: value)",
     "list_type": "a list",
 }
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return "a list"
-    if value is None:
-        return "nothing (null)"
-    if isinstance(value, bool):
-        return f"{str(value).lower()}"
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _unwrap(annotation: Any) -> Any:
@@ -181,9 +168,10 @@ def typing_diagnostics(
             if text not in expected:
                 expected.append(text)
         value = errs[0].get("input")
+        given = describe_value(value, kind=any(err["type"] in _EXPECTED for err in errs))
         report(
             loc,
             "RC103",
-            f"{_dotted(loc)} must be {' or '.join(expected)}, got {_describe(value)}",
+            f"{_dotted(loc)} must be {' or '.join(expected)}, got {given}",
         )
     return found

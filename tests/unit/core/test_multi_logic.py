@@ -81,7 +81,7 @@ def test_a_list_item_that_is_no_name_is_reported_once_at_the_item(lab: Lab) -> N
     """Not also "must be text" for the list: it is a list, of which one item is wrong."""
     lab.replace(EITHER, BOTH, "Follow: [follow_with_poses, 1]")
     d = lab.only("RC103")
-    assert d.message == "actions.Follow[1] must be text, got 1"
+    assert d.message == "actions.Follow[1] must be text, got 1 (a whole number)"
     assert lab.read(EITHER).splitlines()[d.line - 1][d.col - 1 :].startswith("1]")
 
 

@@ -201,7 +201,7 @@ def test_unknown_logic_setting(lab: Lab) -> None:
 def test_setting_of_wrong_type(lab: Lab) -> None:
     lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: fast")
     d = lab.only("RC402")
-    assert "must be a number" in d.message
+    assert d.message.endswith("must be a number, got 'fast' (text)")
     assert lab.read(DELIVERY).splitlines()[d.line - 1][d.col - 1 :].startswith("fast")
 
 
@@ -211,9 +211,26 @@ def test_integer_setting_refuses_a_fraction_and_a_boolean(lab: Lab) -> None:
         "capability: turtlebot3-bluetooth\nlogic_settings:\n"
         "  follow_with_bluetooth: {rssi_threshold: -50.5}\n",
     )
-    assert "whole number" in lab.only("RC402").message
+    assert lab.only("RC402").message.endswith("must be a whole number, got -50.5 (a number)")
     lab.replace("configs/scenarios/bt.yaml", "-50.5", "true")
-    assert lab.only("RC402")
+    assert lab.only("RC402").message.endswith("must be a whole number, got true")
+
+
+@pytest.mark.parametrize(
+    ("value", "code", "expected"),
+    [
+        ("[1, 2]", "RC103", "or text, got a list"),
+        ("{a: 1}", "RC103", "or text, got a mapping"),
+        ("'yes'", "RC402", "must be true or false, got 'yes' (text)"),
+        ("2", "RC402", "must be true or false, got 2 (a whole number)"),
+        ("0.5", "RC402", "must be true or false, got 0.5 (a number)"),
+    ],
+)
+def test_type_errors_name_what_was_given(lab: Lab, value: str, code: str, expected: str) -> None:
+    """Booleans, lists, mappings, text and numbers each read as `must be X, got V (kind)`."""
+    guide = "configs/scenarios/guide-gazebo.yaml"
+    lab.replace(guide, "{open_timeout: 15}", f"{{open_timeout: 15, wait_until_open: {value}}}")
+    assert lab.only(code).message.endswith(expected)
 
 
 def test_setting_out_of_range(lab: Lab) -> None:
