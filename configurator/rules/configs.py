@@ -188,6 +188,17 @@ def _check_setting(
         report.add(entry, loc, problem[0], f"setting '{name}' {problem[1]}")
 
 
+def _logics_maybe_meant(repo: Repository, config: CapabilityConfiguration) -> set[str]:
+    """Every logic of an action whose selection names a logic it lacks (RC205): the
+    capability may have meant any of them, so settings for them are not also RC406."""
+    meant: set[str] = set()
+    for action_name, logic_name in config.selected_logics():
+        action = repo.actions.get(action_name)
+        if action is not None and logic_name not in action.model.logics:
+            meant.update(action.model.logics)
+    return meant
+
+
 def check_scenario(
     repo: Repository,
     entry: Entry[ScenarioConfiguration],
@@ -231,10 +242,13 @@ def check_scenario(
                 )
         selected_logics = {s.logic_name: s for s in resolved.all_selections()}
         named = {logic for _, logic in resolved.config.selected_logics()}
+        meant = _logics_maybe_meant(repo, resolved.config)
         for logic_name, values in scenario.logic_settings.items():
             selection = selected_logics.get(logic_name)
             if selection is None and logic_name in named:
                 continue  # its action is unknown or unreadable: reported at the capability
+            if selection is None and logic_name in meant:
+                continue  # the capability's RC205 (a misspelt logic of its action) says it
             if selection is None:
                 report.unknown(
                     entry,

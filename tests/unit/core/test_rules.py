@@ -69,9 +69,19 @@ def test_action_not_on_platform(lab: Lab) -> None:
 
 
 def test_unknown_logic_of_action(lab: Lab) -> None:
+    """One typo, one error: the scenario's settings for follow_with_poses (which the typo
+    meant) are not also "not selected" (RC406)."""
+    assert "follow_with_poses:" in lab.read(DELIVERY)
     lab.replace(CAMERA, "Follow: follow_with_poses", "Follow: follow_with_pose")
-    d = lab.diagnostics("RC205")
-    assert len(d) == 1 and "did you mean 'follow_with_poses'" in d[0].message
+    d = lab.only("RC205")
+    assert "did you mean 'follow_with_poses'" in d.message
+
+
+def test_settings_of_another_actions_logic_are_still_refused_beside_a_typo(lab: Lab) -> None:
+    """Only logics of the action whose selection has the typo are spared RC406."""
+    lab.replace(CAMERA, "Follow: follow_with_poses", "Follow: follow_with_pose")
+    lab.replace(DELIVERY, "logic_settings:\n", "logic_settings:\n  open_by_sending_signal: {}\n")
+    assert sorted(d.code for d in lab.check().diagnostics) == ["RC205", "RC406"]
 
 
 def test_unknown_capability(lab: Lab) -> None:
