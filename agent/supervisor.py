@@ -161,6 +161,7 @@ class Supervisor:
         self.restarts = 0
         self.reloads = 0
         self.streak = 0
+        self._forget_desk_restart()  # this request restarts the brain: the latest restart
         if self.pid is not None:
             if self.phase == AgentState.STOPPING:
                 return []  # the exit will start the newest desired request
@@ -190,6 +191,7 @@ class Supervisor:
         """The empty retained payload: nothing assigned, stop."""
         self._set_rejection(None)
         self.desired = None
+        self._forget_desk_restart()
         if self.pid is not None:
             if self.phase == AgentState.STOPPING:
                 return []
@@ -343,6 +345,14 @@ class Supervisor:
             f"reloaded {request.digest} (pid {self.pid}, {self.policy.reload_signal.name})"
         )
         return [Reload(self.pid, self.policy.reload_signal, request)]
+
+    def _forget_desk_restart(self) -> None:
+        """A restart from the desk is shown (`restart: ROBOT by WHO at WHEN`) only while it is
+        the brain's latest start for another reason than a crash: a new request or none ends
+        it. A reload does not (the same process runs on), nor a crash restart (RESTARTS counts
+        those since)."""
+        self.restart_requested_by = None
+        self.restart_requested_at = None
 
     def _spawn(self, now: float) -> list[Effect]:
         assert self.desired is not None
