@@ -38,16 +38,21 @@ class Diagnostic:
         return self.severity is Severity.ERROR
 
 
+def closest(name: str, known: Iterable[str]) -> str | None:
+    """The known name a near miss was meant to be (what did-you-mean suggests), if any."""
+    candidates = sorted(set(known))
+    close = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
+    if close:
+        return close[0]
+    return {c.lower(): c for c in candidates}.get(name.lower())
+
+
 def did_you_mean(name: str, known: Iterable[str]) -> str:
     """` (did you mean 'x'?)` for a near miss, else a short list of what exists."""
     candidates = sorted(set(known))
-    close = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
-    if not close:
-        lowered = {c.lower(): c for c in candidates}
-        if name.lower() in lowered:
-            close = [lowered[name.lower()]]
-    if close:
-        return f"; did you mean '{close[0]}'?"
+    meant = closest(name, candidates)
+    if meant is not None:
+        return f"; did you mean '{meant}'?"
     if not candidates:
         return "; none exist"
     shown = ", ".join(candidates[:8])

@@ -12,6 +12,7 @@ from configurator.composition import (
     setting_problem,
     template_gaps,
 )
+from configurator.diagnostics import closest
 from configurator.repository import Entry, Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
@@ -124,7 +125,10 @@ def _check_action(
             )
     if action_name not in resolved.selections:
         return
+    meant = meant_actions(repo, config)
     for required in missing_requires(action, config.actions):
+        if required in meant:
+            continue  # the RC204 of the name misspelling it says it
         report.add(
             entry,
             ["actions", action_name],
@@ -186,6 +190,17 @@ def _check_setting(
     problem = setting_problem(definition, value)
     if problem is not None:
         report.add(entry, loc, problem[0], f"setting '{name}' {problem[1]}")
+
+
+def meant_actions(repo: Repository, config: CapabilityConfiguration) -> set[str]:
+    """The actions the capability's unknown action names (RC204) were meant to be, as their
+    did-you-mean names them: a requirement or a task missing one of them is not reported
+    again (RC303, RC304) while the typo stands."""
+    return {
+        meant
+        for name in config.actions
+        if name not in repo.actions and (meant := closest(name, repo.actions)) is not None
+    }
 
 
 def _logics_maybe_meant(repo: Repository, config: CapabilityConfiguration) -> set[str]:
@@ -305,6 +320,7 @@ def check_scenario(
                 environment.knowledge_sets,
             )
 
+    meant = meant_actions(repo, resolved.config) if resolved is not None else set()
     for i, goal in enumerate(scenario.goals):
         task_entry = repo.tasks.get(goal.task)
         if task_entry is None:
@@ -320,6 +336,8 @@ def check_scenario(
         elif (
             resolved is not None
             and implementation_for(task_entry.model, resolved.config.actions) is None
+            # a misspelt action (RC204) may be what the task misses: once is enough
+            and implementation_for(task_entry.model, {*resolved.config.actions, *meant}) is None
         ):
             options = " or ".join(
                 "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations

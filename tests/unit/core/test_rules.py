@@ -57,9 +57,24 @@ def test_unknown_action_points_at_the_key(lab: Lab) -> None:
     assert "unknown action 'Folow'; did you mean 'Follow'?" in rc204[0].message
     text = lab.read(CAMERA).splitlines()[rc204[0].line - 1]
     assert text[rc204[0].col - 1 :].startswith("Folow")
-    # The scenario built on it can no longer reach Delivery; its follow_with_poses settings
-    # are not reported a second time.
-    assert {d.code for d in found} == {"RC204", "RC304"}
+    # One typo, one error: the scenario's Delivery, which needs Follow, is not also "not
+    # achievable" (RC304), nor are its follow_with_poses settings reported.
+    assert [d.code for d in found] == ["RC204"]
+
+
+def test_a_misspelt_action_is_not_also_a_missing_requirement(lab: Lab) -> None:
+    """SendGoalId requires AskHelp: `AskHlp` is RC204 alone, not also RC303 and RC304."""
+    lab.replace(CAMERA, "AskHelp: ask_help_broadcast", "AskHlp: ask_help_broadcast")
+    assert "did you mean 'AskHelp'?" in lab.only("RC204").message
+
+
+def test_what_a_typo_does_not_explain_is_still_reported(lab: Lab) -> None:
+    """Follow misspelt and AskHelp gone: AskHelp's absence is no typo's, RC303 and RC304 stay."""
+    lab.replace(CAMERA, "AskHelp: ask_help_broadcast, ", "")
+    lab.replace(CAMERA, "Follow: follow_with_poses", "Folow: follow_with_poses")
+    found = lab.check().diagnostics
+    assert sorted(d.code for d in found) == ["RC204", "RC303", "RC304"]
+    assert "requires action 'AskHelp'" in next(d for d in found if d.code == "RC303").message
 
 
 def test_action_not_on_platform(lab: Lab) -> None:
