@@ -29,6 +29,14 @@ _EXPECTED = {
 }
 
 
+def type_error_text(error: ErrorDetails) -> str | None:
+    """`must be a number, got 'fast' (text)` for a value of the wrong type, else None."""
+    expected = _EXPECTED.get(error["type"])
+    if expected is None:
+        return None
+    return f"must be {expected}, got {describe_value(error.get('input'))}"
+
+
 def _unwrap(annotation: Any) -> Any:
     """The structured member of an Optional/Union annotation, else the annotation itself."""
     origin = get_origin(annotation)
@@ -100,7 +108,10 @@ def error_text(error: ErrorDetails) -> str:
 
 
 def error_line(error: ErrorDetails) -> str:
-    """One error as one readable line: `where: what`."""
+    """One error as one readable line: `where: what`, or `where must be X, got V (kind)`."""
+    natural = type_error_text(error)
+    if natural is not None:
+        return f"{error_path(error['loc'])} {natural}"
     return f"{error_path(error['loc'])}: {error_text(error)}"
 
 
