@@ -92,9 +92,7 @@ def test_status_shows_a_robot_s_hostile_interfaces_escaped(mosquitto: Mosquitto)
     publish(mosquitto.url, TOPICS.launch(ROBOT), request.payload())
     running = AgentStatus(robot_id=ROBOT, state=AgentState.RUNNING, digest=request.digest)
     publish(mosquitto.url, TOPICS.status(ROBOT), running.model_dump_json().encode())
-    hostile = RobotInterfaces(
-        topics=[Interface(name="/tb3_01/cmd_vel", type=FORGED)], source=FORGED
-    )
+    hostile = RobotInterfaces(topics=[Interface(name="/tb3_01/cmd_vel", type=FORGED)], source=FORGED)
     publish_interfaces(mosquitto.url, ROBOT, hostile)
     for args in ([], ["--json"]):
         done = subprocess.run(

@@ -157,6 +157,22 @@ def test_healthy_waves_advance_in_order_until_complete(
     )
 
 
+@pytest.mark.parametrize("state", [AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED])
+def test_a_failed_canary_rolls_back(
+    two: tuple[FleetRender, FleetRender], state: AgentState
+) -> None:
+    stable, head = two
+    first = step(head, stable, held(stable))
+    launches = {**held(stable), **held(head, CANARY)}
+    failed = step(head, stable, launches, running(head, CANARY, state), first, T0 + 1)
+    assert failed.serve_stable and failed.status is not None
+    assert failed.status.state == "RolledBack" and failed.status.failed == CANARY
+    assert "over max_failures 0" in failed.status.message
+    # The same revision is not tried again: the next step still serves the stable one.
+    again = step(head, stable, held(stable), {}, failed, T0 + 500)
+    assert again.serve_stable and again.status is not None and again.status.state == "RolledBack"
+
+
 def test_halt_leaves_the_moved_robots_and_publishes_no_later_wave(lab: Lab) -> None:
     stable, head = fleet(lab, "a"), fleet(lab, "b", on_failure="halt")
     first = step(head, stable, held(stable))
