@@ -28,7 +28,7 @@ from configurator.diagnostics import did_you_mean
 from configurator.files import read_regular
 from configurator.mqtt import Connection
 from configurator.types import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
-from configurator.typing_errors import error_path, error_text
+from configurator.typing_errors import error_path, error_text, type_error_text
 from configurator.wire import (
     BROKER_ENV,
     DEFAULT_BROKER,
@@ -417,6 +417,9 @@ def _explain(error: ErrorDetails) -> tuple[Loc, str]:
         return loc, f"{where}: {message}"
     if loc[:1] == ("env",):
         return loc, f"{where}: {message}"  # never the value: env may hold secrets
+    natural = type_error_text(error)
+    if natural is not None:
+        return loc, f"{where} {natural}"
     return loc, f"{where}: {message} (got {error.get('input')!r})"
 
 

@@ -192,6 +192,7 @@ class Supervisor:
         self.restarts = 0
         self.reloads = 0
         self.streak = 0
+        self._forget_desk_restart()  # this request restarts the brain: the latest restart
         if self.pid is not None:
             if self.phase == AgentState.STOPPING:
                 return []  # the exit will start the newest desired request
@@ -221,6 +222,7 @@ class Supervisor:
         """The empty retained payload: nothing assigned, stop."""
         self._set_rejection(None)
         self.desired = None
+        self._forget_desk_restart()
         if self.phase == AgentState.DEFERRED:
             return self._still_deferred(now)
         if self.pid is not None:
@@ -507,6 +509,14 @@ class Supervisor:
         self._defer_until = None
         self._deferred_since = None
         self._pending_restart = None
+
+    def _forget_desk_restart(self) -> None:
+        """A restart from the desk is shown (`restart: ROBOT by WHO at WHEN`) only while it is
+        the brain's latest start for another reason than a crash: a new request or none ends
+        it. A reload does not (the same process runs on), nor a crash restart (RESTARTS counts
+        those since)."""
+        self.restart_requested_by = None
+        self.restart_requested_at = None
 
     def _spawn(self, now: float) -> list[Effect]:
         assert self.desired is not None

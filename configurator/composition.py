@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 
+from configurator.diagnostics import describe_value
 from configurator.types import (
     Action,
     Environment,
@@ -98,7 +99,7 @@ def setting_problem(definition: SettingDefinition, value: JsonScalar) -> tuple[s
             "string": "text",
             "enum": "one of the choices",
         }[kind]
-        return "RC402", f"must be {expected} ({kind}), got {value!r}"
+        return "RC402", f"must be {expected}, got {describe_value(value)}"
     if definition.choices is not None and not is_choice(value, definition.choices):
         options = ", ".join(repr(c) for c in definition.choices)
         return "RC404", f"{value!r} is not one of the choices: {options}"

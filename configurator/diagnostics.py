@@ -38,21 +38,45 @@ class Diagnostic:
         return self.severity is Severity.ERROR
 
 
+def closest(name: str, known: Iterable[str]) -> str | None:
+    """The known name a near miss was meant to be (what did-you-mean suggests), if any."""
+    candidates = sorted(set(known))
+    close = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
+    if close:
+        return close[0]
+    return {c.lower(): c for c in candidates}.get(name.lower())
+
+
 def did_you_mean(name: str, known: Iterable[str]) -> str:
     """` (did you mean 'x'?)` for a near miss, else a short list of what exists."""
     candidates = sorted(set(known))
-    close = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
-    if not close:
-        lowered = {c.lower(): c for c in candidates}
-        if name.lower() in lowered:
-            close = [lowered[name.lower()]]
-    if close:
-        return f"; did you mean '{close[0]}'?"
+    meant = closest(name, candidates)
+    if meant is not None:
+        return f"; did you mean '{meant}'?"
     if not candidates:
         return "; none exist"
     shown = ", ".join(candidates[:8])
     more = f", ... ({len(candidates)} in all)" if len(candidates) > 8 else ""
     return f"; known: {shown}{more}"
+
+
+_KIND_OF = {str: "text", int: "a whole number", float: "a number"}
+
+
+def describe_value(value: object, *, kind: bool = True) -> str:
+    """A value as an error quotes it: `'fast' (text)`, `3 (a whole number)`, `a list`; with
+    `kind=False` (a value of the right type out of range) the scalar alone."""
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list | tuple):
+        return "a list"
+    if value is None:
+        return "nothing (null)"
+    if isinstance(value, bool):
+        return str(value).lower()
+    text = repr(value)
+    text = text if len(text) <= 40 else text[:37] + "..."
+    return f"{text} ({_KIND_OF.get(type(value), type(value).__name__)})" if kind else text
 
 
 def format_text(diagnostics: list[Diagnostic]) -> str:

@@ -10,7 +10,7 @@ from typing import Any, Union, get_args, get_origin
 from pydantic import BaseModel, ValidationError
 from pydantic_core import ErrorDetails
 
-from configurator.diagnostics import Diagnostic, Severity, did_you_mean
+from configurator.diagnostics import Diagnostic, Severity, describe_value, did_you_mean
 from configurator.yamlio import YamlDocument
 
 _EXPECTED = {
@@ -29,17 +29,12 @@ _EXPECTED = {
 }
 
 
-def _describe(value: Any) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return "a list"
-    if value is None:
-        return "nothing (null)"
-    if isinstance(value, bool):
-        return f"{str(value).lower()}"
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+def type_error_text(error: ErrorDetails) -> str | None:
+    """`must be a number, got 'fast' (text)` for a value of the wrong type, else None."""
+    expected = _EXPECTED.get(error["type"])
+    if expected is None:
+        return None
+    return f"must be {expected}, got {describe_value(error.get('input'))}"
 
 
 def _unwrap(annotation: Any) -> Any:
@@ -113,7 +108,10 @@ def error_text(error: ErrorDetails) -> str:
 
 
 def error_line(error: ErrorDetails) -> str:
-    """One error as one readable line: `where: what`."""
+    """One error as one readable line: `where: what`, or `where must be X, got V (kind)`."""
+    natural = type_error_text(error)
+    if natural is not None:
+        return f"{error_path(error['loc'])} {natural}"
     return f"{error_path(error['loc'])}: {error_text(error)}"
 
 
@@ -181,9 +179,10 @@ def typing_diagnostics(
             if text not in expected:
                 expected.append(text)
         value = errs[0].get("input")
+        given = describe_value(value, kind=any(err["type"] in _EXPECTED for err in errs))
         report(
             loc,
             "RC103",
-            f"{_dotted(loc)} must be {' or '.join(expected)}, got {_describe(value)}",
+            f"{_dotted(loc)} must be {' or '.join(expected)}, got {given}",
         )
     return found

@@ -165,7 +165,9 @@ class _Rollout:
     def everyone(self) -> RolloutStep:
         step = self.hold(self.count)
         step.complete = True
-        step.status = self._status("Complete", self.count - 1, None, {}, "rolled out")
+        status = self._status("Complete", self.count - 1, None, {}, "rolled out")
+        # Rolled out everywhere, the head is what a later rollback would restore.
+        step.status = status.model_copy(update={"stable_revision": status.revision})
         return step
 
     # ------------------------------------------------------------------ the states

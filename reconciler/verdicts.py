@@ -314,6 +314,33 @@ class FleetStatus:
         ready = self.reconciler is not None and self.reconciler.ready
         return robots_ok and ready and self.health is Health.OK
 
+    def not_in_sync_because(self) -> str | None:
+        """Why the fleet is not in sync in a few words, None when it is: its robots' counts
+        say it when some are not settled; else the reconciler does (a rollback leaves every
+        robot InSync on the stable revision, and the fleet short of its branch's head)."""
+        if self.in_sync:
+            return None
+        unsettled = sum(r.verdict not in SETTLED for r in self.rows)
+        if unsettled:
+            return f"{unsettled} robot{'s' if unsettled != 1 else ''} not settled"
+        health, status = self.health, self.reconciler
+        if status is None or health is not Health.OK:
+            return {
+                Health.MISSING: "no reconciler status on the broker",
+                Health.OFFLINE: "the reconciler is offline",
+                Health.STALE: "the reconciler's heartbeat is overdue",
+            }.get(health, "the reconciler is not ready")
+        rollout = status.rollout
+        if rollout is not None and rollout.state == "RolledBack":
+            return (
+                f"the rollout of {short_rev(rollout.revision)} was rolled back: the robots run "
+                f"{short_rev(rollout.stable_revision)}, the last revision that fully rolled out"
+            )
+        if rollout is not None and rollout.state in ("Halted", "Paused"):
+            return f"the rollout of {short_rev(rollout.revision)} is {rollout.state.lower()}"
+        failed = f" {short_rev(status.failed_revision)}" if status.failed_revision else ""
+        return f"the reconciler is {clean(status.state)} ({clean(status.reason)}{failed})"
+
     def counts(self) -> dict[str, int]:
         found = {v.value: 0 for v in Verdict}
         for row in self.rows:
@@ -328,6 +355,7 @@ class FleetStatus:
             reconciler.pop("heartbeat", None)
         return {
             "in_sync": self.in_sync,
+            "not_in_sync_because": self.not_in_sync_because(),
             "desired_from": self.desired_from,
             "counts": self.counts(),
             "reconciler": reconciler,

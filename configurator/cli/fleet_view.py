@@ -9,7 +9,17 @@ from rich.text import Text
 from configurator.cli.terminal import plain_text, safe
 from reconciler.verdicts import FleetStatus, RobotRow, Verdict, reconciler_lines, short_digest
 
-COLUMNS = ("ROBOT", "VERDICT", "ONLINE", "SCENARIO", "DESIRED", "REPORTED", "STATE", "RESTARTS")
+COLUMNS = (
+    "ROBOT",
+    "VERDICT",
+    "ONLINE",
+    "SCENARIO",
+    "DESIRED",
+    "REPORTED",
+    "STATE",
+    "RESTARTS",
+    "RELOADS",
+)
 # Shown after SCENARIO when some robot has labels, or a rollout wave: a fleet without either
 # keeps its table.
 LABELS = "LABELS"
@@ -71,6 +81,7 @@ def fleet_table(fleet: FleetStatus) -> Table:
             Text(short_digest(r.reported)),
             safe(r.state),
             Text(str(r.restarts)),
+            Text(str(r.reloads)),
             *([_drift_cell(r)] if DRIFT in names else []),
             safe("" if r.verdict is Verdict.IN_SYNC else r.reason),
         )
@@ -123,8 +134,9 @@ def fleet_status_view(fleet: FleetStatus) -> Group:
         parts += [safe(line) for line in restarts]
     counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
     parts.append(Text(""))
+    why = fleet.not_in_sync_because()
     parts.append(
-        Text(f"{len(fleet.rows)} robots: {counts}" + ("" if fleet.in_sync else " — not in sync"))
+        safe(f"{len(fleet.rows)} robots: {counts}" + (f" — not in sync: {why}" if why else ""))
     )
     return Group(*parts)
 

@@ -26,6 +26,7 @@ from configurator.plan import (
     with_drift,
 )
 from configurator.render import FleetRender, RenderError, render_robot
+from configurator.source import SourceError
 from configurator.textsafe import json_printable
 from configurator.tree import (
     CapabilityTree,
@@ -38,7 +39,7 @@ from configurator.tree import (
 )
 from configurator.types import RolloutPolicy
 from configurator.wire import Topics
-from configurator.workspace import check
+from configurator.workspace import Checked, check
 
 
 def catalogue_view(sections: list[Section]) -> Group:
@@ -145,16 +146,36 @@ def _fleet_at(
     repo: Path, rev: str | None, label: str, cache: BuildCache
 ) -> tuple[FleetRender, RolloutPolicy | None]:
     """The revision's rendered fleet and its rollout policy."""
-    checked = check(repo, rev, cache.check)
+    try:
+        checked = check(repo, rev, cache.check)
+    except SourceError as exc:
+        raise CliError(f"{label} revision does not exist: {exc}") from None
     if not checked.ok:
-        sys.stderr.write(format_text(checked.errors))
-        raise CliError(f"{label} revision {rev or '(work tree)'} is invalid")
+        raise CliError(_does_not_validate(checked, rev, label))
     try:
         rendered = cache.render(checked)
     except RenderError as exc:
         raise CliError(f"{label}: {exc}") from None
     fleet = checked.repo.fleet
     return rendered, fleet.model.rollout if fleet is not None else None
+
+
+def _does_not_validate(checked: Checked, rev: str | None, label: str) -> str:
+    """Its errors on stderr, under a heading that says the revision exists; the reason there
+    is no plan: an invalid commit renders no fleet, and the base is what robots run, which the
+    reconciler never takes from a commit that does not validate."""
+    name = "(work tree)" if rev is None else f"{rev} ({checked.repo.revision[:12]})"
+    errors = len(checked.errors)
+    count = f"{errors} error{'s' if errors != 1 else ''}"
+    sys.stderr.write(f"robotconf: {label} revision {name} exists but does not validate:\n")
+    sys.stderr.write(format_text(checked.errors))
+    why = (
+        "no robot runs it (the reconciler applies only revisions that validate): give as --base "
+        "the revision `robotconf status` shows as applied"
+        if label == "base"
+        else "fix them, then plan again"
+    )
+    return f"{label} revision {name} is invalid ({count} above), so there is no plan; {why}"
 
 
 def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:

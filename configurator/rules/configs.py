@@ -12,6 +12,7 @@ from configurator.composition import (
     setting_problem,
     template_gaps,
 )
+from configurator.diagnostics import closest
 from configurator.repository import Entry, Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
@@ -124,7 +125,10 @@ def _check_action(
             )
     if action_name not in resolved.selections:
         return
+    meant = meant_actions(repo, config)
     for required in missing_requires(action, config.actions):
+        if required in meant:
+            continue  # the RC204 of the name misspelling it says it
         report.add(
             entry,
             ["actions", action_name],
@@ -188,6 +192,28 @@ def _check_setting(
         report.add(entry, loc, problem[0], f"setting '{name}' {problem[1]}")
 
 
+def meant_actions(repo: Repository, config: CapabilityConfiguration) -> set[str]:
+    """The actions the capability's unknown action names (RC204) were meant to be, as their
+    did-you-mean names them: a requirement or a task missing one of them is not reported
+    again (RC303, RC304) while the typo stands."""
+    return {
+        meant
+        for name in config.actions
+        if name not in repo.actions and (meant := closest(name, repo.actions)) is not None
+    }
+
+
+def _logics_maybe_meant(repo: Repository, config: CapabilityConfiguration) -> set[str]:
+    """Every logic of an action whose selection names a logic it lacks (RC205): the
+    capability may have meant any of them, so settings for them are not also RC406."""
+    meant: set[str] = set()
+    for action_name, logic_name in config.selected_logics():
+        action = repo.actions.get(action_name)
+        if action is not None and logic_name not in action.model.logics:
+            meant.update(action.model.logics)
+    return meant
+
+
 def check_scenario(
     repo: Repository,
     entry: Entry[ScenarioConfiguration],
@@ -231,10 +257,13 @@ def check_scenario(
                 )
         selected_logics = {s.logic_name: s for s in resolved.all_selections()}
         named = {logic for _, logic in resolved.config.selected_logics()}
+        meant = _logics_maybe_meant(repo, resolved.config)
         for logic_name, values in scenario.logic_settings.items():
             selection = selected_logics.get(logic_name)
             if selection is None and logic_name in named:
                 continue  # its action is unknown or unreadable: reported at the capability
+            if selection is None and logic_name in meant:
+                continue  # the capability's RC205 (a misspelt logic of its action) says it
             if selection is None:
                 report.unknown(
                     entry,
@@ -291,6 +320,7 @@ def check_scenario(
                 environment.knowledge_sets,
             )
 
+    meant = meant_actions(repo, resolved.config) if resolved is not None else set()
     for i, goal in enumerate(scenario.goals):
         task_entry = repo.tasks.get(goal.task)
         if task_entry is None:
@@ -306,6 +336,8 @@ def check_scenario(
         elif (
             resolved is not None
             and implementation_for(task_entry.model, resolved.config.actions) is None
+            # a misspelt action (RC204) may be what the task misses: once is enough
+            and implementation_for(task_entry.model, {*resolved.config.actions, *meant}) is None
         ):
             options = " or ".join(
                 "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations

@@ -330,6 +330,33 @@ def test_restart_starts_a_failed_brain_again_and_status_says_who(
     assert f"restart: {ROBOT} by alice at " in text
 
 
+def test_a_restart_line_goes_once_a_later_request_restarted_the_brain(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    """The screen shows the brain's latest restart: a commit that restarts it after the desk's
+    restart takes `restart: ROBOT by alice at ...` away (table and --json)."""
+    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": "x"})
+    first = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    agent.note_brain(first.pid)
+    assert robotconf("restart", ROBOT, "--as", "alice", broker=mosquitto).returncode == 0
+    again = new_brain(watch, agent, first.pid)
+    assert again.restart_requested_by == "alice"
+    later = make_request(variant=1)  # a later commit; the agent has no reload: a restart
+    publish(mosquitto.url, TOPICS.launch(ROBOT), later.payload())
+    now = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=later.digest)
+    agent.note_brain(now.pid)
+    assert now.pid != again.pid and now.restart_requested_by is None
+    robot = next(r for r in status_json(mosquitto, tmp_path)["robots"] if r["robot_id"] == ROBOT)
+    assert robot["restart"] is None
+    text = subprocess.run(
+        [str(ROBOTCONF), "status", "--broker", mosquitto.url, "--repo", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    ).stdout
+    assert f"{ROBOT} " in text and "restart: " not in text
+
+
 def new_brain(watch: FleetWatch, agent: Any, before: int | None) -> AgentStatus:
     """The robot's status once it runs a brain other than `before`."""
     status = watch.wait_for(

@@ -98,7 +98,23 @@ def test_plan_with_an_invalid_revision_is_a_tool_error(lab: Lab) -> None:
     done = lab.run("plan", "--base", "HEAD")
     assert done.returncode == 2 and "RC403" in done.stderr and "head revision" in done.stderr
     done = lab.run("plan", "--base", "no-such-rev")
-    assert done.returncode == 2 and "no such revision" in done.stderr
+    assert done.returncode == 2
+    assert "base revision does not exist: 'no-such-rev': no such revision" in done.stderr
+
+
+def test_plan_from_a_base_that_does_not_validate_says_it_exists(lab: Lab) -> None:
+    """A base that exists but does not validate is not read as "no such revision": its errors
+    under a heading that says it exists, then why there is no plan."""
+    lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: 7")
+    bad = lab.commit("too fast")
+    lab.replace(DELIVERY, "move_speed: 7", "move_speed: 0.1")
+    done = lab.run("plan", "--base", "HEAD")
+    lines = done.stderr.splitlines()
+    assert done.returncode == 2, done.stderr
+    assert lines[0] == f"robotconf: base revision HEAD ({bad[:12]}) exists but does not validate:"
+    assert "RC403" in lines[1] and len(lines) == 3
+    assert lines[2].startswith(f"robotconf: base revision HEAD ({bad[:12]}) is invalid (1 error")
+    assert "no robot runs it" in lines[2]
 
 
 def test_changed_fields_walks_dicts_and_equal_length_lists() -> None:

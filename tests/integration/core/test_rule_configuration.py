@@ -135,4 +135,6 @@ def test_plan_judges_each_revision_with_its_own_configuration(lab: Lab) -> None:
     lab.remove(CONFIG)
     untuned = lab.commit("the configuration removed, nothing else")
     again = lab.run("plan", "--base", head, "--head", untuned)
-    assert again.returncode == 2 and f"head revision {untuned} is invalid" in again.stderr
+    assert again.returncode == 2 and f"head revision {untuned} ({untuned[:12]}) is invalid" in (
+        again.stderr
+    )

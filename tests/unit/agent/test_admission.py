@@ -86,7 +86,7 @@ def test_schema_violations_are_rejected_with_the_field() -> None:
 def test_a_rejection_names_the_field_as_agent_yaml_and_validate_do() -> None:
     data = json.loads(make_request().payload())
     data["scenario"]["capability"]["tasks"] = ["Delivery", 7]
-    assert "scenario.capability.tasks[1]: Input should be a valid string" in reason(
+    assert "scenario.capability.tasks[1] must be text, got 7 (a whole number)" in reason(
         json.dumps(data).encode()
     )
 

@@ -304,7 +304,7 @@ def test_interfaces_reporting_is_off_unless_configured(tmp_path: Path) -> None:
     [
         ("{command: [x]}", "8: 'interfaces.interval' is required; e.g. interfaces: {interval: 30}"),
         ("{interval: 0}", "8: interfaces.interval: Input should be greater than 0"),
-        ("{interval: '5'}", "8: interfaces.interval: Input should be a valid number"),
+        ("{interval: '5'}", "8: interfaces.interval must be a number, got '5' (text)"),
         ("{interval: 5, timeout: 0}", "8: interfaces.timeout: Input should be greater than 0"),
         ("{interval: 5, intervall: 3}", "8: unknown key 'interfaces.intervall'; did you mean"),
         ("30", "8: interfaces is a mapping of its settings, e.g. interfaces: {interval: 30}"),
@@ -320,3 +320,17 @@ def test_a_bad_interfaces_section_is_one_located_line(
 ) -> None:
     found = problems(tmp_path, GOOD + f"interfaces: {value}\n")
     assert len(found) == 1 and found[0].startswith(expected), found
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        ("fast", "restart.max_restarts must be a whole number, got 'fast' (text)"),
+        ("2.5", "restart.max_restarts must be a whole number, got 2.5 (a number)"),
+        ("[1]", "restart.max_restarts must be a whole number, got a list"),
+    ],
+)
+def test_a_wrong_type_reads_naturally(tmp_path: Path, value: str, expected: str) -> None:
+    text = GOOD.replace("max_restarts: 5", f"max_restarts: {value}")
+    line = next(n for n, row in enumerate(text.splitlines(), 1) if row.startswith("restart:"))
+    assert problems(tmp_path, text) == [f"{line}: {expected}"]

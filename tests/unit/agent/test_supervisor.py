@@ -604,3 +604,29 @@ def test_the_agents_own_shutdown_is_not_deferred() -> None:
 def test_max_defer_zero_ignores_the_hold_file() -> None:
     sup, _ = holding(max_defer=0.0)
     assert sup.accept(LOGIC, [], 5.0) == [Terminate(100)]
+
+
+def test_a_desk_restart_is_shown_until_a_new_request_restarts_the_brain() -> None:
+    """`restart: ROBOT by WHO at WHEN` tells the brain's latest restart, not an old one."""
+    sup = running(supervisor(), pid=100)
+    sup.restart("alice", 1234.5, 5.0)
+    sup.exited(100, -15, 5.5)
+    sup.spawned(101, 6.0)
+    sup.exited(101, 1, 7.0)  # a crash restart after it: RESTARTS counts it, the line stays
+    sup.tick(7.0 + sup.policy.backoff_initial)
+    assert sup.status().restart_requested_by == "alice" and sup.status().restarts == 1
+    sup.accept(LOGIC, [], 20.0)  # a later commit restarts the brain
+    status = sup.status()
+    assert (status.restart_requested_by, status.restart_requested_at) == (None, None)
+
+
+def test_a_reload_keeps_the_desk_restart_and_a_cleared_request_forgets_it() -> None:
+    sup = reloading()
+    sup.restart("alice", 1234.5, 1.0)
+    sup.exited(100, -15, 1.5)
+    sup.spawned(101, 2.0)
+    sup.tick(2.0 + sup.policy.startsecs)
+    sup.accept(B, [], 5.0)  # reloaded: the same process runs on
+    assert sup.status().reloads == 1 and sup.status().restart_requested_by == "alice"
+    sup.clear(6.0)
+    assert sup.status().restart_requested_by is None

@@ -175,4 +175,4 @@ def test_a_domain_out_of_range_is_located_with_the_bound(lab: Lab) -> None:
     lab.replace(ROBOTICS_LAB, "ros_domain_id: 1", "ros_domain_id: '1'")
     d = lab.only("RC103")
     assert (d.path, d.line) == (ROBOTICS_LAB, lab.line_of(ROBOTICS_LAB, "ros_domain_id"))
-    assert d.message == "ros_domain_id must be a whole number, got '1'"
+    assert d.message == "ros_domain_id must be a whole number, got '1' (text)"

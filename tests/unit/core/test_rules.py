@@ -57,9 +57,24 @@ def test_unknown_action_points_at_the_key(lab: Lab) -> None:
     assert "unknown action 'Folow'; did you mean 'Follow'?" in rc204[0].message
     text = lab.read(CAMERA).splitlines()[rc204[0].line - 1]
     assert text[rc204[0].col - 1 :].startswith("Folow")
-    # The scenario built on it can no longer reach Delivery; its follow_with_poses settings
-    # are not reported a second time.
-    assert {d.code for d in found} == {"RC204", "RC304"}
+    # One typo, one error: the scenario's Delivery, which needs Follow, is not also "not
+    # achievable" (RC304), nor are its follow_with_poses settings reported.
+    assert [d.code for d in found] == ["RC204"]
+
+
+def test_a_misspelt_action_is_not_also_a_missing_requirement(lab: Lab) -> None:
+    """SendGoalId requires AskHelp: `AskHlp` is RC204 alone, not also RC303 and RC304."""
+    lab.replace(CAMERA, "AskHelp: ask_help_broadcast", "AskHlp: ask_help_broadcast")
+    assert "did you mean 'AskHelp'?" in lab.only("RC204").message
+
+
+def test_what_a_typo_does_not_explain_is_still_reported(lab: Lab) -> None:
+    """Follow misspelt and AskHelp gone: AskHelp's absence is no typo's, RC303 and RC304 stay."""
+    lab.replace(CAMERA, "AskHelp: ask_help_broadcast, ", "")
+    lab.replace(CAMERA, "Follow: follow_with_poses", "Folow: follow_with_poses")
+    found = lab.check().diagnostics
+    assert sorted(d.code for d in found) == ["RC204", "RC303", "RC304"]
+    assert "requires action 'AskHelp'" in next(d for d in found if d.code == "RC303").message
 
 
 def test_action_not_on_platform(lab: Lab) -> None:
@@ -69,9 +84,19 @@ def test_action_not_on_platform(lab: Lab) -> None:
 
 
 def test_unknown_logic_of_action(lab: Lab) -> None:
+    """One typo, one error: the scenario's settings for follow_with_poses (which the typo
+    meant) are not also "not selected" (RC406)."""
+    assert "follow_with_poses:" in lab.read(DELIVERY)
     lab.replace(CAMERA, "Follow: follow_with_poses", "Follow: follow_with_pose")
-    d = lab.diagnostics("RC205")
-    assert len(d) == 1 and "did you mean 'follow_with_poses'" in d[0].message
+    d = lab.only("RC205")
+    assert "did you mean 'follow_with_poses'" in d.message
+
+
+def test_settings_of_another_actions_logic_are_still_refused_beside_a_typo(lab: Lab) -> None:
+    """Only logics of the action whose selection has the typo are spared RC406."""
+    lab.replace(CAMERA, "Follow: follow_with_poses", "Follow: follow_with_pose")
+    lab.replace(DELIVERY, "logic_settings:\n", "logic_settings:\n  open_by_sending_signal: {}\n")
+    assert sorted(d.code for d in lab.check().diagnostics) == ["RC205", "RC406"]
 
 
 def test_unknown_capability(lab: Lab) -> None:
@@ -201,7 +226,7 @@ def test_unknown_logic_setting(lab: Lab) -> None:
 def test_setting_of_wrong_type(lab: Lab) -> None:
     lab.replace(DELIVERY, "move_speed: 0.1", "move_speed: fast")
     d = lab.only("RC402")
-    assert "must be a number" in d.message
+    assert d.message.endswith("must be a number, got 'fast' (text)")
     assert lab.read(DELIVERY).splitlines()[d.line - 1][d.col - 1 :].startswith("fast")
 
 
@@ -211,9 +236,26 @@ def test_integer_setting_refuses_a_fraction_and_a_boolean(lab: Lab) -> None:
         "capability: turtlebot3-bluetooth\nlogic_settings:\n"
         "  follow_with_bluetooth: {rssi_threshold: -50.5}\n",
     )
-    assert "whole number" in lab.only("RC402").message
+    assert lab.only("RC402").message.endswith("must be a whole number, got -50.5 (a number)")
     lab.replace("configs/scenarios/bt.yaml", "-50.5", "true")
-    assert lab.only("RC402")
+    assert lab.only("RC402").message.endswith("must be a whole number, got true")
+
+
+@pytest.mark.parametrize(
+    ("value", "code", "expected"),
+    [
+        ("[1, 2]", "RC103", "or text, got a list"),
+        ("{a: 1}", "RC103", "or text, got a mapping"),
+        ("'yes'", "RC402", "must be true or false, got 'yes' (text)"),
+        ("2", "RC402", "must be true or false, got 2 (a whole number)"),
+        ("0.5", "RC402", "must be true or false, got 0.5 (a number)"),
+    ],
+)
+def test_type_errors_name_what_was_given(lab: Lab, value: str, code: str, expected: str) -> None:
+    """Booleans, lists, mappings, text and numbers each read as `must be X, got V (kind)`."""
+    guide = "configs/scenarios/guide-gazebo.yaml"
+    lab.replace(guide, "{open_timeout: 15}", f"{{open_timeout: 15, wait_until_open: {value}}}")
+    assert lab.only(code).message.endswith(expected)
 
 
 def test_setting_out_of_range(lab: Lab) -> None:

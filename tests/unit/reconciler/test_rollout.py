@@ -10,6 +10,7 @@ import pytest
 from configurator.render import FleetRender, render_fleet
 from configurator.wire import AgentState, AgentStatus, RolloutStatus
 from reconciler.rollout import RolloutInput, RolloutStep, roll_out
+from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab
 
 ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]
@@ -153,6 +154,12 @@ def test_healthy_waves_advance_in_order_until_complete(
     assert published(third, head) == ROBOTS
     done = step(head, stable, held(head), running(head, ROBOTS), third, now=T0 + 40)
     assert done.complete and done.status is not None and done.status.state == "Complete"
+    # Rolled out: the head is the stable revision now (`stable -` or the old one was a lie).
+    assert (done.status.revision, done.status.stable_revision) == ("b" * 40, "b" * 40)
+    assert rollout_line(done.status).startswith(
+        f"rollout: {'b' * 12} Complete, wave 3/3 (all): 0 healthy, 0 failed, 0 pending; "
+        f"stable {'b' * 12}"
+    )
 
 
 @pytest.mark.parametrize("state", [AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED])
