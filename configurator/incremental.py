@@ -29,6 +29,7 @@ from typing import Any, TypeVar
 
 from configurator.diagnostics import Diagnostic
 from configurator.gcpause import collector_paused
+from configurator.launch import LaunchScenario, canonical_json
 from configurator.loader import LoadedFile, load_repository
 from configurator.render import FleetRender, render_fleet, request_for, scenario_requests
 from configurator.rendered import RenderedRequest, ScenarioRequests
@@ -223,6 +224,14 @@ def changes(before: Snapshot, after: Snapshot) -> set[Dep]:
             if (was is _MISSING) != (now is _MISSING):
                 changed.add(("has", container, name))
     return changed
+
+
+def same_content(before: LaunchScenario, after: LaunchScenario) -> bool:
+    """The same request content, byte for byte: `==` alone would take `1` for `1.0` (and
+    `True` for `1`), which JSON, and so the robot and the digest, tell apart."""
+    return before == after and canonical_json(before.model_dump(mode="json")) == canonical_json(
+        after.model_dump(mode="json")
+    )
 
 
 @dataclass
@@ -434,7 +443,7 @@ class BuildCache:
                     before: ScenarioRequests | None = None if found is None else found.value
                     if (
                         before is not None
-                        and before.scenario == made.scenario
+                        and same_content(before.scenario, made.scenario)
                         and before.ros_domain_id == made.ros_domain_id
                     ):
                         made = before  # the same content: its robots need nothing new

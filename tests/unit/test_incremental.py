@@ -536,3 +536,16 @@ def test_a_domain_changed_in_a_commit_is_judged_and_rendered_again() -> None:
     }
     assert cache_.stats.robots_rendered == 2  # the environment's robots, no other
     assert_same_fleet(rendered, full_build(parted, "5" * 40)[1])
+
+
+def test_a_number_written_another_way_renders_the_bytes_a_full_build_does(built: Any) -> None:
+    """`1` and `1.0` are equal in Python but not in JSON: the request carries what the file
+    says, so a scenario whose content compares equal but serialises differently is new."""
+    cache_, files, _ = built
+    path = "configs/scenarios/scenario-0003.yaml"
+    one_point_o = _edit(files, path, b"ROLE:", b"EXTRA: 1.0\n  ROLE:")
+    incremental_build(cache_, one_point_o, "2" * 40)
+    one = _edit(files, path, b"ROLE:", b"EXTRA: 1\n  ROLE:")
+    checked, rendered = incremental_build(cache_, one, "3" * 40)
+    assert checked.ok and isinstance(rendered, FleetRender)
+    assert_same_fleet(rendered, full_build(one, "3" * 40)[1])
