@@ -51,7 +51,13 @@ from reconciler.observed import (
     summarise_launches,
 )
 from reconciler.report import Followed, StatusWriter, one_line, status_of
-from reconciler.retained import Ignored, Presence, RetainedView, read_object, take_snapshot
+from reconciler.retained import (
+    Ignored,
+    Presence,
+    RetainedView,
+    read_object,
+    take_snapshot_said,
+)
 from reconciler.source import BranchSource
 from reconciler.wave_memory import WaveRecord
 
@@ -601,7 +607,7 @@ class Controller:
         if not resync and connection == self._sampled_connection:
             return set()
         self._sampled_connection = connection
-        statuses = take_snapshot(
+        statuses, lost = take_snapshot_said(
             self.connection,
             [self.topics.all_status],
             f"{self.topics.prefix}/sync",
@@ -611,6 +617,13 @@ class Controller:
         if statuses is None:
             log.info("no status sample from the broker this time")
             return set()
+        if lost is not None:
+            # What it lacks may be a robot still running: act on what arrived, say the rest.
+            log.warning(
+                "the status sample lacks messages the broker dropped (%s); raise its "
+                "max_queued_messages (robotconf broker-config sets it for the fleet)",
+                lost,
+            )
         return parse_retained(statuses, self.topics, ignored=self.ignored).active()
 
     def _recover_serving(self, head: str | None) -> None:

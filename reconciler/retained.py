@@ -594,11 +594,19 @@ def take_snapshot(
 ) -> dict[str, bytes] | None:
     """The retained messages under `filters` right now, over a connection of its own; None
     when the broker does not answer within `timeout` seconds."""
+    return take_snapshot_said(connection, filters, marker_topic, role, timeout)[0]
+
+
+def take_snapshot_said(
+    connection: Connection, filters: Sequence[str], marker_topic: str, role: str, timeout: float
+) -> tuple[dict[str, bytes] | None, str | None]:
+    """`take_snapshot`, and how the snapshot is known to lack messages the broker dropped
+    (`RetainedView.lost`), or None: for a caller that says so to its user."""
     view = RetainedView(connection, filters, marker_topic, role=role)
     view.start()
     try:
         if not view.wait_synced(timeout):
-            return None
-        return view.snapshot()
+            return None, None
+        return view.snapshot(), view.lost
     finally:
         view.stop()

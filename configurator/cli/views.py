@@ -27,7 +27,7 @@ from configurator.plan import (
 )
 from configurator.render import FleetRender, RenderError, render_robot
 from configurator.source import SourceError
-from configurator.textsafe import json_printable
+from configurator.textsafe import json_printable, printable
 from configurator.tree import (
     CapabilityTree,
     action_label,
@@ -182,11 +182,11 @@ def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
     """Each robot's retained interfaces report (or why it cannot be read); None, said on
     stderr, when the broker does not answer: the plan stands without drift."""
     from reconciler.observed import parse_retained
-    from reconciler.retained import take_snapshot
+    from reconciler.retained import take_snapshot_said
 
     connection = mqtt.connection()
     topics = Topics(mqtt.prefix)
-    messages = take_snapshot(
+    messages, lost = take_snapshot_said(
         connection, [topics.all_interfaces], f"{mqtt.prefix}/sync", "plan", wait
     )
     if messages is None:
@@ -195,6 +195,12 @@ def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
             "drift is not judged (--wait S)\n"
         )
         return None
+    if lost is not None:
+        sys.stderr.write(
+            f"robotconf: note: the broker dropped retained messages ({printable(lost)}): "
+            "drift is judged only for the robots whose interfaces arrived; raise its "
+            "max_queued_messages (robotconf broker-config sets it for the fleet)\n"
+        )
     seen = parse_retained(messages, topics)
     return {r: (robot.interfaces, robot.interfaces_error) for r, robot in seen.robots.items()}
 
