@@ -196,21 +196,28 @@ class WorkdirLock:
         """The pid of the agent holding this lock (0 if it has not written it yet), None when
         nobody does: the kernel releases the lock of a dead agent, so no lock is ever stale."""
         try:
-            fd = os.open(self._path, os.O_RDONLY | os.O_CLOEXEC)
+            return lock_holder(self._path)
         except FileNotFoundError:
             return None
-        try:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-            except OSError:
-                raw = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-                return int(raw) if raw.isdigit() else 0
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            return None
-        finally:
-            os.close(fd)
 
     def release(self) -> None:
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
+
+
+def lock_holder(path: Path) -> int | None:
+    """The pid written in a held flock file (0 if not written yet), None when nobody holds it:
+    the kernel drops the lock of a dead holder, so a held lock is never stale. Raises OSError
+    when the file cannot be opened."""
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError:
+            raw = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+            return int(raw) if raw.isdigit() else 0
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)

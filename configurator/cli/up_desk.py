@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 from dataclasses import dataclass
@@ -114,20 +113,12 @@ def _read(path: Path) -> UpDesk | None:
 def _running(desk: UpDesk) -> bool:
     """True while the `up` that wrote `desk` holds its lock: the kernel drops a flock when its
     holder dies, so a killed `up` is never taken for a running one."""
+    from agent.workdir import lock_holder
+
     try:
-        fd = os.open(desk.lock, os.O_RDONLY | os.O_CLOEXEC)
+        return lock_holder(desk.lock) == desk.pid
     except OSError:
         return False
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except OSError:
-            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-            return holder == str(desk.pid)
-        fcntl.flock(fd, fcntl.LOCK_UN)  # nobody holds it: that `up` is gone
-        return False
-    finally:
-        os.close(fd)
 
 
 def _shown(path: Path) -> str:
