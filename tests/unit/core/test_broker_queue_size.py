@@ -16,7 +16,7 @@ def test_the_queue_holds_twice_the_fleet_s_retained_messages() -> None:
 
 
 def test_the_generated_config_sets_it_and_says_why() -> None:
-    conf = render_conf(Listener(), 8884, Path("/etc/mosquitto/robotconf"), 10_000)
+    conf = render_conf(Listener(), 8884, Path("/etc/robotconf"), 10_000)
     assert "\nmax_queued_messages 81000\n" in conf
     # Global, so before the first listener, and explained.
     assert conf.index("max_queued_messages") < conf.index("listener ")
