@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.fleet import STARTED, kill_leftovers
 from tests.support.lab import Lab
 from tests.support.mosquitto import Mosquitto, find_mosquitto
 from tests.support.watch import FleetWatch
@@ -47,6 +48,16 @@ def temporary_files_checked(pytestconfig: pytest.Config) -> Iterator[None]:
     folder = pytestconfig.stash[_session_tmp]
     left = sorted(entry.name for entry in folder.iterdir())
     assert not left, f"tests left these in the temporary folder (use tmp_path): {left}"
+
+
+@pytest.fixture(autouse=True)
+def processes_ended() -> Iterator[None]:
+    """A test that fails half-way leaves no process of it running (a `status --watch`, an
+    agent): they would outlive the run and load the machine. Fixtures of a wider scope are
+    set up before this one: what they start is theirs to end."""
+    since = len(STARTED)
+    yield
+    kill_leftovers(since)
 
 
 @pytest.fixture

@@ -80,6 +80,11 @@ class GitLab(Lab):
         return sorted(fleet["robots"])
 
 
+# Every Proc started and not yet reaped: `kill_leftovers` (an autouse fixture of
+# tests/conftest.py) ends those a failed test left running, so none outlives its test.
+STARTED: list[Proc] = []
+
+
 class Proc:
     """A background process with its output in a log file."""
 
@@ -95,6 +100,7 @@ class Proc:
                 cwd=cwd,
                 start_new_session=True,
             )
+        STARTED.append(self)
 
     @property
     def pid(self) -> int:
@@ -120,6 +126,17 @@ class Proc:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(self.popen.pid, signal.SIGKILL)
         self.popen.wait()
+
+
+def kill_leftovers(since: int = 0) -> int:
+    """Kills every Proc started since the `since`-th (len(STARTED) then) still running, each
+    with its whole session; returns how many there were. Those started before (by a fixture
+    of a wider scope, set up first) are left to their fixture."""
+    alive = [proc for proc in STARTED[since:] if proc.popen.poll() is None]
+    for proc in alive:
+        proc.kill()
+    del STARTED[since:]
+    return len(alive)
 
 
 def start_agent(lab: GitLab, robot_id: str, url: str, folder: Path) -> Proc:
