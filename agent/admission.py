@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.launch import (
+from contract.launch import (
     API_VERSION,
     LaunchRequest,
     RestartRequest,
@@ -21,9 +21,9 @@ from configurator.launch import (
     canonical_json,
     template_mismatch,
 )
-from configurator.safejson import PayloadError, parse_object
-from configurator.typing_errors import error_line
-from configurator.wire import LogsRequest, RobotDescription
+from contract.safejson import PayloadError, parse_object
+from contract.typing_errors import error_line
+from contract.wire import LogsRequest, RobotDescription
 
 
 @dataclass(frozen=True)

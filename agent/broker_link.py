@@ -31,9 +31,9 @@ from agent.events import (
     StatusMessage,
 )
 from agent.workdir import SeqStore
-from configurator.backoff import Backoff
-from configurator.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
-from configurator.wire import AgentState, AgentStatus, RobotDescription, Topics
+from contract.backoff import Backoff
+from contract.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
+from contract.wire import AgentState, AgentStatus, RobotDescription, Topics
 
 log = logging.getLogger("robotconf.agent.broker_link")
 

@@ -17,9 +17,9 @@ from agent import parent_death, process
 from agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
 from agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
 from agent.workdir import WorkdirLock
-from configurator.cli.errors import CliError, ExitCode
-from configurator.logsafe import SafeFormatter
-from configurator.signing import SigningKeyError
+from contract.errors import CliError, ExitCode
+from contract.logsafe import SafeFormatter
+from contract.signing import SigningKeyError
 
 PROG = "robotconf agent"
 

@@ -24,12 +24,12 @@ from pydantic import (
 )
 from pydantic_core import ErrorDetails
 
-from configurator.diagnostics import did_you_mean
-from configurator.files import read_regular
-from configurator.mqtt import Connection
 from configurator.types import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
-from configurator.typing_errors import error_path, error_text, type_error_text
-from configurator.wire import (
+from contract.diagnostics import did_you_mean
+from contract.files import read_regular
+from contract.mqtt import Connection
+from contract.typing_errors import error_path, error_text, type_error_text
+from contract.wire import (
     BROKER_ENV,
     DEFAULT_BROKER,
     DEFAULT_PREFIX,
@@ -37,7 +37,7 @@ from configurator.wire import (
     parse_broker_url,
     validate_prefix,
 )
-from configurator.yamlio import (
+from contract.yamlio import (
     MAX_FILE_BYTES,
     YamlDocument,
     YamlProblem,
@@ -444,7 +444,7 @@ def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc
             ),
         )
     if config.public_key is not None:
-        from configurator.signing import SigningKeyError, load_public_key
+        from contract.signing import SigningKeyError, load_public_key
 
         try:
             load_public_key(config.public_key)

@@ -19,16 +19,16 @@ from pathlib import Path
 
 from agent import process
 from agent.config import InterfacesConfig
-from configurator.interfaces import (
+from contract.interfaces import (
     MAX_INTERFACE_NAME,
     MAX_INTERFACES,
     MAX_INTERFACES_BYTES,
     Interface,
     RobotInterfaces,
 )
-from configurator.safejson import PayloadError, parse_object
-from configurator.textsafe import printable
-from configurator.wire import now as now_wall
+from contract.safejson import PayloadError, parse_object
+from contract.textsafe import printable
+from contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent.interfaces")
 

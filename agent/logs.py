@@ -22,7 +22,7 @@ from agent.redact import (
     key_fragment,
     pem_state_after,
 )
-from configurator.wire import (
+from contract.wire import (
     LOG_FOLLOW_TTL,
     MAX_LOG_MESSAGE_BYTES,
     LogsChunk,

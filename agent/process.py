@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.workdir import write_atomic
-from configurator.launch import LaunchRequest
+from contract.launch import LaunchRequest
 
 log = logging.getLogger("robotconf.agent.process")
 

@@ -63,12 +63,12 @@ from agent.workdir import (
     remove_hold,
     write_atomic,
 )
-from configurator.interfaces import RobotInterfaces
-from configurator.launch import LaunchRequest
-from configurator.safejson import PayloadError, parse_object
-from configurator.throttle import Throttle
-from configurator.wire import AgentState, AgentStatus
-from configurator.wire import now as now_wall
+from contract.interfaces import RobotInterfaces
+from contract.launch import LaunchRequest
+from contract.safejson import PayloadError, parse_object
+from contract.throttle import Throttle
+from contract.wire import AgentState, AgentStatus
+from contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
 # The robot whose agent runs right now on this thread: one process may host several, and each
@@ -131,7 +131,7 @@ class Agent:
         )
         self.verify: admission.Verifier | None = None
         if config.public_key is not None:
-            from configurator.signing import load_public_key, verify_object
+            from contract.signing import load_public_key, verify_object
 
             key = load_public_key(config.public_key)
             self.verify = lambda data: verify_object(data, key)

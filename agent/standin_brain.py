@@ -19,7 +19,7 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from configurator.launch import LaunchRequest
+    from contract.launch import LaunchRequest
 
 
 def describe(request: LaunchRequest, environ: Mapping[str, str]) -> list[str]:
@@ -99,7 +99,7 @@ def hold(path: Path, seconds: float | None, marker: Path | None, stop: threading
 
 def _read(path: Path) -> LaunchRequest:
     """The request in `path`; raises OSError or pydantic's ValidationError."""
-    from configurator.launch import LaunchRequest
+    from contract.launch import LaunchRequest
 
     return LaunchRequest.model_validate_json(path.read_bytes())
 

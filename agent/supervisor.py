@@ -11,9 +11,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
-from configurator.backoff import exponential_delay
-from configurator.launch import LaunchRequest
-from configurator.wire import AgentState, AgentStatus
+from contract.backoff import exponential_delay
+from contract.launch import LaunchRequest
+from contract.wire import AgentState, AgentStatus
 
 # ---------------------------------------------------------------- effects for the runtime
 

@@ -12,7 +12,7 @@ import os
 import threading
 from pathlib import Path
 
-from configurator.files import write_atomic
+from contract.files import write_atomic
 
 __all__ = ["write_atomic"]  # kept here too: the agent's modules import it from its workdir
 

@@ -30,7 +30,7 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
-from configurator.wire import AgentState, AgentStatus, Topics  # noqa: E402
+from contract.wire import AgentState, AgentStatus, Topics  # noqa: E402
 from tests.support.agents import make_request  # noqa: E402
 from tests.support.mosquitto import Mosquitto  # noqa: E402
 

@@ -19,10 +19,10 @@ import time
 from pathlib import Path
 
 from configurator.drift import DriftMemo, Need, drift_of, needs_of_rendered
-from configurator.interfaces import Interface, KeptInterfaces, RobotInterfaces
 from configurator.render import render_fleet
 from configurator.rendered import RenderedRequest
 from configurator.workspace import check
+from contract.interfaces import Interface, KeptInterfaces, RobotInterfaces
 
 ROOT = Path(__file__).resolve().parents[1]
 

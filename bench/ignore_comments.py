@@ -29,7 +29,7 @@ import generate  # bench/generate.py, next to this file
 
 from configurator.ruleconfig import ignore_comments, judge
 from configurator.workspace import check
-from configurator.yamlio import parse_document
+from contract.yamlio import parse_document
 
 FLEET = "configs/fleet.yaml"
 COMMENT = b"  # robotconf: ignore RC505"

@@ -36,7 +36,7 @@ import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
 from agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install  # noqa: E402
-from configurator.wire import Topics  # noqa: E402
+from contract.wire import Topics  # noqa: E402
 from tests.support.agents import agent_argv, make_request  # noqa: E402
 from tests.support.mosquitto import Mosquitto  # noqa: E402
 

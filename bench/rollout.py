@@ -63,8 +63,8 @@ from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
 from configurator.brokerconf import queue_lines  # noqa: E402
 from configurator.render import render_fleet  # noqa: E402
-from configurator.wire import AgentStatus  # noqa: E402
 from configurator.workspace import check  # noqa: E402
+from contract.wire import AgentStatus  # noqa: E402
 from tests.support.mosquitto import find_mosquitto, free_port  # noqa: E402
 from tests.support.watch import FleetWatch  # noqa: E402
 
@@ -79,7 +79,7 @@ TIMEOUT = 120.0
 ROBOTCONF = [
     sys.executable,
     "-c",
-    "import sys; from configurator.cli import main; sys.exit(main())",
+    "import sys; from workstation.cli import main; sys.exit(main())",
 ]
 TARGETS = {100: (1.0, None), 1000: (3.0, 10.0)}  # size: (p50 seconds, ratio to the floor)
 WAVE_GAP_TARGET = 0.1  # seconds from a wave's last healthy robot to the next wave's publish

@@ -19,7 +19,7 @@ from typing import Any
 
 from configurator.render import FleetRender
 from configurator.types import RolloutPolicy, Wave
-from configurator.wire import AgentState, AgentStatus
+from contract.wire import AgentState, AgentStatus
 from reconciler.rollout import RolloutInput, RolloutStep, roll_out
 
 T0 = 1_000_000.0

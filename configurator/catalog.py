@@ -1,5 +1,5 @@
 """What exists: a summary of the catalogue for `robotconf catalog` (JSON, and the words of its
-text form, which configurator/cli/views.py draws)."""
+text form, which workstation/cli/views.py draws)."""
 
 from __future__ import annotations
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 
-from configurator.diagnostics import describe_value
 from configurator.types import (
     Action,
     Environment,
@@ -20,6 +19,7 @@ from configurator.types import (
     SettingDefinition,
     Task,
 )
+from contract.diagnostics import describe_value
 
 
 def template_gaps(logic: Logic, template: RobotTemplate) -> list[str]:

@@ -14,15 +14,6 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from configurator.diagnostics import did_you_mean
-from configurator.interfaces import (
-    KIND_OF_MAPPING,
-    MAX_INTERFACES,
-    Interface,
-    InterfaceKind,
-    RobotInterfaces,
-    same_type,
-)
 from configurator.repository import Repository
 from configurator.rosnames import (
     UnresolvableName,
@@ -32,6 +23,15 @@ from configurator.rosnames import (
 )
 from configurator.types import MappingBinding, MappingKind, MappingScheme, RobotTemplate
 from configurator.types import SettingDefinition as Setting
+from contract.diagnostics import did_you_mean
+from contract.interfaces import (
+    KIND_OF_MAPPING,
+    MAX_INTERFACES,
+    Interface,
+    InterfaceKind,
+    RobotInterfaces,
+    same_type,
+)
 
 # The ROS graph's own plumbing, which no brain is configured with: a draft leaves it out.
 INFRASTRUCTURE_TOPICS = frozenset({"/rosout", "/parameter_events"})

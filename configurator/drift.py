@@ -10,7 +10,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from configurator.interfaces import (
+from configurator.rendered import RenderedRequest
+from configurator.rosnames import resolve_in
+from configurator.types import Action
+from contract.interfaces import (
     KIND_OF_MAPPING,
     InterfacesVerdict,
     Reported,
@@ -18,10 +21,7 @@ from configurator.interfaces import (
     interfaces_verdict,
     same_type,
 )
-from configurator.launch import LaunchCapability, LaunchRequest
-from configurator.rendered import RenderedRequest
-from configurator.rosnames import resolve_in
-from configurator.types import Action
+from contract.launch import LaunchCapability, LaunchRequest
 
 DriftPolicy = Literal["warn", "hold"]
 DRIFT_POLICIES: tuple[DriftPolicy, ...] = ("warn", "hold")

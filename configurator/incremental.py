@@ -27,9 +27,7 @@ from collections.abc import Hashable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-from configurator.diagnostics import Diagnostic
 from configurator.gcpause import collector_paused
-from configurator.launch import LaunchScenario, canonical_json
 from configurator.loader import LoadedFile, load_repository
 from configurator.render import FleetRender, render_fleet, request_for, scenario_requests
 from configurator.rendered import RenderedRequest, ScenarioRequests
@@ -39,6 +37,8 @@ from configurator.rules.report import Reporter
 from configurator.source import Source
 from configurator.types import RobotAssignment
 from configurator.workspace import Checked, judged
+from contract.diagnostics import Diagnostic
+from contract.launch import LaunchScenario, canonical_json
 
 V = TypeVar("V")
 

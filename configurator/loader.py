@@ -13,7 +13,6 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ValidationError
 
-from configurator.diagnostics import Diagnostic, Severity
 from configurator.repository import Entry, Platform, Repository
 from configurator.ruleconfig import IgnoreComment, ignore_comments
 from configurator.source import RULE_CONFIGURATION, FileTooLarge, Source
@@ -29,8 +28,9 @@ from configurator.types import (
     ScenarioConfiguration,
     Task,
 )
-from configurator.typing_errors import typing_diagnostics
-from configurator.yamlio import YamlDocument, YamlReadError, parse_document
+from contract.diagnostics import Diagnostic, Severity
+from contract.typing_errors import typing_diagnostics
+from contract.yamlio import YamlDocument, YamlReadError, parse_document
 
 
 @dataclass(frozen=True)

@@ -7,13 +7,13 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
-from configurator.interfaces import Reported as Report
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
-from configurator.textsafe import markdown_code, markdown_text, printable_lines
 from configurator.types import RolloutPolicy
 from configurator.waves import assign_waves
-from configurator.wire import short_rev
+from contract.interfaces import Reported as Report
+from contract.textsafe import markdown_code, markdown_text, printable_lines
+from contract.wire import short_rev
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
 

@@ -10,10 +10,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from configurator.composition import achievable_tasks, find_location
-from configurator.diagnostics import did_you_mean
 from configurator.drift import logics_needing
 from configurator.gcpause import collector_paused
-from configurator.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
 from configurator.rendered import RenderedRequest, ScenarioRequests
 from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
@@ -27,6 +25,8 @@ from configurator.types import (
     logic_choice,
     logic_names,
 )
+from contract.diagnostics import did_you_mean
+from contract.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
 
 
 class RenderError(Exception):

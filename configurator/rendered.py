@@ -14,7 +14,9 @@ import secrets
 from json.encoder import encode_basestring
 from typing import Any
 
-from configurator.launch import (
+from configurator.rosnames import resolve_in
+from configurator.types import MappingBinding
+from contract.launch import (
     LaunchCapability,
     LaunchRequest,
     LaunchScenario,
@@ -22,8 +24,6 @@ from configurator.launch import (
     digest_content,
     restart_content_of,
 )
-from configurator.rosnames import resolve_in
-from configurator.types import MappingBinding
 
 # The bytes between the slots, and each slot's index in a robot's values (`_values`).
 _Template = tuple[tuple[bytes, ...], tuple[int, ...]]

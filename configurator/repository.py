@@ -22,7 +22,7 @@ from configurator.types import (
     ScenarioConfiguration,
     Task,
 )
-from configurator.yamlio import YamlDocument
+from contract.yamlio import YamlDocument
 
 M = TypeVar("M", bound=BaseModel)
 

@@ -11,10 +11,10 @@ from typing import Protocol
 
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from configurator.codes import RULES, Severity
-from configurator.diagnostics import Diagnostic, did_you_mean
 from configurator.types import RuleConfiguration
-from configurator.yamlio import YamlDocument, decode
+from contract.codes import RULES, Severity
+from contract.diagnostics import Diagnostic, did_you_mean
+from contract.yamlio import YamlDocument, decode
 
 
 class Configured(Protocol):

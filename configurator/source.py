@@ -14,8 +14,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import IO, Protocol
 
-from configurator.files import NotRegularFile, file_kind, read_regular
-from configurator.yamlio import MAX_FILE_BYTES
+from contract.files import NotRegularFile, file_kind, read_regular
+from contract.yamlio import MAX_FILE_BYTES
 
 ROOTS = ("configs", "models")
 # The one file read outside ROOTS: the lab's rule configuration (configurator/ruleconfig.py).

@@ -1,6 +1,6 @@
 """The capability tree (tasks > actions > logics): what is chosen, what could be, and why not.
 
-The words of each node are here; `robotconf tree` draws them (configurator/cli/views.py).
+The words of each node are here; `robotconf tree` draws them (workstation/cli/views.py).
 """
 
 from __future__ import annotations

@@ -20,16 +20,16 @@ from typing import Protocol
 
 from pydantic import ValidationError
 
-from configurator.backoff import Backoff
-from configurator.interfaces import Reported
-from configurator.launch import LaunchRequest, StopRequest
-from configurator.mqtt import Connection
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
-from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
-from configurator.signing import Signed
 from configurator.source import SourceError
-from configurator.wire import (
+from contract.backoff import Backoff
+from contract.interfaces import Reported
+from contract.launch import LaunchRequest, StopRequest
+from contract.mqtt import Connection
+from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError
+from contract.signing import Signed
+from contract.wire import (
     AgentState,
     AgentStatus,
     ReconcilerStatus,
@@ -75,7 +75,7 @@ Builder = Callable[[Path, str], Desired]
 
 
 class Signer(Protocol):
-    """Signs a launch or a stop request (configurator.signing.sign with the reconciler's key)."""
+    """Signs a launch or a stop request (contract.signing.sign with the reconciler's key)."""
 
     def __call__(self, request: Signed, /) -> Signed: ...
 

@@ -11,10 +11,10 @@ from collections.abc import Mapping, Set
 from dataclasses import dataclass, field, replace
 
 from configurator.drift import Drift, drift_of, needs_of_rendered
-from configurator.interfaces import Reported
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
-from configurator.wire import (
+from contract.interfaces import Reported
+from contract.wire import (
     MAX_LISTED,
     AgentStatus,
     HeldRobot,

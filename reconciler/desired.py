@@ -9,8 +9,8 @@ from pathlib import Path
 from configurator.incremental import BuildCache
 from configurator.render import FleetRender, RenderError, render_fleet
 from configurator.source import SourceError
-from configurator.wire import ReconcilerReason, StatusDiagnostic
 from configurator.workspace import check
+from contract.wire import ReconcilerReason, StatusDiagnostic
 
 MAX_DIAGNOSTICS = 50  # a retained status message must stay small
 FLEET_FILE = "configs/fleet.yaml"

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from configurator.drift import Drift
-from configurator.textsafe import chat_text
-from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
+from contract.textsafe import chat_text
+from contract.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
 
 SETTLE = 5.0  # seconds a robot told degraded or offline runs the desired request before in sync
 REMEMBERED = 64  # revisions remembered as told: a commit refused long ago is not told again

@@ -23,8 +23,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
-from configurator.textsafe import printable
-from configurator.throttle import Throttle
+from contract.textsafe import printable
+from contract.throttle import Throttle
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -21,7 +21,7 @@ from prometheus_client import (
 )
 
 from configurator.drift import Drift
-from configurator.wire import ReconcilerReason
+from contract.wire import ReconcilerReason
 from reconciler.decide import state_of
 from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
 from reconciler.notify import OUTCOMES

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import unquote, urlsplit, urlunsplit
 
-from configurator.backoff import Backoff
+from contract.backoff import Backoff
 from reconciler.events import Event
 
 log = logging.getLogger("robotconf.reconciler")
@@ -413,7 +413,7 @@ class Notifier:
 
     def tell(self, events: Sequence[Event]) -> None:
         for event in events:
-            # The message quotes robots: the log's formatter (configurator.logsafe) escapes it.
+            # The message quotes robots: the log's formatter (contract.logsafe) escapes it.
             log.info("event %s: %s", event.kind.value, event.message)
             for sender in self.senders:
                 sender.put(event)

@@ -12,15 +12,15 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from configurator.interfaces import (
+from contract.interfaces import (
     MAX_INTERFACES,
     MAX_INTERFACES_BYTES,
     KeptInterfaces,
     RobotInterfaces,
 )
-from configurator.launch import LaunchRequest, StopRequest, canonical_json
-from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError
-from configurator.wire import (
+from contract.launch import LaunchRequest, StopRequest, canonical_json
+from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError
+from contract.wire import (
     ACTIVE_STATES,
     AgentStatus,
     ReconcilerStatus,

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 from pydantic import ValidationError
 
 from configurator.rendered import RenderedRequest
-from configurator.safejson import PayloadError
-from configurator.wire import ReconcilerStatus, Topics, now
+from contract.safejson import PayloadError
+from contract.wire import ReconcilerStatus, Topics, now
 from reconciler.decide import Condition, Reason
 from reconciler.desired import Desired
 from reconciler.diff import Actions

@@ -23,9 +23,9 @@ from paho.mqtt.enums import MQTTProtocolVersion
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from configurator.gcpause import collector_paused
-from configurator.mqtt import Connection, make_client
-from configurator.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
-from configurator.throttle import Throttle
+from contract.mqtt import Connection, make_client
+from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
+from contract.throttle import Throttle
 
 log = logging.getLogger("robotconf.mqtt")
 

@@ -18,7 +18,7 @@ from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.types import RolloutPolicy
 from configurator.waves import assign_waves, failure_budget
-from configurator.wire import (
+from contract.wire import (
     MAX_LISTED,
     AgentState,
     AgentStatus,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from configurator.signing import Signed
+from contract.signing import Signed
 
 if TYPE_CHECKING:
     from reconciler.controller import Signer
@@ -16,7 +16,7 @@ def make_signer(key_path: Path | None) -> Signer | None:
     raises SigningKeyError when the key cannot be read."""
     if key_path is None:
         return None
-    from configurator.signing import load_private_key, sign
+    from contract.signing import load_private_key, sign
 
     key = load_private_key(key_path)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from configurator.source import SourceError
-from configurator.wire import redact_url
+from contract.wire import redact_url
 
 log = logging.getLogger("robotconf.reconciler")
 

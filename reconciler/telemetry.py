@@ -15,8 +15,8 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from configurator.drift import Drift, DriftMemo
-from configurator.mqtt import Connection
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.mqtt import Connection
+from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
 from reconciler.events import Seen, Told, resumed, transitions

@@ -1,7 +1,7 @@
 """Fleet status verdicts (DESIGN §10), pure: desired robots + retained topics -> a verdict each.
 
 The JSON form and the words of the reconciler's lines are here; the table for people is drawn
-by configurator/cli/fleet_view.py.
+by workstation/cli/fleet_view.py.
 """
 
 from __future__ import annotations
@@ -21,14 +21,14 @@ from configurator.drift import (
     needs_of,
     needs_of_rendered,
 )
-from configurator.interfaces import interfaces_verdict
-from configurator.launch import template_mismatch
 from configurator.render import FleetRender
-from configurator.textsafe import printable
 from configurator.waves import assign_waves, matches
-from configurator.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutStatus
-from configurator.wire import short_digest as _short_digest
-from configurator.wire import short_rev as _short_rev
+from contract.interfaces import interfaces_verdict
+from contract.launch import template_mismatch
+from contract.textsafe import printable
+from contract.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutStatus
+from contract.wire import short_digest as _short_digest
+from contract.wire import short_rev as _short_rev
 from reconciler.observed import Retained, RobotSeen
 
 

@@ -12,8 +12,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from configurator.safejson import PayloadError, parse_object
-from configurator.textsafe import printable
+from contract.safejson import PayloadError, parse_object
+from contract.textsafe import printable
 
 # A push of a few commits is a few kB (GitHub lists at most 20 commits in one); the repository
 # and sender blocks add a few more. A megabyte is generous, and small enough to hold in memory.

@@ -10,8 +10,8 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from configurator.files import NotRegularFile, read_regular
-from configurator.textsafe import printable
+from contract.files import NotRegularFile, read_regular
+from contract.textsafe import printable
 from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
 from reconciler.webhook import MAX_BODY, Answer, Outcome, judge, refused, server_of
 

@@ -11,7 +11,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from configurator.diagnostics import Diagnostic
 from configurator.repository import Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.catalogue import (
@@ -25,6 +24,7 @@ from configurator.rules.configs import check_capability, check_fleet, check_scen
 from configurator.rules.namespaces import ScenarioNames, check_namespaces, scenario_names
 from configurator.rules.report import Reporter
 from configurator.rules.rollout import check_labels, check_rollout
+from contract.diagnostics import Diagnostic
 
 # Values worked out from the repository once per name and argument (a scenario's ROS names),
 # shared by the units that need them: memoised in one build, and across builds by the

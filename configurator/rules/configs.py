@@ -12,7 +12,6 @@ from configurator.composition import (
     setting_problem,
     template_gaps,
 )
-from configurator.diagnostics import closest
 from configurator.repository import Entry, Repository
 from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
@@ -24,6 +23,7 @@ from configurator.types import (
     is_robot_id,
     reserved_robot_id,
 )
+from contract.diagnostics import closest
 
 
 def check_capability(

@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from configurator.codes import severity_of
-from configurator.diagnostics import Diagnostic, did_you_mean
 from configurator.repository import Entry
+from contract.codes import severity_of
+from contract.diagnostics import Diagnostic, did_you_mean
 
 
 class Reporter:
@@ -23,7 +23,7 @@ class Reporter:
         *,
         key: bool = False,
     ) -> None:
-        """A finding at `loc` (the key itself with `key`), as severe as configurator/codes.py
+        """A finding at `loc` (the key itself with `key`), as severe as contract/codes.py
         declares its code."""
         severity = severity_of(code)
         line, col = entry.doc.locate(loc, key=key)

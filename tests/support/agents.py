@@ -19,10 +19,10 @@ import paho.mqtt.client as paho
 import yaml
 
 from agent.process import is_alive, read_pidfile
-from configurator.launch import LaunchCapability, LaunchRequest, LaunchScenario, make_launch_request
-from configurator.mqtt import Connection, make_client
 from configurator.types import MappingBinding
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.launch import LaunchCapability, LaunchRequest, LaunchScenario, make_launch_request
+from contract.mqtt import Connection, make_client
+from contract.wire import AgentState, AgentStatus, Topics
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
 

@@ -15,8 +15,8 @@ from typing import Any
 
 import yaml
 
-from configurator.mqtt import Connection
 from configurator.rendered import RenderedRequest
+from contract.mqtt import Connection
 from reconciler.controller import Controller
 from reconciler.desired import load_desired
 from reconciler.source import BranchSource
@@ -45,7 +45,7 @@ def robotconf_argv(*args: str) -> list[str]:
     return [
         sys.executable,
         "-c",
-        "import sys; from configurator.cli import main; sys.exit(main())",
+        "import sys; from workstation.cli import main; sys.exit(main())",
         *args,
     ]
 

@@ -7,9 +7,9 @@ import itertools
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
-from configurator.interfaces import Interface, RobotInterfaces
-from configurator.mqtt import parse_broker_url
-from configurator.wire import Topics
+from contract.interfaces import Interface, RobotInterfaces
+from contract.mqtt import parse_broker_url
+from contract.wire import Topics
 
 _ids = itertools.count(1)
 

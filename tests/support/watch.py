@@ -14,10 +14,10 @@ from typing import Any, Protocol, TypeVar
 import paho.mqtt.client as paho
 from pydantic import ValidationError
 
-from configurator.mqtt import Connection
 from configurator.rendered import RenderedRequest
-from configurator.safejson import PayloadError
-from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+from contract.mqtt import Connection
+from contract.safejson import PayloadError
+from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
 from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView, read_object
 

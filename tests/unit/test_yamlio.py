@@ -1,11 +1,11 @@
-"""configurator.yamlio on bytes: the data it yields and where every key and value came from."""
+"""contract.yamlio on bytes: the data it yields and where every key and value came from."""
 
 from __future__ import annotations
 
 import pytest
 
-from configurator import yamlio
-from configurator.yamlio import (
+from contract import yamlio
+from contract.yamlio import (
     MAX_DEPTH,
     MAX_EVENTS,
     MAX_PROBLEMS,

@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from agent.process import is_alive
-from configurator.launch import StopRequest
-from configurator.signing import generate_keys, load_private_key, sign
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.launch import StopRequest
+from contract.signing import generate_keys, load_private_key, sign
+from contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, STANDIN, AgentProc, make_request, publish
 from tests.support.lab import ROBOTCONF

@@ -16,10 +16,10 @@ import paho.mqtt.client as paho
 import pytest
 
 from agent.logs import BURST, RATE
-from configurator.launch import RestartRequest
-from configurator.mqtt import Connection, make_client
-from configurator.signing import generate_keys, load_private_key, sign
-from configurator.wire import (
+from contract.launch import RestartRequest
+from contract.mqtt import Connection, make_client
+from contract.signing import generate_keys, load_private_key, sign
+from contract.wire import (
     LOG_FOLLOW_TTL,
     MAX_LOG_MESSAGE_BYTES,
     AgentState,

@@ -9,7 +9,7 @@ import os
 import pytest
 
 from agent.process import is_alive
-from configurator.wire import AgentState, Topics
+from contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, make_request, publish, start_running
 from tests.support.mosquitto import Mosquitto

@@ -10,7 +10,7 @@ import pytest
 
 from agent.cli import main
 from agent.process import is_alive
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import make_request, publish, read_retained
 from tests.support.mosquitto import Mosquitto

@@ -19,10 +19,10 @@ import pytest
 
 from agent.process import is_alive
 from agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install
-from configurator.interfaces import MAX_INTERFACES, RobotInterfaces
-from configurator.launch import with_digest
-from configurator.mqtt import Connection, make_client
-from configurator.wire import AgentState, Topics
+from contract.interfaces import MAX_INTERFACES, RobotInterfaces
+from contract.launch import with_digest
+from contract.mqtt import Connection, make_client
+from contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, make_request, publish, read_retained, start_running
 from tests.support.mosquitto import Mosquitto

@@ -12,7 +12,7 @@ import textwrap
 from pathlib import Path
 
 from agent.process import is_alive
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import (
     ROBOT,

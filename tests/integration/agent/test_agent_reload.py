@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 from agent.process import is_alive
-from configurator.wire import AgentState, Topics
+from contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, TIMEOUT, make_request, publish, start_running
 from tests.support.mosquitto import Mosquitto

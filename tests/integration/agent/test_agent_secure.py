@@ -15,9 +15,9 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
-from configurator.mqtt import Connection
-from configurator.signing import generate_keys, load_private_key, sign
-from configurator.wire import AgentState, Topics
+from contract.mqtt import Connection
+from contract.signing import generate_keys, load_private_key, sign
+from contract.wire import AgentState, Topics
 from tests.support.agents import AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto
 from tests.support.tlsutil import make_pki

@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from configurator.wire import Topics
-from configurator.yamlio import parse_document
+from contract.wire import Topics
+from contract.yamlio import parse_document
 from tests.support.agents import publish
 from tests.support.lab import ROOT, Lab
 from tests.support.mosquitto import Mosquitto

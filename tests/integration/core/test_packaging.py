@@ -43,7 +43,7 @@ def _copy_project(dest: Path) -> Path:
     dest.mkdir()
     for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy2(ROOT / name, dest / name)
-    for package in ("configurator", "reconciler", "agent"):
+    for package in ("contract", "configurator", "reconciler", "workstation", "agent"):
         shutil.copytree(
             ROOT / package, dest / package, ignore=shutil.ignore_patterns("__pycache__")
         )

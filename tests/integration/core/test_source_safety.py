@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from configurator.source import GitSource, WorkTreeSource
-from configurator.yamlio import MAX_FILE_BYTES
+from contract.yamlio import MAX_FILE_BYTES
 from reconciler.desired import load_desired
 from tests.support.lab import ROBOTCONF, Lab
 

@@ -11,7 +11,7 @@ import pytest
 
 from tests.support.lab import ROOT
 
-PACKAGES = ("configurator", "reconciler", "agent")
+PACKAGES = ("contract", "configurator", "reconciler", "workstation", "agent")
 
 
 def module_name(path: Path) -> str:
@@ -93,15 +93,15 @@ def test_the_cycle_finder_finds_a_function_level_cycle(tmp_path: Path) -> None:
     assert find_cycle(graph) == ["a.x", "a.y", "a.z", "a.x"]
     assert find_cycle({"a.x": {"a.y"}, "a.y": set()}) is None
     # Imports inside functions count: they run sooner or later.
-    module = ROOT / "reconciler" / "up.py"
-    assert "reconciler.broker" in imported_modules(module, set(import_graph()))
+    module = ROOT / "workstation" / "up.py"
+    assert "workstation.broker" in imported_modules(module, set(import_graph()))
 
 
 def loaded_modules(*argv: str) -> set[str]:
     """The modules a `robotconf` run with these arguments has imported when it ends."""
     code = (
         "import sys, io, contextlib\n"
-        "from configurator.cli import main\n"
+        "from workstation.cli import main\n"
         "out = io.StringIO()\n"
         "with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):\n"
         f"    code = main({list(argv)!r})\n"
@@ -123,8 +123,8 @@ def _top(modules: set[str]) -> set[str]:
 
 def test_help_imports_no_command_module() -> None:
     loaded = loaded_modules("--help")
-    commands = {m for m in loaded if m.startswith("configurator.cli.")}
-    assert commands <= {"configurator.cli.main", "configurator.cli.errors"}, commands
+    commands = {m for m in loaded if m.startswith("workstation.cli.")}
+    assert commands <= {"workstation.cli.main", "contract.errors"}, commands
     assert not _top(loaded) & {"rich", "pydantic", "paho", "git", "reconciler", "agent"}
 
 
@@ -134,7 +134,7 @@ def test_validate_imports_neither_rich_nor_the_broker_side() -> None:
     assert not _top(loaded) & {"rich", "paho", "git", "reconciler", "agent"}
 
 
-@pytest.mark.parametrize("module", ["agent.cli", "agent.runtime", "configurator.cli.errors"])
+@pytest.mark.parametrize("module", ["agent.cli", "agent.runtime", "contract.errors"])
 def test_the_robot_side_imports_no_workstation_library(module: str) -> None:
     code = f"import sys, {module}; print('\\n'.join(sorted(sys.modules)))"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)

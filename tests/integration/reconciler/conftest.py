@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from configurator.rendered import RenderedRequest
-from configurator.wire import AgentStatus
+from contract.wire import AgentStatus
 from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start_reconciler
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch

@@ -18,8 +18,8 @@ import pytest
 import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
-from configurator.mqtt import Connection
-from configurator.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, Topics
+from contract.mqtt import Connection
+from contract.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, Topics
 from reconciler.decide import state_of
 from reconciler.events import Event, Kind
 from reconciler.notify import QUEUE, Notifier, Sender, parse_receiver

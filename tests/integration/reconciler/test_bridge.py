@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from configurator.wire import AgentState
+from contract.wire import AgentState
 from tests.support.fleet import (
     GitLab,
     Proc,

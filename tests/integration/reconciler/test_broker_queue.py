@@ -13,12 +13,12 @@ import pytest
 import yaml
 
 from configurator.brokerconf import Listener, render_conf
-from configurator.mqtt import Connection, make_client
-from configurator.wire import AgentState, AgentStatus, Topics
-from reconciler.fleet_status import open_view
+from contract.mqtt import Connection, make_client
+from contract.wire import AgentState, AgentStatus, Topics
 from tests.support.fleet import robotconf_argv
 from tests.support.lab import ROOT
 from tests.support.mosquitto import Mosquitto
+from workstation.fleet_status import open_view
 
 sys.path.insert(0, str(ROOT / "bench"))
 import generate

@@ -14,8 +14,8 @@ import termios
 import threading
 from pathlib import Path
 
-from configurator.mqtt import Connection
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.mqtt import Connection
+from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Controller
 from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from configurator.mqtt import Connection
+from contract.mqtt import Connection
 from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch, RemoteBranch
 from tests.support.fleet import ROBOTS, GitLab, Running

@@ -9,7 +9,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from configurator.mqtt import Connection
+from contract.mqtt import Connection
 from reconciler.metrics import Metrics
 from reconciler.notify import Notifier, parse_receiver
 from reconciler.source import LocalBranch

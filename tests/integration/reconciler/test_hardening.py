@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from configurator.launch import LaunchRequest, StopRequest
-from configurator.mqtt import Connection
-from configurator.signing import Signed, generate_keys, load_public_key, verify
-from configurator.wire import ReconcilerStatus, Topics
+from contract.launch import LaunchRequest, StopRequest
+from contract.mqtt import Connection
+from contract.signing import Signed, generate_keys, load_public_key, verify
+from contract.wire import ReconcilerStatus, Topics
 from reconciler.controller import MAX_REQUEST_BYTES, Signer
 from reconciler.desired import Desired, load_desired
 from reconciler.retained import Ignored, RetainedView

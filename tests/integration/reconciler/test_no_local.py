@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.mqtt import Connection
+from contract.mqtt import Connection
 from reconciler import retained
 from reconciler.retained import RetainedView, speaks_mqtt5
 from tests.support.agents import publish

@@ -10,7 +10,7 @@ import json
 import yaml
 
 from configurator.rendered import RenderedRequest
-from configurator.wire import AgentState, ReconcilerStatus
+from contract.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.watch import wait_for
 

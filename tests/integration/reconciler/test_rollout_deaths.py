@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from configurator.rendered import RenderedRequest
-from configurator.wire import AgentState, ReconcilerStatus
+from contract.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet, fleet_on
 from tests.integration.reconciler.test_rollout import (
     CANARY,

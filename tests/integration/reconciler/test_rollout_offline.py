@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from configurator.wire import ReconcilerStatus
+from contract.wire import ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_rollout import (
     CANARY,

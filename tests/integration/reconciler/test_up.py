@@ -25,14 +25,14 @@ import yaml
 from paho.mqtt.enums import CallbackAPIVersion
 
 from agent.config import parse_config
-from configurator.mqtt import Connection
-from reconciler.broker import EmbeddedBroker, free_port
-from reconciler.broker_login import broker_login
+from contract.mqtt import Connection
 from reconciler.desired import load_desired
-from reconciler.up import agent_yaml, prepare
 from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
+from workstation.broker import EmbeddedBroker, free_port
+from workstation.broker_login import broker_login
+from workstation.up import agent_yaml, prepare
 
 
 @contextlib.contextmanager
@@ -398,7 +398,7 @@ def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path
 
 def test_the_embedded_broker_takes_many_clients_at_once_without_an_error(tmp_path: Path) -> None:
     """amqtt 0.11/0.12 raised "dictionary changed size during iteration" when a client
-    connected while others subscribed (reconciler/broker.py): up's six agents did, at most
+    connected while others subscribed (workstation/broker.py): up's six agents did, at most
     starts. Thirty clients with five subscriptions each make it happen at every run."""
     errors: list[logging.LogRecord] = []
 

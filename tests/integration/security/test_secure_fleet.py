@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from configurator.launch import LaunchRequest, canonical_json, content_digest
 from configurator.rendered import RenderedRequest
-from configurator.signing import generate_keys, load_private_key, sign
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.launch import LaunchRequest, canonical_json, content_digest
+from contract.signing import generate_keys, load_private_key, sign
+from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.retained import RetainedView
 from tests.support.fleet import GitLab, Proc, pid_alive
 from tests.support.lab import ROBOTCONF

@@ -10,15 +10,15 @@ import pytest
 
 from agent.admission import Accept, Clear, Freshness, Reject, Verifier, interpret
 from agent.workdir import IssuedStore
-from configurator.launch import StopRequest, canonical_json
-from configurator.signing import (
+from contract.launch import StopRequest, canonical_json
+from contract.signing import (
     generate_keys,
     load_private_key,
     load_public_key,
     sign,
     verify_object,
 )
-from configurator.wire import RobotDescription
+from contract.wire import RobotDescription
 from tests.support.agents import make_request
 
 ROBOT = RobotDescription(

@@ -10,7 +10,7 @@ import pytest
 
 from agent.config import AgentConfig, load_config
 from agent.process import brain_environment, request_environment
-from configurator.launch import with_digest
+from contract.launch import with_digest
 from tests.support.agents import make_request
 from tests.unit.agent.test_config import GOOD, problems, write
 

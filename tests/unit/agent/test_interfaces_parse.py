@@ -17,8 +17,8 @@ from agent.interfaces import (
     parse_command_json,
 )
 from agent.standin_ros2 import lines_of
-from configurator.interfaces import MAX_INTERFACE_NAME, MAX_INTERFACES, MAX_INTERFACES_BYTES
-from configurator.wire import AgentState, AgentStatus
+from contract.interfaces import MAX_INTERFACE_NAME, MAX_INTERFACES, MAX_INTERFACES_BYTES
+from contract.wire import AgentState, AgentStatus
 
 # What `ros2 topic list -t` prints on a TurtleBot3 (ros2topic/verb/list.py: name, a space,
 # the types in brackets joined by ', ').

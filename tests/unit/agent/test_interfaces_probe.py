@@ -18,7 +18,7 @@ from agent.config import InterfacesConfig
 from agent.interfaces import MAX_OUTPUT, InterfaceProbe
 from agent.logs import Redactor
 from agent.process import is_alive
-from configurator.interfaces import RobotInterfaces
+from contract.interfaces import RobotInterfaces
 
 
 def drive(probe: InterfaceProbe, deadline: float = 30.0) -> RobotInterfaces:

@@ -21,7 +21,7 @@ from agent.logs import (
     fit_line,
     read_tail,
 )
-from configurator.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, LogsChunk, LogsRequest
+from contract.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, LogsChunk, LogsRequest
 
 
 def stream(

@@ -19,8 +19,8 @@ from agent.admission import (
     interpret_restart,
 )
 from agent.workdir import RESTART_ISSUED_FILE, RESTARTS_AHEAD_FILE, RestartLedger
-from configurator.launch import RestartRequest
-from configurator.signing import (
+from contract.launch import RestartRequest
+from contract.signing import (
     generate_keys,
     load_private_key,
     load_public_key,
@@ -197,7 +197,7 @@ def test_a_signed_launch_request_is_not_a_restart(keyed: tuple[Any, Verifier]) -
 
 def test_log_requests_are_bounded_and_strict() -> None:
     from agent.admission import interpret_logs_request
-    from configurator.wire import LogsRequest
+    from contract.wire import LogsRequest
 
     good = LogsRequest(session="s1", lines=5, follow=True)
     assert interpret_logs_request(good.model_dump_json().encode()) == good

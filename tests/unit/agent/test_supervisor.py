@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 
 from agent.supervisor import Kill, Policy, Reload, Spawn, Supervisor, Terminate
-from configurator.launch import with_digest
-from configurator.wire import AgentState
+from contract.launch import with_digest
+from contract.wire import AgentState
 from tests.support.agents import make_request
 
 A = make_request(variant=0)

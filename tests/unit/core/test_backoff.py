@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from agent.supervisor import Policy
-from configurator.backoff import Backoff, exponential_delay
+from contract.backoff import Backoff, exponential_delay
 
 
 def test_delays_double_up_to_the_cap() -> None:

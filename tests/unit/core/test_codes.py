@@ -8,21 +8,21 @@ from pathlib import Path
 
 import pytest
 
-from configurator.codes import RULES, Severity, UnregisteredCode, readme_table, with_readme_table
-from configurator.diagnostics import Diagnostic
 from configurator.rules.report import Reporter
-from configurator.yamlio import YamlProblem, parse_document
+from contract.codes import RULES, Severity, UnregisteredCode, readme_table, with_readme_table
+from contract.diagnostics import Diagnostic
+from contract.yamlio import YamlProblem, parse_document
 from tests.support.lab import ROOT
 
 CODE = re.compile(r"\bRC\d{3}\b")
-REGISTRY = ROOT / "configurator" / "codes.py"
-UPDATE = "python -m configurator.codes README.md"
+REGISTRY = ROOT / "contract" / "codes.py"
+UPDATE = "python -m contract.codes README.md"
 
 
 def _sources() -> list[Path]:
     found = [
         path
-        for package in ("configurator", "reconciler", "agent")
+        for package in ("contract", "configurator", "reconciler", "workstation", "agent")
         for path in sorted((ROOT / package).rglob("*.py"))
         if path != REGISTRY
     ]
@@ -39,7 +39,7 @@ def test_every_code_named_in_the_packages_is_declared() -> None:
         for code in CODE.findall(line)
         if code not in RULES
     ]
-    assert not undeclared, "declare these in configurator/codes.py:\n" + "\n".join(undeclared)
+    assert not undeclared, "declare these in contract/codes.py:\n" + "\n".join(undeclared)
 
 
 def test_every_declared_code_is_used_as_a_literal() -> None:
@@ -52,7 +52,7 @@ def test_every_declared_code_is_used_as_a_literal() -> None:
         and CODE.fullmatch(node.value)
     }
     dead = sorted(set(RULES) - used)
-    assert not dead, f"declared in configurator/codes.py but never reported: {dead}"
+    assert not dead, f"declared in contract/codes.py but never reported: {dead}"
     assert used <= set(RULES)
 
 
@@ -62,7 +62,7 @@ def test_readme_table_is_generated_from_the_registry() -> None:
         table = readme[readme.index("| code | rule |") :].split("\n\n", 1)[0] + "\n"
         stale = sorted(set(table.splitlines()) ^ set(readme_table().splitlines()))
         pytest.fail(
-            "README.md's table of rule codes is not configurator/codes.py's; after editing the "
+            "README.md's table of rule codes is not contract/codes.py's; after editing the "
             f"registry, run `{UPDATE}`. Rows that differ:\n" + "\n".join(stale)
         )
 

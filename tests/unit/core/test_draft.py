@@ -20,11 +20,11 @@ from configurator.draft import (
     scheme_yaml,
     template_yaml,
 )
-from configurator.interfaces import MAX_INTERFACES, RobotInterfaces
 from configurator.loader import KIND_BY_NAME, load_file
 from configurator.types import MappingBinding, MappingScheme, RobotTemplate, SettingDefinition
 from configurator.workspace import check
-from configurator.yamlio import parse_document
+from contract.interfaces import MAX_INTERFACES, RobotInterfaces
+from contract.yamlio import parse_document
 from tests.support.lab import ROOT
 
 

@@ -10,9 +10,9 @@ from configurator.drift import (
     needs_of,
     needs_of_rendered,
 )
-from configurator.interfaces import Interface, RobotInterfaces
-from configurator.launch import LaunchRequest
 from configurator.render import render_fleet
+from contract.interfaces import Interface, RobotInterfaces
+from contract.launch import LaunchRequest
 from tests.support.interfaces import PATROL_ON_A_PATH_DRIFT
 from tests.support.lab import Lab
 

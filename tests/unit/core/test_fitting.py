@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from configurator.fitting import logic_fits_interfaces
-from configurator.interfaces import RobotInterfaces
 from configurator.types import Logic, MappingBinding, MappingScheme
+from contract.interfaces import RobotInterfaces
 
 SCHEME = MappingScheme(
     mappings={

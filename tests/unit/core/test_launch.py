@@ -11,7 +11,7 @@ import pytest
 from pydantic import BaseModel, ValidationError
 
 from agent.admission import Accept, interpret
-from configurator.launch import (
+from contract.launch import (
     CONTENT_WHEN_SET,
     DIGEST_EXCLUDED,
     LaunchRequest,
@@ -21,7 +21,7 @@ from configurator.launch import (
     template_mismatch,
     with_digest,
 )
-from configurator.wire import AgentState, AgentStatus, RobotDescription
+from contract.wire import AgentState, AgentStatus, RobotDescription
 from reconciler.observed import RobotSeen
 from reconciler.verdicts import DesiredRobot, template_warning
 from tests.support.agents import make_request

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = ["configurator", "reconciler", "agent"]
+PACKAGES = ["contract", "configurator", "reconciler", "workstation", "agent"]
 # Other libraries' loggers, configured by their own names (quietened, mostly).
 THIRD_PARTY = {"watchfiles", "amqtt", "transitions"}
 # `logging.getLogger()` without a name is the root logger: only for attaching a handler.
@@ -77,7 +77,7 @@ def test_the_check_tells_good_names_from_bad(source: str, ok: bool) -> None:
 
 def test_every_log_handler_escapes_what_peers_wrote() -> None:
     """Log lines quote robots' and peers' text: each handler the project sets up formats with
-    `configurator.logsafe.SafeFormatter`, never a plain `logging.Formatter`."""
+    `contract.logsafe.SafeFormatter`, never a plain `logging.Formatter`."""
     plain = [
         f"{path.relative_to(ROOT)}:{node.lineno}"
         for path in _sources()
@@ -95,7 +95,7 @@ def test_a_command_without_logging_of_its_own_escapes_stray_records(
 ) -> None:
     import logging
 
-    from configurator.logsafe import escape_stray_records
+    from contract.logsafe import escape_stray_records
 
     before = logging.lastResort
     try:

@@ -11,18 +11,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from configurator.launch import (
+from configurator.render import FleetRender, RenderError, render_fleet, request_for
+from configurator.rendered import _SLOT_NAMES, ScenarioRequests, _prefix
+from configurator.rosnames import UnresolvableName, resolve_name
+from configurator.types import MappingBinding
+from configurator.workspace import check
+from contract.launch import (
     LaunchRequest,
     LaunchScenario,
     make_launch_request,
     restart_digest_of,
     with_digest,
 )
-from configurator.render import FleetRender, RenderError, render_fleet, request_for
-from configurator.rendered import _SLOT_NAMES, ScenarioRequests, _prefix
-from configurator.rosnames import UnresolvableName, resolve_name
-from configurator.types import MappingBinding
-from configurator.workspace import check
 from tests.support.lab import ROOT
 
 

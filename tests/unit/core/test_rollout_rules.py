@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from configurator.codes import Severity
+from contract.codes import Severity
 from tests.support.lab import Lab
 
 FLEET = "configs/fleet.yaml"

@@ -3,12 +3,12 @@ when some robot has any; as text, never as markup."""
 
 from __future__ import annotations
 
-from configurator.cli.fleet_view import COLUMNS, fleet_status_text
 from configurator.render import render_fleet
-from configurator.wire import AgentState, AgentStatus
+from contract.wire import AgentState, AgentStatus
 from reconciler.observed import Retained, RobotSeen
 from reconciler.verdicts import DesiredRobot, FleetStatus, build_rows, desired_from_fleet
 from tests.support.lab import Lab
+from workstation.cli.fleet_view import COLUMNS, fleet_status_text
 
 D1 = "sha256:" + "1" * 64
 

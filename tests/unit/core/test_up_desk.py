@@ -12,9 +12,9 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from configurator.cli.broker_options import BrokerOptions, desk_broker_options
-from configurator.cli.options import repo_option
-from configurator.cli.up_desk import DESK_FILE, UpDesk, find_desk, remove_desk, write_desk
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from workstation.cli.options import repo_option
+from workstation.up_desk import DESK_FILE, UpDesk, find_desk, remove_desk, write_desk
 
 
 @pytest.fixture

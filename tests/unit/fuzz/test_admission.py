@@ -12,14 +12,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from agent.admission import Accept, Freshness, Reject, interpret
-from configurator.signing import (
+from contract.signing import (
     generate_keys,
     load_private_key,
     load_public_key,
     sign,
     verify_object,
 )
-from configurator.wire import RobotDescription
+from contract.wire import RobotDescription
 from tests.support.agents import make_request
 from tests.unit.fuzz.strategies import json_values, mutated
 

@@ -9,7 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from pydantic import BaseModel, ValidationError
 
-from configurator.launch import (
+from configurator.types import MappingBinding
+from contract.launch import (
     DIGEST_EXCLUDED,
     LaunchCapability,
     LaunchRequest,
@@ -17,9 +18,8 @@ from configurator.launch import (
     canonical_json,
     make_launch_request,
 )
-from configurator.safejson import PayloadError, parse_json, parse_object
-from configurator.types import MappingBinding
-from configurator.wire import AgentStatus, ReconcilerStatus, RobotDescription
+from contract.safejson import PayloadError, parse_json, parse_object
+from contract.wire import AgentStatus, ReconcilerStatus, RobotDescription
 from tests.unit.fuzz.strategies import json_values, mutated
 
 MODELS: list[type[BaseModel]] = [AgentStatus, ReconcilerStatus, RobotDescription, LaunchRequest]
@@ -142,7 +142,7 @@ def test_an_interfaces_report_is_read_or_an_error_never_a_crash(payload: bytes) 
     """A robot's interfaces report: a model, or `error` with a reason; drift then claims
     nothing from an unreadable one."""
     from configurator.drift import Need, drift_of
-    from configurator.wire import Topics
+    from contract.wire import Topics
     from reconciler.observed import parse_retained
 
     topics = Topics()

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from agent.logs import LogStream
 from agent.redact import MIN_SECRET_CHARS, REDACTED, Redactor, encodings, secret_forms
-from configurator.wire import LogsChunk, LogsRequest
+from contract.wire import LogsChunk, LogsRequest
 
 # What a secret may hold: any printable character (a log line cannot carry a control
 # character as it was written), with the ones that encodings change made likely.

@@ -19,7 +19,7 @@ from agent.admission import (
     interpret_restart,
 )
 from agent.workdir import RestartLedger
-from configurator.launch import RestartRequest
+from contract.launch import RestartRequest
 
 START = 1_800_000_000.0
 

@@ -14,8 +14,8 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from configurator.logsafe import SafeFormatter, format_exception
-from configurator.textsafe import chat_text, printable
+from contract.logsafe import SafeFormatter, format_exception
+from contract.textsafe import chat_text, printable
 from reconciler.notify import parse_receiver
 
 FORMAT = "%(levelname)s %(message)s"

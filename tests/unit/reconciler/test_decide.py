@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.launch import StopRequest
 from configurator.render import render_fleet
-from configurator.wire import AgentState, AgentStatus, StatusDiagnostic, Topics
+from contract.launch import StopRequest
+from contract.wire import AgentState, AgentStatus, StatusDiagnostic, Topics
 from reconciler.decide import Observation, Reason, decide
 from reconciler.desired import Desired, build_failure
 from reconciler.observed import parse_retained

@@ -3,9 +3,9 @@ reports keeps what it holds until they fit; `warn` delivers; unknown interfaces 
 
 from __future__ import annotations
 
-from configurator.interfaces import Interface, RobotInterfaces
 from configurator.render import FleetRender, render_fleet
-from configurator.wire import AgentState, AgentStatus
+from contract.interfaces import Interface, RobotInterfaces
+from contract.wire import AgentState, AgentStatus
 from reconciler.decide import Observation, Reason, decide
 from reconciler.desired import Desired
 from reconciler.report import Followed, status_of

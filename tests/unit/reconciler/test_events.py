@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
+from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
 from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
 from reconciler.lifecycle import parse_address
 from reconciler.notify import parse_receiver

@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 
 from configurator.render import render_fleet
-from configurator.wire import AgentState, AgentStatus, Topics
 from configurator.workspace import check
-from reconciler.fleet_status import DesiredCache, fleet_status
+from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.observed import ReadMemo
 from tests.support.lab import ROOT
+from workstation.fleet_status import DesiredCache, fleet_status
 
 T = Topics()
 
@@ -49,7 +49,7 @@ def test_drift_is_worked_out_again_only_for_the_robot_whose_report_or_request_ch
     repo: Path,
 ) -> None:
     from configurator.drift import DriftMemo
-    from configurator.interfaces import Interface, RobotInterfaces
+    from contract.interfaces import Interface, RobotInterfaces
 
     def report(*names: str) -> bytes:
         topics = [Interface(name=n, type="nav_msgs/msg/Odometry") for n in names]

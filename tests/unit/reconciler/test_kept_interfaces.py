@@ -10,8 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from configurator.drift import Need, drift_of
-from configurator.interfaces import KeptInterfaces, RobotInterfaces, index
-from configurator.wire import Topics
+from contract.interfaces import KeptInterfaces, RobotInterfaces, index
+from contract.wire import Topics
 from reconciler.observed import parse_retained
 
 TOPICS = Topics()

@@ -9,8 +9,8 @@ from dataclasses import asdict
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from configurator.launch import StopRequest
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.launch import StopRequest
+from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.observed import launch_summary, parse_retained, summarise_launches
 from reconciler.retained import oversized
 from tests.support.agents import make_request

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from configurator.wire import AgentState, AgentStatus, Topics
+from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.observed import ReadMemo, parse_retained
 from tests.support.agents import make_request
 

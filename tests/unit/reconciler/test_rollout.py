@@ -8,7 +8,7 @@ from collections.abc import Mapping
 import pytest
 
 from configurator.render import FleetRender, render_fleet
-from configurator.wire import AgentState, AgentStatus, RolloutStatus
+from contract.wire import AgentState, AgentStatus, RolloutStatus
 from reconciler.rollout import RolloutInput, RolloutStep, roll_out
 from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab

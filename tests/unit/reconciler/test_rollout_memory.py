@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from configurator.render import FleetRender
-from configurator.wire import AgentState, AgentStatus
+from contract.wire import AgentState, AgentStatus
 from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
 from reconciler.wave_memory import WaveMemory, memory_of
 from tests.support.lab import Lab

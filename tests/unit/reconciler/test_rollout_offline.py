@@ -8,7 +8,7 @@ import pytest
 from configurator.plan import format_plan_text, make_plan, plan_as_json
 from configurator.render import FleetRender
 from configurator.types import RolloutPolicy
-from configurator.wire import AgentState, AgentStatus
+from contract.wire import AgentState, AgentStatus
 from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
 from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab

@@ -3,10 +3,10 @@ the fleet, restart lines, RELOADS beside RESTARTS (issue 22, item 4)."""
 
 from __future__ import annotations
 
-from configurator.cli.fleet_view import fleet_status_text
-from configurator.wire import AgentStatus, ReconcilerStatus, RolloutStatus
+from contract.wire import AgentStatus, ReconcilerStatus, RolloutStatus
 from reconciler.observed import Retained, RobotSeen
 from reconciler.verdicts import DesiredRobot, FleetStatus, build_rows
+from workstation.cli.fleet_view import fleet_status_text
 
 STABLE = "sha256:" + "1" * 64  # the stable revision's request for each robot
 HEAD, OLD = "b" * 40, "a" * 40

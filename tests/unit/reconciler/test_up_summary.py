@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from configurator.wire import ReconcilerStatus, RolloutStatus
-from reconciler.up import summary
+from contract.wire import ReconcilerStatus, RolloutStatus
 from reconciler.verdicts import FleetStatus
+from workstation.up import summary
 
 
 def fleet_with(rollout: RolloutStatus | None) -> FleetStatus:

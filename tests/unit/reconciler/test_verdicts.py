@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.cli.fleet_view import fleet_status_text
-from configurator.launch import StopRequest
-from configurator.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
+from contract.launch import StopRequest
+from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
 from reconciler.observed import Retained, RobotSeen, parse_retained
 from reconciler.retained import oversized
 from reconciler.verdicts import (
@@ -17,6 +16,7 @@ from reconciler.verdicts import (
     build_rows,
     verdict,
 )
+from workstation.cli.fleet_view import fleet_status_text
 
 D1 = "sha256:" + "1" * 64
 D2 = "sha256:" + "2" * 64
@@ -255,8 +255,8 @@ def test_a_label_selector_keeps_only_the_robots_it_matches() -> None:
 
 
 def test_a_selector_option_is_key_equals_value() -> None:
-    from configurator.cli.errors import CliError
-    from configurator.cli.status import parse_selector
+    from contract.errors import CliError
+    from workstation.cli.status import parse_selector
 
     assert parse_selector(("ring=canary", "site=hall-a")) == {"ring": "canary", "site": "hall-a"}
     for bad in ("ring", "ring=", "=x", "a b=c", "ring=can ary"):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from configurator.wire import AgentState, AgentStatus
+from contract.wire import AgentState, AgentStatus
 from reconciler.observed import Retained, RobotSeen
 from reconciler.verdicts import DesiredRobot, FleetStatus, Verdict, build_rows
 

@@ -1,0 +1,75 @@
+"""One way to build a paho-mqtt 2.x client (callback API v2) from a broker URL and credentials.
+
+Shared by the agent, the reconciler and `robotconf status`; MQTT 3.1.1 by default so that any
+broker (Mosquitto, the embedded amqtt of `robotconf up`) serves it.
+"""
+
+from __future__ import annotations
+
+import ssl
+from dataclasses import dataclass
+from pathlib import Path
+
+import paho.mqtt.client as paho
+from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
+
+from contract.wire import BrokerAddress, parse_broker_url
+
+# Seconds between connection attempts: the first retry after 1 s, doubling up to 30 s. paho's
+# own loop uses them for the reconciler and `status`; the agent, driving paho itself, feeds
+# them to contract.backoff.Backoff.
+RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY = 1.0, 30.0
+
+
+@dataclass(frozen=True)
+class Connection:
+    """Where and how to connect; secrets are read from files, never passed on a command line."""
+
+    url: str
+    username: str | None = None
+    password_file: Path | None = None
+    ca_file: Path | None = None
+    cert_file: Path | None = None
+    key_file: Path | None = None
+    insecure: bool = False  # skip server certificate verification (tests, lab benches only)
+    protocol: MQTTProtocolVersion = MQTTProtocolVersion.MQTTv311
+
+    @property
+    def address(self) -> BrokerAddress:
+        return parse_broker_url(self.url)
+
+    def password(self) -> str | None:
+        if self.password_file is None:
+            return self.address.password
+        return self.password_file.read_text(encoding="utf-8").strip()
+
+
+def make_client(connection: Connection, client_id: str) -> paho.Client:
+    """A configured, not yet connected client."""
+    address = connection.address
+    client = paho.Client(
+        CallbackAPIVersion.VERSION2,
+        client_id=client_id,
+        protocol=connection.protocol,
+        clean_session=True if connection.protocol != MQTTProtocolVersion.MQTTv5 else None,
+    )
+    username = connection.username or address.username
+    if username:
+        client.username_pw_set(username, connection.password())
+    if address.tls:
+        context = ssl.create_default_context(
+            cafile=str(connection.ca_file) if connection.ca_file else None
+        )
+        if connection.cert_file:
+            context.load_cert_chain(
+                str(connection.cert_file),
+                str(connection.key_file) if connection.key_file else None,
+            )
+        if connection.insecure:
+            context.check_hostname = False
+            context.verify_mode = ssl.CERT_NONE
+        client.tls_set_context(context)
+    client.reconnect_delay_set(
+        min_delay=int(RECONNECT_MIN_DELAY), max_delay=int(RECONNECT_MAX_DELAY)
+    )
+    return client

@@ -1,0 +1,240 @@
+"""`robotconf reconcile`: the fleet follows a git branch until the process is signalled."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from contract.errors import CliError, ExitCode
+from contract.signing import SigningKeyError
+from reconciler.lifecycle import log_to_stderr, on_stop_signals, parse_address
+from reconciler.signer import make_signer
+from reconciler.source import BranchSource, LocalBranch, RemoteBranch
+from workstation.cli.broker_options import BrokerOptions, broker_options
+from workstation.cli.options import repo_option
+
+if TYPE_CHECKING:
+    from contract.mqtt import Connection
+    from reconciler.metrics import Metrics
+    from reconciler.telemetry import Telemetry
+    from reconciler.webhook_server import WebhookServer
+
+
+def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | None) -> BranchSource:
+    if remote:
+        return RemoteBranch(remote, branch, Path(cache_dir) if cache_dir else None)
+    source = LocalBranch(repo, branch)
+    source.head()  # a branch that does not exist is a typo: say so now
+    return source
+
+
+def make_telemetry(
+    connection: Connection, prefix: str, notify: tuple[str, ...], metrics_at: str | None
+) -> Telemetry | None:
+    """Alerts and metrics, when asked for (the default path starts nothing); a bad URL or
+    address, or a port that cannot be listened on, is a one-line error."""
+    if not notify and metrics_at is None:
+        return None
+    from reconciler.notify import Notifier, parse_receiver
+    from reconciler.telemetry import Telemetry
+
+    try:
+        receivers = [parse_receiver(url, index) for index, url in enumerate(notify, 1)]
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    metrics = None
+    if metrics_at is not None:
+        from reconciler.metrics import Metrics
+
+        try:
+            host, port = parse_address(metrics_at, "--metrics", "127.0.0.1:9108")
+        except ValueError as exc:
+            raise CliError(str(exc)) from None
+        metrics = Metrics()
+        try:
+            metrics.serve(host, port)
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            raise CliError(f"--metrics {metrics_at}: cannot listen: {reason}") from None
+    notifier = None
+    if receivers:
+        notifier = Notifier(receivers, metrics.notified if metrics is not None else None)
+        if metrics is not None:
+            metrics.receivers([receiver.name for receiver in receivers])
+    return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
+
+
+@dataclass(frozen=True)
+class WebhookOptions:
+    host: str
+    port: int
+    secret: bytes
+
+
+def webhook_options(webhook_at: str | None, secret_file: Path | None) -> WebhookOptions | None:
+    """--webhook and its secret, checked before anything starts (None without --webhook)."""
+    if webhook_at is None:
+        if secret_file is not None:
+            raise CliError("--webhook-secret-file is given without --webhook HOST:PORT")
+        return None
+    try:
+        host, port = parse_address(webhook_at, "--webhook", "127.0.0.1:9292")
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if secret_file is None:
+        raise CliError(
+            "--webhook needs --webhook-secret-file FILE: the secret the git server signs its "
+            "pushes with (never on the command line); refusing to accept unsigned pushes"
+        )
+    from reconciler.webhook_server import read_secret
+
+    try:
+        return WebhookOptions(host, port, read_secret(secret_file))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
+def start_webhook(
+    webhook: WebhookOptions, branch: str, on_push: Callable[[], None], metrics: Metrics | None
+) -> WebhookServer:
+    """The push receiver, listening; a port that cannot be listened on is a one-line error."""
+    from reconciler.webhook_server import WebhookServer
+
+    receiver = WebhookServer(
+        webhook.secret, branch, on_push, metrics.webhook if metrics is not None else None
+    )
+    if metrics is not None:
+        metrics.webhook_servers()
+    try:
+        receiver.serve(webhook.host, webhook.port)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise CliError(
+            f"--webhook {webhook.host}:{webhook.port}: cannot listen: {reason}"
+        ) from None
+    host = f"[{webhook.host}]" if ":" in webhook.host else webhook.host
+    logging.getLogger("robotconf.reconciler").info(
+        "webhook: listening at http://%s:%d/ for pushes of %s (GitHub, GitLab, Gitea, Forgejo)",
+        host,
+        receiver.port,
+        branch,
+    )
+    return receiver
+
+
+@click.command("reconcile")
+@repo_option
+@broker_options
+@click.option("--branch", required=True, help="the branch whose head commit is applied")
+@click.option("--remote", default=None, help="fetch this URL into a cache clone instead")
+@click.option("--interval", type=float, default=30.0, help="resync (and fetch) period in seconds")
+@click.option(
+    "--signing-key",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Ed25519 private key (robotconf keys generate): sign every Launch Request",
+)
+@click.option(
+    "--cache-dir",
+    default=None,
+    help="where --remote is cloned (default: ~/.cache/robotconf/remotes)",
+)
+@click.option(
+    "--notify",
+    multiple=True,
+    metavar="URL",
+    help="POST alert events as JSON to this http(s) URL (repeatable; user:password@ in it is "
+    'sent as HTTP Basic authentication); slack:URL posts a Slack-compatible {"text": ...} instead',
+)
+@click.option(
+    "--metrics",
+    "metrics_at",
+    default=None,
+    metavar="HOST:PORT",
+    help="serve Prometheus metrics at http://HOST:PORT/metrics (:PORT: every interface)",
+)
+@click.option(
+    "--webhook",
+    "webhook_at",
+    default=None,
+    metavar="HOST:PORT",
+    help="accept push events of GitHub, GitLab, Gitea and Forgejo at http://HOST:PORT/ "
+    "(:PORT: every interface): a push of --branch fetches at once, not at the next interval",
+)
+@click.option(
+    "--webhook-secret-file",
+    type=click.Path(path_type=Path),
+    default=None,
+    metavar="FILE",
+    help="the webhook's secret (GitHub, Gitea, Forgejo: HMAC-SHA256 key; GitLab: token); "
+    "required with --webhook",
+)
+def reconcile(
+    repo: Path,
+    mqtt: BrokerOptions,
+    branch: str,
+    remote: str | None,
+    interval: float,
+    signing_key: Path | None,
+    cache_dir: str | None,
+    notify: tuple[str, ...],
+    metrics_at: str | None,
+    webhook_at: str | None,
+    webhook_secret_file: Path | None,
+) -> ExitCode:
+    """Make the fleet match a git branch: publish one Launch Request per robot, resync every
+    --interval seconds, and at once when --webhook receives a push; runs until signalled."""
+    from reconciler.controller import Controller
+    from reconciler.retained import speaks_mqtt5
+
+    connection = mqtt.connection()
+    if interval <= 0:
+        raise CliError("--interval must be a positive number of seconds")
+    source = make_source(repo, branch, remote, cache_dir)  # a SourceError is one line, exit 2
+    try:
+        signer = make_signer(signing_key)
+    except SigningKeyError as exc:
+        raise CliError(str(exc)) from None
+    webhook = webhook_options(webhook_at, webhook_secret_file)
+    telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
+    log_to_stderr("reconciler")
+    # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
+    # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.
+    no_local = speaks_mqtt5(connection)
+    controller = Controller(
+        source,
+        connection,
+        mqtt.prefix,
+        interval,
+        signer=signer,
+        on_step=telemetry.on_step if telemetry is not None else None,
+        no_local=no_local,
+    )
+    receiver = None
+    if webhook is not None:
+        metrics = telemetry.metrics if telemetry is not None else None
+        receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
+    on_stop_signals(callback=controller.stop)
+    logging.getLogger("robotconf.reconciler").info(
+        "reconciling %s (branch %s) to %s, prefix %s (MQTT %s)",
+        source.description,
+        branch,
+        connection.address.url,
+        mqtt.prefix,
+        "5, No Local" if no_local else "3.1.1",
+    )
+    if telemetry is not None:
+        telemetry.start()
+    try:
+        controller.run()
+    finally:
+        if receiver is not None:
+            receiver.close()
+        if telemetry is not None:
+            telemetry.stop()
+    return ExitCode.OK

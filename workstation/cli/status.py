@@ -1,0 +1,152 @@
+"""`robotconf status`: the fleet once (exit 0 when in sync), or live until interrupted (--watch)."""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+from pathlib import Path
+
+import click
+from rich.live import Live
+from rich.text import Text
+
+from configurator.types import is_robot_id
+from contract.errors import CliError, ExitCode
+from contract.wire import Topics
+from reconciler.lifecycle import on_stop_signals
+from reconciler.retained import RetainedView
+from reconciler.verdicts import FleetStatus
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options, refused
+from workstation.cli.fleet_view import fleet_status_view
+from workstation.cli.options import repo_option, rev_option
+from workstation.cli.terminal import is_terminal, plain_text, show, terminal_console
+from workstation.fleet_status import (
+    DesiredCache,
+    confirm_loss,
+    fleet_status,
+    open_view,
+    unknown_when_lost,
+    watch,
+)
+
+
+def _verdict(fleet: FleetStatus) -> ExitCode:
+    return ExitCode.OK if fleet.in_sync else ExitCode.FINDINGS
+
+
+@click.command("status")
+@repo_option
+@rev_option
+@desk_broker_options
+@click.option("--watch", "follow", is_flag=True, help="keep showing until interrupted")
+@click.option("--json", "as_json", is_flag=True, help="machine-readable output")
+@click.option(
+    "--wait",
+    type=float,
+    default=5.0,
+    help="give up when the broker's retained messages have not arrived after S seconds",
+)
+@click.option(
+    "--selector",
+    "-l",
+    "selectors",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="only robots with this fleet.yaml label (repeat: all of them); the exit code too",
+)
+def status(
+    repo: Path,
+    rev: str | None,
+    mqtt: BrokerOptions,
+    follow: bool,
+    as_json: bool,
+    wait: float,
+    selectors: tuple[str, ...],
+) -> ExitCode:
+    """Show the fleet: desired vs reported, worst first (exit 0 when every robot is in sync),
+    and each robot's drift: what its request needs that the interfaces it reports lack."""
+    selector = parse_selector(selectors)
+    connection = mqtt.connection()
+    topics = Topics(mqtt.prefix)
+    desired = DesiredCache(repo, rev)
+    changed = threading.Event()
+    view = open_view(connection, mqtt.prefix, changed.set)
+    view.start()
+    try:
+        if not view.wait_synced(wait, or_refused=True):
+            if view.refused is not None:
+                raise refused(connection.address.url, view.refused)
+            reason = view.silence()
+            raise CliError(
+                f"no retained messages from {connection.address.url} within {wait:g} s "
+                f"({reason}); is the broker running? (--broker URL, --wait S)"
+            )
+        if not follow:
+            messages = view.snapshot()
+            fleet = fleet_status(messages, topics, desired)
+            lost = confirm_loss(view, fleet, messages, topics)
+            if lost is not None:
+                fleet = unknown_when_lost(fleet, messages, topics, lost)
+            fleet = fleet.select(selector)
+            if as_json:
+                print(json.dumps(fleet.as_json(), indent=2))
+            else:
+                show(fleet_status_view(fleet))
+            return _verdict(fleet)
+        return _follow(view, topics, desired, changed, as_json, selector)
+    finally:
+        view.stop()
+
+
+def parse_selector(selectors: tuple[str, ...]) -> dict[str, str]:
+    """`KEY=VALUE` options as a label selector; a malformed one is a CliError."""
+    found: dict[str, str] = {}
+    for text in selectors:
+        key, equals, value = text.partition("=")
+        if not equals or not is_robot_id(key) or not is_robot_id(value):
+            raise CliError(
+                f"--selector {text!r} is not KEY=VALUE with a label key and value written like "
+                "robot ids (e.g. --selector ring=canary)"
+            )
+        found[key] = value
+    return found
+
+
+def _follow(
+    view: RetainedView,
+    topics: Topics,
+    desired: DesiredCache,
+    changed: threading.Event,
+    as_json: bool,
+    selector: dict[str, str],
+) -> ExitCode:
+    """Per change: one JSON line, or one plain report ended by `---`; on a terminal, a screen."""
+    stop = threading.Event()
+    on_stop_signals(stop, changed.set)
+    code = ExitCode.FINDINGS
+    offline = f"(waiting for the broker at {view.connection.address.url}: {{}})"
+    if as_json or not is_terminal():
+        for found in watch(view, topics, desired, changed, stop):
+            fleet = found.select(selector) if found is not None else None
+            if fleet is None:
+                if not as_json:
+                    print(offline.format(view.last_error), flush=True)
+                continue
+            code = _verdict(fleet)
+            if as_json:
+                print(json.dumps(fleet.as_json()), flush=True)
+            else:
+                sys.stdout.write(plain_text(fleet_status_view(fleet)) + "---\n")
+                sys.stdout.flush()
+        return code
+
+    with Live(console=terminal_console(), auto_refresh=False, transient=False) as live:
+        for found in watch(view, topics, desired, changed, stop):
+            fleet = found.select(selector) if found is not None else None
+            if fleet is None:
+                live.update(Text(offline.format(view.last_error)), refresh=True)
+                continue
+            code = _verdict(fleet)
+            live.update(fleet_status_view(fleet), refresh=True)
+    return code

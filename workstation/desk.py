@@ -1,0 +1,122 @@
+"""The desk's side of `robotconf logs` and `robotconf restart`: one broker client on one robot's
+topics that tells what the broker knows of it, sends it a request and hands back its answers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import difflib
+import queue
+from dataclasses import dataclass
+from typing import TypeVar
+
+from pydantic import ValidationError
+
+from contract.mqtt import Connection
+from contract.safejson import PayloadError
+from contract.textsafe import printable
+from contract.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
+from reconciler.observed import RobotSeen, parse_retained
+from reconciler.retained import RetainedView, read_object, take_snapshot
+
+# Answers are bounded by the agent; anything much larger is not one of its answers.
+MAX_ANSWER_BYTES = MAX_LOG_MESSAGE_BYTES + 4096
+QUEUE_LIMIT = 10_000  # answers waiting to be printed; beyond, a flood is dropped
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Unknown:
+    """The broker knows nothing of the robot: nothing retained under its id."""
+
+    robot_id: str
+    known: list[str]
+
+    def message(self, url: str) -> str:
+        close = difflib.get_close_matches(self.robot_id, self.known, n=3)
+        # Ids come from topic names anyone allowed on the broker may make up: shown escaped.
+        hint = f"; did you mean {', '.join(printable(c) for c in close)}?" if close else ""
+        count = len(self.known)
+        return (
+            f"unknown robot {self.robot_id!r}: {url} holds no status, description or launch "
+            f"request for it ({count} robot{'s' if count != 1 else ''} known){hint}"
+        )
+
+
+class RobotDesk:
+    """A client on one robot's retained topics (status, description, launch) and, with
+    `logs`, its log topic; `statuses` and `chunks` queue what arrives, in order."""
+
+    def __init__(self, connection: Connection, prefix: str, robot_id: str, *, logs: bool) -> None:
+        self.connection = connection
+        self.topics = Topics(prefix)
+        self.robot_id = robot_id
+        self._status_topic = self.topics.status(robot_id)
+        self._logs_topic = self.topics.logs(robot_id)
+        self.statuses: queue.Queue[AgentStatus] = queue.Queue(QUEUE_LIMIT)
+        self.chunks: queue.Queue[LogsChunk] = queue.Queue(QUEUE_LIMIT)
+        filters = [
+            self.topics.status(robot_id),
+            self.topics.description(robot_id),
+            self.topics.launch(robot_id),
+        ]
+        if logs:
+            filters.append(self._logs_topic)
+        self.view = RetainedView(
+            connection,
+            filters,
+            f"{prefix}/sync",
+            role="desk",
+            on_payload=self._arrived,
+            max_payload=MAX_ANSWER_BYTES,
+        )
+
+    def __enter__(self) -> RobotDesk:
+        self.view.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.view.stop()
+
+    def wait_synced(self, timeout: float) -> bool:
+        """False at once when the broker refuses the connection (`view.refused` says why)."""
+        return self.view.wait_synced(timeout, or_refused=True)
+
+    def robot(self) -> RobotSeen | None:
+        """The robot as its retained topics show it; None when nothing is retained for it."""
+        retained = parse_retained(self.view.snapshot(), self.topics)
+        return retained.robots.get(self.robot_id)
+
+    def unknown(self, timeout: float) -> Unknown:
+        """Why the robot is unknown, with the ids the broker does know (for a suggestion)."""
+        t = self.topics
+        messages = take_snapshot(
+            self.connection,
+            [t.all_status, t.all_description, t.all_launch],
+            f"{t.prefix}/sync",
+            "desk-robots",
+            timeout,
+        )
+        known = sorted(parse_retained(messages or {}, t, requests=False).robots)
+        return Unknown(self.robot_id, known)
+
+    def send(self, topic: str, payload: bytes, timeout: float) -> bool:
+        return self.view.publish(topic, payload, timeout)
+
+    # Runs on paho's thread (guarded by the view): parse, queue, nothing else.
+    def _arrived(self, topic: str, payload: bytes) -> None:
+        try:
+            if topic == self._logs_topic:
+                chunk = LogsChunk.model_validate(read_object(payload, MAX_ANSWER_BYTES))
+                if chunk.robot_id == self.robot_id:
+                    _put(self.chunks, chunk)
+            elif topic == self._status_topic and payload:
+                status = AgentStatus.model_validate(read_object(payload, MAX_ANSWER_BYTES))
+                _put(self.statuses, status)
+        except (PayloadError, ValidationError, ValueError):
+            return  # not an answer of an agent: nothing to show
+
+
+def _put(target: queue.Queue[T], item: T) -> None:
+    with contextlib.suppress(queue.Full):  # a flood: what does not fit is not shown
+        target.put_nowait(item)

@@ -1,0 +1,197 @@
+"""The fleet as `status` sees it: a broker client reading the retained topics, compared with the
+repository, as one FleetStatus now or one per change (`--watch`)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+
+from configurator.drift import DriftMemo
+from configurator.render import RenderError, render_fleet
+from configurator.source import SourceError
+from configurator.workspace import check
+from contract.mqtt import Connection
+from contract.wire import ReconcilerStatus, Topics
+from reconciler.observed import ReadMemo, parse_retained
+from reconciler.retained import RetainedView
+from reconciler.verdicts import (
+    DesiredRobot,
+    FleetStatus,
+    Verdict,
+    build_rows,
+    desired_from_fleet,
+    desired_from_retained,
+    short_rev,
+)
+
+CONFIRM_TIMEOUT = 5.0  # seconds for the few topics a lossy-looking read is checked with
+
+Desired = tuple[dict[str, DesiredRobot] | None, str, list[str]]
+
+
+class DesiredCache:
+    """The desired robots for `status`, re-read only when the revision to compare with moves."""
+
+    def __init__(self, repo: Path, rev: str | None) -> None:
+        self.repo = repo
+        self.rev = rev
+        self._key: tuple[str | None, str | None] | None = None
+        self._value: Desired = ({}, "", [])
+
+    def get(self, reconciler: ReconcilerStatus | None) -> Desired:
+        applied = reconciler.last_applied_revision if reconciler else None
+        key = (self.rev, applied)
+        if key != self._key:
+            self._value = self._load(applied)
+            self._key = key
+        return self._value
+
+    def _load(self, applied: str | None) -> Desired:
+        notes: list[str] = []
+        # What the reconciler applied is what robots should run; the work tree is the fallback.
+        candidates: list[str | None] = (
+            [self.rev] if self.rev else [applied, None] if applied else [None]
+        )
+        for rev in candidates:
+            try:
+                checked = check(self.repo, rev)
+            except SourceError as exc:
+                notes.append(f"{exc}")
+                continue
+            where = f"{self.repo} at {short_rev(checked.repo.revision)}"
+            if not checked.ok:
+                notes.append(f"{where} has {len(checked.errors)} error(s) (robotconf validate)")
+                continue
+            try:
+                fleet = render_fleet(checked.repo)
+            except RenderError as exc:
+                notes.append(f"{where}: {exc}")
+                continue
+            return desired_from_fleet(fleet), where, notes
+        return None, "the retained launch topics (no valid repository to compare with)", notes
+
+
+def fleet_status(
+    messages: dict[str, bytes],
+    topics: Topics,
+    desired: DesiredCache,
+    memos: dict[bool, ReadMemo] | None = None,
+    drift: DriftMemo | None = None,
+    lost: str | None = None,
+) -> FleetStatus:
+    """`memos` (one per way of reading requests, in full or not): what was read of each
+    payload, kept for the next call (`--watch` reads only what changed); `drift`: each robot's
+    drift, worked out again only for a robot whose request or interfaces changed."""
+    # With a repository to compare with, the requests' digests are all a row needs: 10,000
+    # requests are validated in full only when they are the one account of what is desired.
+    status = {t: m for t, m in messages.items() if t == topics.reconciler_status}
+    robots, where, notes = desired.get(parse_retained(status, topics).reconciler)
+    full = robots is None
+    memo = memos.setdefault(full, ReadMemo()) if memos is not None else None
+    retained = parse_retained(messages, topics, requests=full, memo=memo)
+    if robots is None:
+        robots = desired_from_retained(retained)
+    rows = build_rows(robots, retained, drift)
+    fleet = FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
+    return fleet if lost is None else unknown_when_lost(fleet, messages, topics, lost)
+
+
+def unknown_when_lost(
+    fleet: FleetStatus, messages: dict[str, bytes], topics: Topics, lost: str
+) -> FleetStatus:
+    """A read the broker cut short (`lost`, why) calls no robot Offline for want of a status:
+    such a robot is Unknown, and the report says how many and what to do."""
+    rows = [
+        replace(
+            row,
+            verdict=Verdict.UNKNOWN,
+            reason="the broker dropped its retained status on the way here",
+            state="unknown",
+        )
+        if row.verdict is Verdict.OFFLINE and topics.status(row.robot_id) not in messages
+        else row
+        for row in fleet.rows
+    ]
+    unknown = sum(row.verdict is Verdict.UNKNOWN for row in rows)
+    reconciler = "" if fleet.reconciler else " (the reconciler's status may be one of them)"
+    said = (
+        f"the broker dropped retained messages: {unknown} of {len(rows)} robots unknown"
+        f"{reconciler}; raise its max_queued_messages (robotconf broker-config sets it for "
+        f"the fleet). How it is known: {lost}"
+    )
+    return replace(fleet, rows=rows, lost=said)
+
+
+def confirm_loss(
+    view: RetainedView, fleet: FleetStatus, messages: dict[str, bytes], topics: Topics
+) -> str | None:
+    """Why the view's snapshot is known to be lossy, or None: the view's own account, else
+    a few of the topics it lacks (the reconciler's status, assigned robots' statuses) read
+    again alone: a fleet that is really off holds none of them."""
+    if view.lost is None:
+        silent = [
+            topics.status(row.robot_id)
+            for row in fleet.rows
+            if row.verdict is Verdict.OFFLINE and topics.status(row.robot_id) not in messages
+        ]
+        if topics.reconciler_status not in messages:
+            silent.insert(0, topics.reconciler_status)
+        view.confirm_missing(silent, CONFIRM_TIMEOUT)
+    return view.lost
+
+
+def open_view(
+    connection: Connection, prefix: str, on_change: Callable[[], None] | None = None
+) -> RetainedView:
+    """A (not yet started) view of every retained topic fleet status reads."""
+    topics = Topics(prefix)
+    return RetainedView(
+        connection,
+        [
+            topics.all_launch,
+            topics.all_status,
+            topics.all_description,
+            topics.all_interfaces,
+            topics.reconciler_status,
+        ],
+        f"{prefix}/sync",
+        role="status",
+        on_change=on_change,
+        on_synced=on_change,
+    )
+
+
+def change_key(fleet: FleetStatus) -> str:
+    """What tells one report from the next: a heartbeat alone is not a change."""
+    return json.dumps(fleet.as_json(heartbeat=False), sort_keys=True)
+
+
+def watch(
+    view: RetainedView,
+    topics: Topics,
+    desired: DesiredCache,
+    changed: threading.Event,
+    stop: threading.Event,
+) -> Iterator[FleetStatus | None]:
+    """Each new state of the fleet until `stop` is set; None once when the broker is lost (each
+    time). `changed` is set by the view (and by whoever sets `stop`)."""
+    shown: str | None = None
+    memos: dict[bool, ReadMemo] = {}
+    drift = DriftMemo()
+    while not stop.is_set():
+        changed.clear()
+        if view.synced:
+            fleet = fleet_status(view.snapshot(), topics, desired, memos, drift, view.lost)
+            key = change_key(fleet)
+            if key != shown:
+                shown = key
+                yield fleet
+        elif shown != "offline":
+            shown = "offline"
+            yield None
+        changed.wait(5.0)
+        time.sleep(0.2)  # coalesce a burst of status messages into one redraw

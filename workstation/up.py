@@ -1,0 +1,624 @@
+"""`robotconf up`: the whole loop on one machine — broker, reconciler, one agent per robot, status.
+
+Agents run as `robotconf agent` subprocesses with a stand-in brain; the reconciler runs in this
+process. Ctrl-C, SIGTERM or SIGHUP stop the agents (and their brains) first, then the reconciler,
+then the broker; if `up` is killed, the kernel tells its agents (agent/parent_death.py).
+What is shown, and how, is the caller's (workstation/cli/up.py): an UpScreen.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import fcntl
+import itertools
+import logging
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import yaml
+
+from agent.parent_death import ENV as DIE_WITH_PARENT
+from agent.workdir import LOCK_FILE, WorkdirLock
+from configurator.render import FleetRender
+from configurator.source import SourceError
+from contract.errors import CliError, ExitCode
+from contract.mqtt import Connection
+from contract.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
+from contract.wire import (
+    BROKER_ENV,
+    ReconcilerReason,
+    ReconcilerStatus,
+    Topics,
+    redact_url,
+    short_rev,
+)
+from reconciler.controller import Controller
+from reconciler.desired import DesiredBuilder
+from reconciler.lifecycle import log_to_file, on_stop_signals
+from reconciler.observed import parse_retained
+from reconciler.retained import RetainedView
+from reconciler.signer import make_signer
+from reconciler.source import LocalBranch, open_repo
+from reconciler.verdicts import (
+    FleetStatus,
+    build_rows,
+    clean,
+    desired_from_fleet,
+    diagnostic_lines,
+    rollout_line,
+)
+from workstation.fleet_status import change_key, open_view
+from workstation.up_desk import UpDesk, remove_desk, write_desk
+
+log = logging.getLogger("robotconf.up")
+
+AGENT_STOP_TIMEOUT = 5.0  # the stand-in brain stops at once; this bounds a stubborn one
+RESYNC_INTERVAL = 10.0
+REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REFUSED.value}
+REFUSED_DIAGNOSTICS = 3  # the first ones say what to fix; `robotconf validate` lists them all
+GIVEN_BROKER_WAIT = 10.0  # a given broker that has not answered by then is an error, not a wait
+DEFAULT_PORT = 1883
+
+
+@dataclass
+class UpSetup:
+    """What `up` will run, decided before anything starts."""
+
+    root: Path
+    branch: str
+    head: str
+    fleet: FleetRender
+    workdir: Path
+    notes: list[str] = field(default_factory=list)
+    # The build of `head` above, kept: the controller's first build of it reuses every file
+    # and robot instead of building the commit a second time.
+    builder: DesiredBuilder = field(default_factory=DesiredBuilder)
+    port: int = DEFAULT_PORT  # the embedded broker's, when free
+    broker_origin: str = "--broker"  # where a given broker came from, for messages
+
+
+def _git_repo(root: Path) -> Any:
+    try:
+        return open_repo(root)
+    except SourceError as exc:
+        raise CliError(str(exc).replace("the reconciler", "robotconf up")) from None
+
+
+def prepare(root: Path, branch: str | None, workdir: str | None) -> UpSetup:
+    """Checks the repository and says what will be applied; raises CliError."""
+    root = root.absolute()
+    if not (root / "configs").is_dir():
+        raise CliError(f"{root} has no configs/ folder; run robotconf up in a lab repository")
+    repo = _git_repo(root)
+    notes: list[str] = []
+    try:
+        if branch is None:
+            if repo.head.is_detached:
+                raise CliError("HEAD is detached; say which branch to apply: --branch BRANCH")
+            branch = str(repo.active_branch.name)
+        top = Path(repo.working_tree_dir or root)
+        rel = [os.path.relpath(root / part, top) for part in ("configs", "models")]
+        dirty = repo.git.status("--porcelain", "--", *rel).splitlines()
+    finally:
+        repo.close()
+    if dirty:
+        notes.append(
+            f"{len(dirty)} uncommitted change(s) in configs/ or models/ are NOT applied: "
+            f"robotconf up applies commits of '{branch}' only; commit them to roll them out"
+        )
+    try:
+        head = LocalBranch(root, branch).head()
+    except SourceError as exc:
+        raise CliError(str(exc)) from None
+    builder = DesiredBuilder()
+    desired = builder(root, head)
+    if desired.fleet is None:
+        shown = "\n  ".join(str(p) for p in desired.problems[:20])
+        raise CliError(
+            f"the head commit {short_rev(head)} of '{branch}' cannot be applied:\n  {shown}\n"
+            "fix it (robotconf validate), commit, and run robotconf up again"
+        )
+    folder = Path(workdir).absolute() if workdir else root / ".robotconf" / "up"
+    return UpSetup(root, branch, head, desired.fleet, folder, notes, builder)
+
+
+def agent_yaml(
+    fleet: FleetRender,
+    robot_id: str,
+    workdir: Path,
+    connection: Connection,
+    prefix: str,
+    public_key: Path | None = None,
+) -> dict[str, Any]:
+    """The agent.yaml of one robot: it recommends the template it is assigned (no warning)."""
+    request = fleet.requests[robot_id]
+    capability = request.scenario_requests.scenario.capability  # what every robot of it shares
+    description: dict[str, Any] = {"id": robot_id, "name": request.robot_name}
+    if capability.robot_template:
+        description["recommended_template"] = capability.robot_template
+    description["platform"] = capability.platform
+    config: dict[str, Any] = {
+        "broker": connection.url,
+        "prefix": prefix,
+        "description": description,
+        "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+        "workdir": str(workdir / robot_id),
+        "stop_timeout": AGENT_STOP_TIMEOUT,
+        # The stand-in brain re-reads its request on SIGHUP: a settings-only commit reloads it.
+        "reload": {"signal": "SIGHUP"},
+    }
+    # A given broker may need the same credentials and TLS settings as `up` itself.
+    if connection.username:
+        config["username"] = connection.username
+    if connection.password_file:
+        config["password_file"] = str(connection.password_file.absolute())
+    if connection.address.tls:
+        tls: dict[str, Any] = {"insecure": connection.insecure}
+        for key in ("ca_file", "cert_file", "key_file"):
+            value = getattr(connection, key)
+            if value is not None:
+                tls[key] = str(Path(value).absolute())
+        config["tls"] = tls
+    if public_key is not None:
+        config["public_key"] = str(public_key.absolute())
+    return config
+
+
+class UpLock:
+    """One `up` per work directory. A flock: the kernel releases it when `up` dies, so the lock
+    of a crashed `up` is never stale."""
+
+    def __init__(self, workdir: Path) -> None:
+        self.path = workdir / "up.lock"
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        """Raises CliError when another `up` holds it."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            raise CliError(
+                f"another robotconf up (pid {holder}) is running with {self.path.parent}; "
+                "stop it first, or give this one its own --workdir"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:
+    """Stops the agents a killed `up` left running (where the kernel could not be asked to
+    stop them, or they are still stopping): each holds its work directory's lock."""
+    if not workdir.is_dir():
+        return
+    held: dict[Path, int] = {}
+    for folder in sorted(p for p in workdir.iterdir() if (p / LOCK_FILE).is_file()):
+        pid = WorkdirLock(folder).holder()
+        if pid is None:
+            continue
+        if pid > 0 and not _runs_config(pid, folder / "agent.yaml"):
+            # Not an agent `up` started (say, a robot's own, given --workdir): not ours to stop.
+            raise CliError(
+                f"another agent (pid {pid}) is using {folder}; give robotconf up another --workdir"
+            )
+        held[folder] = pid
+    for folder, pid in held.items():
+        if pid > 0:
+            say(f"stopping agent pid {pid} left running in {folder} by a previous robotconf up")
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGTERM)  # it stops its brain and says so
+    deadline = time.monotonic() + AGENT_STOP_TIMEOUT + 5.0
+    for folder, pid in held.items():
+        lock = WorkdirLock(folder)
+        while lock.holder() is not None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if lock.holder() is not None and pid > 0:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(pid, signal.SIGKILL)  # its brain is stopped by the next agent
+        while lock.holder() is not None and time.monotonic() < deadline + 5.0:
+            time.sleep(0.1)
+        if lock.holder() is not None:
+            raise CliError(f"an agent still holds {folder / LOCK_FILE}; stop it and start again")
+
+
+def _runs_config(pid: int, config: Path) -> bool:
+    """True when process `pid` was started with `--config config`, as `up` starts agents."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    wanted = os.fsencode(config)
+    return any(a == b"--config" and b == wanted for a, b in itertools.pairwise(argv))
+
+
+class Agents:
+    """One `robotconf agent` subprocess per robot, each in its own session so that Ctrl-C
+    reaches this process only and the agents are stopped in order. Each is asked to die with
+    this process (and its brain with it), so that not even a SIGKILL of `up` leaves them."""
+
+    def __init__(
+        self, workdir: Path, connection: Connection, prefix: str, public_key: Path | None = None
+    ) -> None:
+        self.workdir = workdir
+        self.connection = connection
+        self.prefix = prefix
+        self.public_key = public_key
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, robot_ids: list[str], fleet: FleetRender) -> None:
+        for robot_id in robot_ids:
+            if robot_id in self.procs or robot_id not in fleet.requests:
+                continue
+            folder = self.workdir / robot_id
+            folder.mkdir(parents=True, exist_ok=True)
+            config = folder / "agent.yaml"
+            settings = agent_yaml(
+                fleet, robot_id, self.workdir, self.connection, self.prefix, self.public_key
+            )
+            config.write_text(yaml.safe_dump(settings, sort_keys=False), encoding="utf-8")
+            with (folder / "agent.log").open("ab") as out:
+                self.procs[robot_id] = subprocess.Popen(
+                    [sys.executable, "-m", "agent.cli", "--config", str(config)],
+                    stdin=subprocess.DEVNULL,
+                    stdout=out,
+                    stderr=out,
+                    start_new_session=True,
+                    # Asked of the kernel by the agent itself (no preexec_fn in this threaded
+                    # process); agents are started on the main thread, which lives as long as
+                    # `up`: the parent-death signal follows the thread, not the process.
+                    env={**os.environ, DIE_WITH_PARENT: str(os.getpid())},
+                )
+
+    def died(self) -> list[tuple[str, int]]:
+        return [(r, p.returncode) for r, p in self.procs.items() if p.poll() is not None]
+
+    def stop(self, timeout: float = AGENT_STOP_TIMEOUT + 5.0) -> None:
+        """SIGTERM lets each agent stop its brain and say so; SIGKILL only what is left."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + timeout
+        for proc in self.procs.values():
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(max(0.1, deadline - time.monotonic()))
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def _demo_keys(folder: Path) -> KeyPair:
+    """The key pair of this up folder: made once, reused, so restarted agents still verify."""
+    pair = KeyPair(folder / PRIVATE_NAME, folder / PUBLIC_NAME)
+    if pair.private.is_file() and pair.public.is_file():
+        return pair
+    return generate_keys(folder, force=True)
+
+
+class UpScreen(Protocol):
+    """Where `up` reports: lines as they happen, and the fleet whenever it changes."""
+
+    @property
+    def live(self) -> bool:
+        """True when the fleet is drawn on a screen (then changes are not said as lines)."""
+        ...
+
+    def say(self, line: str) -> None: ...
+
+    def begin(self, header: list[str]) -> None:
+        """The fleet is about to be shown, under these lines."""
+        ...
+
+    def show(self, fleet: FleetStatus) -> None: ...
+
+    def end(self) -> None:
+        """Nothing more will be shown (the stopping lines are said after)."""
+        ...
+
+
+def refusal_lines(status: ReconcilerStatus | None) -> list[str]:
+    """A commit the reconciler refused, in words: which, why, what the robots keep, and its
+    first diagnostics; [] when none is refused. Shown as prominently as the robots."""
+    if status is None or status.reason not in REFUSED or not status.failed_revision:
+        return []
+    where = f" of '{clean(status.branch)}'" if status.branch else ""
+    keep = (
+        f"the robots keep {short_rev(status.last_applied_revision)}"
+        if status.last_applied_revision
+        else "nothing is applied"
+    )
+    lines = [
+        f"REFUSED: commit {short_rev(status.failed_revision)}{where} is not applied "
+        f"({clean(status.reason)}); {keep}. Fix it (robotconf validate) and commit again."
+    ]
+    return lines + diagnostic_lines(status, REFUSED_DIAGNOSTICS)
+
+
+def run_up(
+    setup: UpSetup,
+    given_broker: str | None,
+    connect: Callable[[str], Connection],
+    prefix: str,
+    signing: bool,
+    screen: UpScreen,
+) -> ExitCode:
+    """Runs the loop until SIGINT, SIGTERM or SIGHUP; `connect` makes the connection to a broker
+    URL (raising CliError); without `given_broker`, an embedded broker is started."""
+    lock = UpLock(setup.workdir)
+    lock.acquire()
+    try:
+        return _run_up(setup, given_broker, connect, prefix, signing, screen)
+    finally:
+        lock.release()
+
+
+def _run_up(
+    setup: UpSetup,
+    given_broker: str | None,
+    connect: Callable[[str], Connection],
+    prefix: str,
+    signing: bool,
+    screen: UpScreen,
+) -> ExitCode:
+    log_to_file(setup.workdir / "up.log")
+    say = screen.say
+    recover_agents(setup.workdir, say)
+    for note in setup.notes:
+        say(f"note: {note}")
+    broker, login, url = _start_broker(setup, given_broker, say)
+    try:
+        connection = connect(url)
+        if login is not None:  # up's reconciler, its agents and the operator: one login
+            connection = dataclasses.replace(
+                connection, username=login.username, password_file=login.password_file
+            )
+        if broker is None:
+            _given_answers(connection, prefix, setup.broker_origin)
+        return _serve(setup, connection, prefix, signing, screen)
+    finally:
+        if broker is not None:
+            broker.stop()
+        say("stopped")
+
+
+def _start_broker(
+    setup: UpSetup, given_broker: str | None, say: Callable[[str], None]
+) -> tuple[Any, Any, str]:
+    """The embedded broker and its login (None, None with a given broker), and the URL."""
+    if given_broker:
+        say(f"broker: {redact_url(given_broker)} (given by {setup.broker_origin})")
+        return None, None, given_broker
+    from workstation.broker import BrokerStartError, EmbeddedBroker
+    from workstation.broker_login import broker_login
+
+    login = broker_login(setup.workdir / "broker")
+    broker = EmbeddedBroker(login, preferred=setup.port)
+    try:
+        broker.start()
+    except BrokerStartError as exc:
+        raise CliError(f"{exc}; or pass --broker mqtt://HOST:PORT") from None
+    taken = "" if broker.port == setup.port else f" (port {setup.port} is taken)"
+    say(
+        f"broker: embedded amqtt at {broker.url}{taken}, for user {login.username} only: its "
+        f"password is in {login.password_file} (0600), readable by you alone"
+    )
+    return broker, login, broker.url
+
+
+def _given_answers(connection: Connection, prefix: str, origin: str) -> None:
+    """Raises CliError when a given broker does not answer within GIVEN_BROKER_WAIT: a stale
+    $ROBOTCONF_BROKER must not leave `up` waiting for ever with nothing started."""
+    probe = RetainedView(connection, [], f"{prefix}/sync", role="up-probe")
+    with probe:
+        if probe.wait_synced(GIVEN_BROKER_WAIT, or_refused=True):
+            return
+    unset = f"; unset {BROKER_ENV} to run up's own broker" if origin == f"${BROKER_ENV}" else ""
+    raise CliError(
+        f"the broker {connection.address.url} (given by {origin}) did not answer within "
+        f"{GIVEN_BROKER_WAIT:g} s ({probe.silence()}): start it or give another{unset}"
+    )
+
+
+def _serve(
+    setup: UpSetup, connection: Connection, prefix: str, signing: bool, screen: UpScreen
+) -> ExitCode:
+    say = screen.say
+    signer, public_key, private_key = None, None, None
+    if signing:
+        keys = _demo_keys(setup.workdir / "keys")
+        signer, public_key, private_key = make_signer(keys.private), keys.public, keys.private
+        say(f"signing: every request is signed; agents verify with {public_key}")
+
+    stop = threading.Event()
+    changed = threading.Event()
+    controller = Controller(
+        LocalBranch(setup.root, setup.branch),
+        connection,
+        prefix,
+        RESYNC_INTERVAL,
+        on_reconciled=lambda status: changed.set(),
+        signer=signer,
+        builder=setup.builder,
+    )
+    agents = Agents(setup.workdir, connection, prefix, public_key)
+    view = open_view(connection, prefix, changed.set)
+
+    def at_once() -> None:  # a second Ctrl-C: do not wait (the brains get SIGTERM as orphans)
+        for proc in agents.procs.values():
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+        os._exit(ExitCode.INTERRUPTED)
+
+    on_stop_signals(stop, changed.set, again=at_once)
+
+    say(
+        f"reconciling {setup.root} branch '{setup.branch}' (head {short_rev(setup.head)}), "
+        f"{len(setup.fleet.requests)} robot(s); agent files and logs in {setup.workdir}"
+    )
+    desk = write_desk(setup.root, up_desk(setup, connection, prefix, private_key))
+    header = banner(setup, connection, desk)
+    for line in header[1:3]:
+        say(line.strip())
+    thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
+    thread.start()
+    view.start()
+    agents.start(sorted(setup.fleet.requests), setup.fleet)
+    screen.begin(header)
+    try:
+        _loop(controller, agents, view, Topics(prefix), stop, changed, screen)
+    finally:
+        screen.end()
+        say("stopping: agents and their brains ...")
+        remove_desk(setup.root, os.getpid())
+        agents.stop()
+        view.stop()
+        controller.stop()
+        thread.join(10)
+    return ExitCode.OK
+
+
+def up_desk(
+    setup: UpSetup, connection: Connection, prefix: str, private_key: Path | None
+) -> UpDesk:
+    """What the desk commands need to reach this `up`: the URL without credentials, and the
+    paths of the password file and signing key (the secrets stay in their 0600 files)."""
+
+    def absolute(path: Path | None) -> Path | None:
+        return None if path is None else path.absolute()
+
+    return UpDesk(
+        broker=connection.address.url,
+        prefix=prefix,
+        pid=os.getpid(),
+        lock=(setup.workdir / "up.lock").absolute(),
+        username=connection.username or connection.address.username,
+        password_file=absolute(connection.password_file),
+        signing_key=absolute(private_key),
+        ca_file=absolute(connection.ca_file),
+        cert_file=absolute(connection.cert_file),
+        key_file=absolute(connection.key_file),
+        insecure=connection.insecure,
+    )
+
+
+def desk_commands(root: Path) -> list[str]:
+    """What to type in another terminal: no options from within the repository; from
+    elsewhere, --repo naming it (that is where the desk file is looked for)."""
+    here = Path.cwd().absolute()
+    inside = here == root or root in here.parents
+    where = "" if inside else f" --repo {_shown_path(root)}"
+    return [
+        f"robotconf status{where}",
+        f"robotconf logs ROBOT{where}",
+        f"robotconf restart ROBOT{where}",
+    ]
+
+
+def banner(setup: UpSetup, connection: Connection, desk: Path) -> list[str]:
+    """The lines above the live fleet: where the broker is, and what to type elsewhere."""
+    commands = "    ".join(desk_commands(setup.root))
+    return [
+        f"robotconf up: broker {redact_url(connection.url)}, branch '{setup.branch}' of "
+        f"{setup.root}",
+        f"  another terminal: {commands}    (Ctrl-C stops everything)",
+        f"  they find this up's broker, login and signing key in {_shown_path(desk)} "
+        "while it runs; no options needed",
+        *[f"  note: {n}" for n in setup.notes],
+        "",
+    ]
+
+
+def _loop(
+    controller: Controller,
+    agents: Agents,
+    view: RetainedView,
+    topics: Topics,
+    stop: threading.Event,
+    changed: threading.Event,
+    screen: UpScreen,
+) -> None:
+    """Shows the fleet while it changes; starts agents for robots that later commits add."""
+    say = screen.say
+    shown = ""
+    refusal: list[str] = []
+    in_sync_at: str | None = None
+    reported_dead: set[str] = set()
+    started = time.monotonic()
+    waiting_said = False
+    while not stop.is_set():
+        changed.clear()
+        serving = controller.serving
+        if serving is not None and serving.fleet is not None:
+            agents.start(sorted(serving.fleet.requests), serving.fleet)
+        for robot_id, code in agents.died():
+            if robot_id not in reported_dead:
+                reported_dead.add(robot_id)
+                log_file = agents.workdir / robot_id / "agent.log"
+                say(f"agent {robot_id} exited ({code}); see {log_file}")
+        if not view.synced and not waiting_said and time.monotonic() - started > 5:
+            waiting_said = True
+            say(f"waiting for the broker at {view.connection.address.url} ({view.silence()})")
+        if view.synced and serving is not None and serving.fleet is not None:
+            retained = parse_retained(view.snapshot(), topics)
+            fleet = FleetStatus(
+                build_rows(desired_from_fleet(serving.fleet), retained),
+                retained.reconciler,
+                f"{short_rev(serving.revision)} ({controller.source.branch})",
+            )
+            key = change_key(fleet)
+            if key != shown:
+                shown = key
+                screen.show(fleet)
+                refused = refusal_lines(fleet.reconciler)
+                if refused != refusal:  # said once per refused commit, even on a live screen
+                    refusal = refused
+                    for line in refused:
+                        say(line)
+                if fleet.in_sync and in_sync_at != serving.revision:
+                    in_sync_at = serving.revision
+                    say(
+                        f"all robots InSync with {short_rev(serving.revision)}; "
+                        f"watching '{controller.source.branch}' (Ctrl-C to stop)"
+                    )
+                elif not screen.live:
+                    say(summary(fleet))
+        changed.wait(5.0)
+        time.sleep(0.2)  # coalesce a burst of status messages into one redraw
+
+
+def _shown_path(path: Path) -> str:
+    """`path` relative to the current folder when it is under it (shorter), quoted for a shell."""
+    with contextlib.suppress(ValueError):
+        path = path.relative_to(Path.cwd())
+    return shlex.quote(str(path))
+
+
+def summary(fleet: FleetStatus) -> str:
+    """One line for the line output: the robots per verdict, and a rollout under way."""
+    counts = ", ".join(f"{n} {v}" for v, n in fleet.counts().items()) or "no robots"
+    line = f"{len(fleet.rows)} robots: {counts}"
+    rollout = fleet.reconciler.rollout if fleet.reconciler is not None else None
+    if rollout is not None and rollout.state != "Complete":
+        line += f"; {rollout_line(rollout)}"
+    return line
