@@ -24,9 +24,9 @@ from pydantic import (
 )
 from pydantic_core import ErrorDetails
 
-from configurator.types import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
 from contract.diagnostics import did_you_mean
 from contract.files import read_regular
+from contract.models import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
 from contract.mqtt import Connection
 from contract.typing_errors import error_path, error_text, type_error_text
 from contract.wire import (
@@ -163,7 +163,7 @@ AGENT_ENV_PREFIX = "ROBOTCONF_"
 # Linux refuses one environment string longer than 128 KiB at exec time: the brain would never
 # start, and only the robot's log would say why. Far below, and plenty for any setting.
 MAX_ENV_VALUE = 32 * 1024
-# ROS_DOMAIN_ID is checked against MAX_ROS_DOMAIN_ID (configurator/types.py) so a typo is an
+# ROS_DOMAIN_ID is checked against MAX_ROS_DOMAIN_ID (contract/models.py) so a typo is an
 # agent.yaml error at start-up, not a brain restarting until it gives up.
 
 

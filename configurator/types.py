@@ -1,54 +1,26 @@
 """The typed documents of a Robot Configurator repository: catalogue models and configurations.
 
-Pure pydantic; imported by the robot-side agent too, so nothing heavier than pydantic here.
+Pure pydantic. What the robot side shares (robot ids, the strict base, mapping bindings) is
+declared in contract/models.py and re-exported here, so documents keep one import.
 """
 
 from __future__ import annotations
 
-import re
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
-# `$` ends the text in pydantic's and JSON Schema's regexes; Python's `re` also lets it match
-# before a final newline, so Python code matches robot ids in full with `is_robot_id`.
-ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
-_ROBOT_ID = re.compile(ROBOT_ID_PATTERN)
-# The broker users of the service side (broker-config): no robot may log in as one of them.
-SERVICE_USERS = ("reconciler", "viewer", "operator")
-# DDS derives its UDP ports from the ROS domain id; beyond 232 they pass 65535 and a node fails
-# at start (ROS 2 docs, "The ROS_DOMAIN_ID"). One bound for fleet.yaml, the Launch Request and
-# agent.yaml's `env:`.
-MAX_ROS_DOMAIN_ID = 232
-ROS_DOMAIN_DESCRIPTION = (
-    f"the ROS 2 domain (ROS_DOMAIN_ID, 0 to {MAX_ROS_DOMAIN_ID}) the robot's brain runs "
-    "in: robots on different domains share no ROS graph"
-)
-
-
-def is_robot_id(text: str) -> bool:
-    return _ROBOT_ID.fullmatch(text) is not None
-
-
-def reserved_robot_id(text: str) -> str | None:
-    """The service user a robot id would collide with (in any letter case), else None."""
-    for user in SERVICE_USERS:
-        if text.lower() == user:
-            return user
-    return None
-
-
-JsonScalar = bool | int | float | str
-JsonObject = dict[str, Any]
-
-
-class StrictModel(BaseModel):
-    """The base of every typed document, agent.yaml and the Launch Request: unknown fields are
-    refused (a typo must never pass silently) and values are taken only of their own type:
-    `suspended: "yes"`, `minimum: true` or `speed: "0.2"` are mistakes, not conversions."""
-
-    model_config = ConfigDict(extra="forbid", strict=True)
-
+from contract.models import MAX_ROS_DOMAIN_ID as MAX_ROS_DOMAIN_ID
+from contract.models import ROBOT_ID_PATTERN as ROBOT_ID_PATTERN
+from contract.models import ROS_DOMAIN_DESCRIPTION as ROS_DOMAIN_DESCRIPTION
+from contract.models import SERVICE_USERS as SERVICE_USERS
+from contract.models import JsonObject as JsonObject
+from contract.models import JsonScalar as JsonScalar
+from contract.models import MappingBinding as MappingBinding
+from contract.models import MappingKind as MappingKind
+from contract.models import StrictModel as StrictModel
+from contract.models import is_robot_id as is_robot_id
+from contract.models import reserved_robot_id as reserved_robot_id
 
 # ---------------------------------------------------------------- settings
 
@@ -85,17 +57,6 @@ class RobotTemplate(StrictModel):
     description: str = ""
     mappings: list[str] = Field(description="names of the mappings this robot has")
     settings: dict[str, SettingDefinition] = Field(default_factory=dict)
-
-
-MappingKind = Literal["topic", "service", "action_client"]
-
-
-class MappingBinding(StrictModel):
-    """How one mapping is bound on a platform (a ROS topic, service or action client)."""
-
-    kind: MappingKind
-    name: str = Field(description="e.g. the topic name /cmd_vel")
-    type: str = Field(description="e.g. geometry_msgs/msg/Twist")
 
 
 class MappingScheme(StrictModel):

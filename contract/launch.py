@@ -12,7 +12,7 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import Field
 
-from configurator.types import (
+from contract.models import (
     MAX_ROS_DOMAIN_ID,
     ROBOT_ID_PATTERN,
     JsonObject,

@@ -14,8 +14,8 @@ from urllib.parse import unquote, urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from configurator.types import ROBOT_ID_PATTERN
 from contract.diagnostics import Diagnostic
+from contract.models import ROBOT_ID_PATTERN
 
 DEFAULT_PREFIX = "robotconf"
 BROKER_ENV = "ROBOTCONF_BROKER"

@@ -97,6 +97,46 @@ def test_the_cycle_finder_finds_a_function_level_cycle(tmp_path: Path) -> None:
     assert "workstation.broker" in imported_modules(module, set(import_graph()))
 
 
+# The layers, bottom first: each may import its own and those below. The robot side (agent)
+# stands beside them on the contract alone; the workstation shell is the top and may start it.
+MAY_IMPORT = {
+    "contract": {"contract"},
+    "configurator": {"contract", "configurator"},
+    "reconciler": {"contract", "configurator", "reconciler"},
+    "workstation": {"contract", "configurator", "reconciler", "workstation", "agent"},
+    "agent": {"contract", "agent"},
+}
+
+
+def layer_breaches(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(
+        f"{module} -> {target}"
+        for module, targets in graph.items()
+        for target in targets
+        if target.split(".")[0] not in MAY_IMPORT[module.split(".")[0]]
+    )
+
+
+def test_every_import_goes_down_the_layers() -> None:
+    """contract < configurator < reconciler < workstation, and agent on contract alone: an import
+    anywhere in a module (a function's too) that goes up or sideways is a breach."""
+    assert set(MAY_IMPORT) == set(PACKAGES)
+    breaches = layer_breaches(import_graph())
+    assert breaches == [], "imports against the layers: " + "; ".join(breaches)
+
+
+def test_the_layer_check_finds_an_upward_import() -> None:
+    graph = {
+        "contract.wire": {"configurator.types"},
+        "agent.runtime": {"reconciler.retained", "contract.wire"},
+        "workstation.up": {"agent.workdir"},
+    }
+    assert layer_breaches(graph) == [
+        "agent.runtime -> reconciler.retained",
+        "contract.wire -> configurator.types",
+    ]
+
+
 def loaded_modules(*argv: str) -> set[str]:
     """The modules a `robotconf` run with these arguments has imported when it ends."""
     code = (
