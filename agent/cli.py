@@ -54,10 +54,11 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str]) -> int:
-    """Exit code as `robotconf` gives them: a CliError is one line on stderr."""
+def main(argv: list[str] | None = None) -> int:
+    """Exit code as `robotconf` gives them: a CliError is one line on stderr. Also the
+    `robotconf-agent` entry point of a robot-only install (argv from the command line)."""
     try:
-        return _run(argv)
+        return _run(sys.argv[1:] if argv is None else argv)
     except CliError as exc:
         print(f"{PROG}: {exc.message}", file=sys.stderr)
         return exc.code

@@ -38,8 +38,20 @@ class KeyPair:
     public: Path
 
 
+def _require_cryptography() -> None:
+    """A robot-only install has no `cryptography` unless asked for: say which extra brings it."""
+    import importlib.util
+
+    if importlib.util.find_spec("cryptography") is None:
+        raise SigningKeyError(
+            "signed Launch Requests need the `cryptography` package, which this install lacks: "
+            "pip install 'robotconf[signing]' (on a robot) or 'robotconf[server]'"
+        )
+
+
 def generate_keys(folder: Path, *, force: bool = False) -> KeyPair:
     """Write a new Ed25519 pair: the private key 0600, the public key 0644."""
+    _require_cryptography()
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
@@ -63,6 +75,7 @@ def generate_keys(folder: Path, *, force: bool = False) -> KeyPair:
 
 
 def load_private_key(path: Path) -> Ed25519PrivateKey:
+    _require_cryptography()
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
@@ -80,6 +93,7 @@ def load_private_key(path: Path) -> Ed25519PrivateKey:
 
 
 def load_public_key(path: Path) -> Ed25519PublicKey:
+    _require_cryptography()
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 

@@ -137,9 +137,12 @@ class AgentProc:
         broker_url: str,
         robot_id: str = "tb3-01",
         command: list[str] | None = None,
+        *,
+        program: list[str] | None = None,
         **settings: Any,
     ) -> None:
         self.root = root
+        self.program = program or agent_argv()  # another install's agent, e.g. a robot-only one
         self.robot_id = robot_id
         self.workdir = root / "work"
         self.config_path = root / "agent.yaml"
@@ -176,7 +179,7 @@ class AgentProc:
         configs = [arg for a in (self, *hosted) for arg in ("--config", str(a.config_path))]
         with self.stderr_path.open("ab") as err:
             self.proc = subprocess.Popen(
-                [*agent_argv(), *configs, "--log-level", "debug"],
+                [*self.program, *configs, "--log-level", "debug"],
                 stdin=subprocess.DEVNULL,
                 stdout=err,
                 stderr=err,

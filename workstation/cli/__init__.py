@@ -2,12 +2,34 @@
 
 from __future__ import annotations
 
+import sys
+
+from contract.errors import ExitCode
+
 
 def main(argv: list[str] | None = None) -> int:
-    """The `robotconf` entry point: click and the commands load only when it runs."""
-    from workstation.cli.main import main as run
+    """The `robotconf` entry point: click and the commands load only when it runs.
 
-    return run(argv)
+    A robot-only install (`pip install robotconf`, no `[server]` extra) has no click: there
+    `robotconf agent ...` still runs the agent, and any other command says what to install."""
+    args = sys.argv[1:] if argv is None else argv
+    try:
+        from workstation.cli.main import main as run
+    except ModuleNotFoundError as exc:
+        if exc.name != "click":
+            raise
+        if args[:1] == ["agent"]:
+            from agent.cli import main as run_agent
+
+            return run_agent(args[1:])
+        print(
+            "robotconf: this is a robot-only install: only `robotconf agent` (or "
+            "`robotconf-agent`) runs here; the other commands need the server side: "
+            "pip install 'robotconf[server]'",
+            file=sys.stderr,
+        )
+        return int(ExitCode.TOOL)
+    return run(args)
 
 
 __all__ = ["main"]
