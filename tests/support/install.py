@@ -1,0 +1,64 @@
+"""Installs of robotconf as a user gets them: its wheel, built offline from a copy of this
+checkout, put into a fresh virtual environment (no system site-packages, no PYTHONPATH)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from tests.support.lab import ROOT
+
+PACKAGES = ("contract", "configurator", "reconciler", "workstation", "agent")
+INSTALL_TIMEOUT = 600
+
+
+def clean_env() -> dict[str, str]:
+    """No PYTHONPATH: the fresh environment must not see this checkout."""
+    return {k: v for k, v in os.environ.items() if k not in {"PYTHONPATH", "PYTHONHOME"}}
+
+
+def run(argv: list[str], cwd: Path | None = None) -> str:
+    """stdout of a command that must succeed; run outside the checkout, because `python -c`
+    and `-m` put the working folder on sys.path."""
+    done = subprocess.run(
+        argv,
+        cwd=cwd or Path("/"),
+        env=clean_env(),
+        capture_output=True,
+        text=True,
+        timeout=INSTALL_TIMEOUT,
+        check=False,
+    )
+    assert done.returncode == 0, f"{' '.join(argv)}\n{done.stdout}\n{done.stderr}"
+    return done.stdout
+
+
+def build_wheel(dest: Path) -> Path:
+    """robotconf's wheel, built with this venv's setuptools from a copy of the project (so that
+    the build's egg-info stays out of the checkout)."""
+    project = dest / "project"
+    project.mkdir(parents=True)
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy2(ROOT / name, project / name)
+    for package in PACKAGES:
+        shutil.copytree(
+            ROOT / package, project / package, ignore=shutil.ignore_patterns("__pycache__")
+        )
+    wheels = dest / "wheels"
+    pip = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation"]
+    run([*pip, "-w", str(wheels), str(project)])
+    (wheel,) = wheels.glob("robotconf-*.whl")
+    return wheel
+
+
+def fresh_install(root: Path, *requirements: str) -> Path:
+    """A new virtual environment under `root` with robotconf's wheel (and `requirements`)
+    installed as pip resolves them from the package index; returns the environment."""
+    wheel = build_wheel(root)
+    env = root / "venv"
+    run([sys.executable, "-m", "venv", str(env)])
+    run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", str(wheel), *requirements])
+    return env
