@@ -76,6 +76,8 @@ def _scanned() -> list[Path]:
     files = [ROOT / name for name in SCANNED_FILES if (ROOT / name).is_file()]
     for folder in SCANNED_FOLDERS:
         files += sorted(p for p in (ROOT / folder).rglob("*.py") if p.resolve() != here)
+    # The documented production example's files say where they are explained.
+    files += sorted(p for p in (ROOT / "examples").rglob("*") if p.is_file())
     return files
 
 
