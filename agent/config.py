@@ -1,4 +1,5 @@
-"""agent.yaml (DESIGN §11): the AgentConfig model and a loader whose errors name file:line.
+"""agent.yaml (docs/architecture.md#agentyaml): the AgentConfig model, and a loader whose
+errors name file:line.
 
 Loading never raises a traceback at the user: every problem becomes one `ConfigError` line.
 """

@@ -1,4 +1,5 @@
-"""The brain's state machine (DESIGN §7) as pure logic: events in, effects and a status out.
+"""The brain's state machine (docs/architecture.md#the-agents-states) as pure logic: events in,
+effects and a status out.
 
 No processes, no MQTT, no clock of its own: times are passed in, so every rule is unit-tested.
 """
@@ -364,7 +365,7 @@ class Supervisor:
             return [Kill(self.pid)]
         self.shutting_down = True
         self.deadline = None
-        self._end_deferral()  # the agent's own stop is never deferred (README, busy robots)
+        self._end_deferral()  # the agent's own stop is never deferred (the hold file's how-to)
         if self.pid is not None:
             return self._begin_stop(now, "agent shutting down: stopping the brain")
         return []

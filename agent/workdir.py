@@ -59,7 +59,8 @@ def remove_hold(path: Path) -> str | None:
 
 
 class SeqStore:
-    """The connection counter of DESIGN §7, persisted so a restarted agent keeps counting up.
+    """The connection counter (`seq`, docs/architecture.md#the-mqtt-contract), persisted so a
+    restarted agent keeps counting up.
 
     `advance()` runs on paho's network thread right before each connection attempt, the
     agent's thread reads `current`: hence the lock.

@@ -136,7 +136,8 @@ class LaunchRequest(_Published):
 class StopRequest(_Published):
     """A signed "stop": what the launch topic holds for a robot no longer assigned, when the
     reconciler signs. An empty payload cannot carry a signature, so an agent that verifies
-    requests stops its brain only for one of these (DESIGN §7: empty means stop, unsigned)."""
+    requests stops its brain only for one of these (empty means stop, unsigned:
+    docs/architecture.md#the-mqtt-contract)."""
 
     apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
     kind: Literal["Stop"] = "Stop"

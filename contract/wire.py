@@ -1,4 +1,5 @@
-"""The MQTT contract (DESIGN §7): topic names, broker URLs and the retained status messages.
+"""The MQTT contract (docs/architecture.md#the-mqtt-contract): topic names, broker URLs and the
+retained status messages.
 
 Pure pydantic; shared by the agent, the reconciler and `robotconf status`.
 """
@@ -158,7 +159,8 @@ def parse_broker_url(url: str) -> BrokerAddress:
 
 
 class AgentState(str, Enum):
-    """Supervisor states of an agent and its brain service (DESIGN §7)."""
+    """Supervisor states of an agent and its brain service: the table is
+    docs/architecture.md#the-agents-states."""
 
     OFFLINE = "offline"
     IDLE = "idle"

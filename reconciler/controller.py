@@ -658,8 +658,8 @@ class Controller:
             return None, payload
 
     def _stop_payload(self, robot_id: str, revision: str) -> bytes:
-        """Empty (DESIGN §7), or a signed StopRequest when requests are signed: an agent that
-        verifies requests stops only for a stop it can verify."""
+        """Empty (docs/architecture.md#the-mqtt-contract), or a signed StopRequest when requests
+        are signed: an agent that verifies requests stops only for a stop it can verify."""
         if self._sign is None:
             return b""
         return self._sign(StopRequest(robot_id=robot_id, revision=revision)).payload()

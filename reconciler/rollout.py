@@ -97,7 +97,7 @@ def stable_revision_of(previous: RolloutStatus | None, applied: str | None) -> s
 
 
 def roll_out(seen: RolloutInput) -> RolloutStep:
-    """The next step of rolling `head` out; see the module docstring and the README."""
+    """The next step of rolling `head` out; see the module docstring and docs/how-to/rollouts.md."""
     head, stable, previous = seen.head, seen.stable, seen.previous
     policy = head.rollout
     assert policy is not None

@@ -1,4 +1,5 @@
-"""Fleet status verdicts (DESIGN §10), pure: desired robots + retained topics -> a verdict each.
+"""Fleet status verdicts (docs/architecture.md#fleet-status-verdicts), pure: desired robots +
+retained topics -> a verdict each.
 
 The JSON form and the words of the reconciler's lines are here; the table for people is drawn
 by workstation/cli/fleet_view.py.

@@ -15,7 +15,7 @@ import click
 from configurator import __version__
 from contract.errors import CliError, ExitCode
 
-# name -> ("module:attribute", the short help `robotconf --help` shows), in the README's order.
+# name -> ("module:attribute", the short help `robotconf --help` shows), in the docs' order.
 COMMANDS: dict[str, tuple[str, str]] = {
     "validate": ("workstation.cli.validate:validate", "validate the whole repository"),
     "catalog": ("workstation.cli.views:catalog", "list what exists in the catalogue"),

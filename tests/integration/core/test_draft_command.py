@@ -221,8 +221,9 @@ def test_draft_without_a_broker_says_so(lab: Lab, tmp_path: Path) -> None:
     assert done.returncode == 2 and "is the broker running?" in done.stderr
 
 
-def test_the_readme_example_drafts_the_lab_robot(lab: Lab) -> None:
-    """README's example: tb3-04's report in examples/, drafted and then autofilled."""
+def test_the_documented_example_drafts_the_lab_robot(lab: Lab) -> None:
+    """docs/how-to/real-robots.md's example: tb3-04's report in examples/, drafted and then
+    autofilled."""
     report = ROOT / "examples" / "interfaces" / "tb3-04.json"
     done = lab.run(
         "draft",
@@ -237,15 +238,15 @@ def test_the_readme_example_drafts_the_lab_robot(lab: Lab) -> None:
         str(report),
     )
     assert done.returncode == 0, done.stderr
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    page = (ROOT / "docs" / "how-to" / "real-robots.md").read_text(encoding="utf-8")
     shown = [
         line
         for line in done.stdout.splitlines()
         if not line.startswith(("  imu", "  odometry", "  scan", "  sensor_state", "  navigate"))
     ]
     for line in shown[:7]:
-        assert f"\n{line}\n" in readme, line
-    assert "\nmodels/platforms/ROS2/mapping-schemes/gazebo.yaml:8:3: warning RC608 " in readme
+        assert f"\n{line}\n" in page, line
+    assert "\nmodels/platforms/ROS2/mapping-schemes/gazebo.yaml:8:3: warning RC608 " in page
     filled = lab.run(
         "autofill",
         "--platform",

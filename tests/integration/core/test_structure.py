@@ -182,10 +182,10 @@ def test_the_robot_side_imports_no_workstation_library(module: str) -> None:
     assert not _top(set(done.stdout.splitlines())) & {"click", "rich", "git", "reconciler"}
 
 
-def test_the_readme_architecture_names_every_module_once() -> None:
-    """A newcomer finds any module in README's architecture table, and no row is stale."""
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = readme.split("## Architecture", 1)[1].split("\n## ", 1)[0]
+def test_the_architecture_page_names_every_module_once() -> None:
+    """A newcomer finds any module in docs/architecture.md's table, and no row is stale."""
+    page = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = page.split("\n## Modules\n", 1)[1].split("\n## ", 1)[0]
     rows = [
         line.split("`")[1]
         for line in section.splitlines()
@@ -199,8 +199,8 @@ def test_the_readme_architecture_names_every_module_once() -> None:
     )
     assert sorted(set(rows)) == sorted(rows), "a module is listed twice"
     assert sorted(rows) == modules, (
-        f"missing from README: {sorted(set(modules) - set(rows))}; "
-        f"stale in README: {sorted(set(rows) - set(modules))}"
+        f"missing from docs/architecture.md: {sorted(set(modules) - set(rows))}; "
+        f"stale in docs/architecture.md: {sorted(set(rows) - set(modules))}"
     )
 
 

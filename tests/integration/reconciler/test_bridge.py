@@ -28,11 +28,11 @@ PREFIX = "robotconf"
 
 def bridge_to(central: Mosquitto, name: str = "site-b") -> list[str]:
     """The site broker's bridge section (mosquitto.conf(5), "Configuring bridges"), as the
-    README shows it: requests and the reconciler's status come in, the robots' statuses and
-    descriptions go out, all at QoS 1. `try_private` (the default, written out because it
-    matters) marks the connection as a bridge, so that the central broker keeps the retain
-    flag of what it forwards: with `false` the requests are not retained on the site broker,
-    no agent there ever finds its own, and this test fails."""
+    docs/how-to/production-broker.md shows it: requests and the reconciler's status come in, the
+    robots' statuses and descriptions go out, all at QoS 1. `try_private` (the default, written
+    out because it matters) marks the connection as a bridge, so that the central broker keeps
+    the retain flag of what it forwards: with `false` the requests are not retained on the site
+    broker, no agent there ever finds its own, and this test fails."""
     return [
         f"connection {name}",
         f"address {central.host}:{central.port}",

@@ -52,7 +52,7 @@ def test_example_agent_yaml_is_valid(tmp_path: Path) -> None:
 
 UNIT = EXAMPLE / "robotconf-agent.service"
 INSTALLED_CONFIG = "/etc/robotconf/agent.yaml"  # where agent.yaml's header says it goes
-INSTALLED_TOOL = "/opt/robotconf/bin/robotconf"  # the venv of the README's robot install
+INSTALLED_TOOL = "/opt/robotconf/bin/robotconf"  # the venv of docs/how-to/robot-agent.md's install
 
 
 def unit_settings(text: str) -> dict[str, str]:
