@@ -107,6 +107,16 @@ class Controller:
     cache lives as long as the controller; a seam for tests). `no_local` (for a broker that
     speaks MQTT 5) spares the reconciler the echo of every request it publishes."""
 
+    # What the steps have learned, nothing before the first: each replaced, never changed
+    # in place (the rest of the state, containers and views, is made in __init__).
+    serving: Desired | None = None  # the last good revision, applied or being applied
+    _head: str | None = None
+    _last_log: str | None = None
+    _waiting_logged = False
+    _recovered = False
+    _found: ReconcilerStatus | None = None  # the retained status found at start
+    _fetch_error: str | None = None
+
     def __init__(
         self,
         source: BranchSource,
@@ -133,23 +143,8 @@ class Controller:
         self._resync_asked = threading.Event()  # a push announced (webhook): fetch now
         self._stop = threading.Event()
         self.ignored = Ignored(log)  # unreadable payloads skipped, shown in the status
-        # Statuses are not mirrored: during a rollout every robot reports several times, and
-        # they matter only for the repair below (`_sample_running`), sampled now and then.
-        self.view = RetainedView(
-            connection,
-            [self.topics.all_launch, self.topics.reconciler_status, self.topics.reconciler_rollout],
-            f"{prefix}/sync",
-            role="reconciler",
-            on_synced=self._wake.set,
-            on_topic=self._on_topic,
-            no_local=no_local,
-            keep=summarise_launches(self.topics),
-        )
-        # The Last Will (state Offline) lives on a connection of its own: a will is fixed at
-        # connect time, and this one must name the revision applied last.
-        presence = Presence(connection, self.topics.reconciler_status, "reconciler-will")
-        self.writer = StatusWriter(self.view, self.topics, presence, self.ignored, on_reconciled)
-        self.writer.lost = self._lost
+        self.view = self._launch_view(no_local)
+        self.writer = self._status_writer(on_reconciled)
         self.followed = Followed(source.branch, source.description, interval)
         # The robots' statuses, followed live only while the head has a rollout policy: the
         # waves are gated by them. Without one they are only sampled (`_sample_active`).
@@ -179,13 +174,32 @@ class Controller:
         self._sizes = RequestSizes()
         self._health_memo = ReadMemo()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
-        self.serving: Desired | None = None  # the last good revision, applied or being applied
-        self._head: str | None = None
-        self._last_log: str | None = None
-        self._waiting_logged = False
-        self._recovered = False
-        self._found: ReconcilerStatus | None = None  # the retained status found at start
-        self._fetch_error: str | None = None
+
+    def _launch_view(self, no_local: bool) -> RetainedView:
+        """The retained launch topics and the reconciler's own, mirrored. Statuses are not:
+        during a rollout every robot reports several times, and they matter only for the
+        repair (`_sample_active`), sampled now and then."""
+        return RetainedView(
+            self.connection,
+            [self.topics.all_launch, self.topics.reconciler_status, self.topics.reconciler_rollout],
+            f"{self.topics.prefix}/sync",
+            role="reconciler",
+            on_synced=self._wake.set,
+            on_topic=self._on_topic,
+            no_local=no_local,
+            keep=summarise_launches(self.topics),
+        )
+
+    def _status_writer(
+        self, on_reconciled: Callable[[ReconcilerStatus], None] | None
+    ) -> StatusWriter:
+        """The one status writer. Its Last Will (state Offline) lives on a connection of its
+        own: a will is fixed at connect time, and this one must name the revision applied
+        last."""
+        presence = Presence(self.connection, self.topics.reconciler_status, "reconciler-will")
+        writer = StatusWriter(self.view, self.topics, presence, self.ignored, on_reconciled)
+        writer.lost = self._lost
+        return writer
 
     # ------------------------------------------------------------------ loop
 
@@ -334,18 +348,7 @@ class Controller:
         retained messages are known (the next (re)connection wakes the loop)."""
         if fetch:
             self._refresh()
-        head: str | None = None
-        try:
-            head = self.source.head()
-        except SourceError as exc:
-            self._say(f"source: {exc}", logging.WARNING)
-            build = Desired(
-                "",
-                None,
-                [StatusDiagnostic(code=Reason.SOURCE_UNAVAILABLE.value, message=str(exc))],
-            )
-        else:
-            build = self._build(head)
+        head, build = self._head_and_build()
         self._head = head
         if not self.view.synced:
             if not self._waiting_logged:
@@ -391,6 +394,17 @@ class Controller:
             dark_since=dict(self._dark_since),
             interfaces=interfaces,
         )
+
+    def _head_and_build(self) -> tuple[str | None, Desired]:
+        """The branch's head commit and its build; no head, and a build saying why, when the
+        source cannot be read."""
+        try:
+            head = self.source.head()
+        except SourceError as exc:
+            self._say(f"source: {exc}", logging.WARNING)
+            problem = StatusDiagnostic(code=Reason.SOURCE_UNAVAILABLE.value, message=str(exc))
+            return None, Desired("", None, [problem])
+        return head, self._build(head)
 
     def _serving_fleet(self) -> FleetRender | None:
         return self.serving.fleet if self.serving is not None else None

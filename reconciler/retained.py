@@ -181,22 +181,27 @@ class RetainedView:
         # (its copy is updated at the PUBACK instead); retained messages still come at each
         # subscription, so a reconnect still reads back what is published.
         self.no_local = no_local
-        if no_local:
+        self._client = self._paho_client(connection, max_inflight)
+        self._started = False
+
+    def _paho_client(self, connection: Connection, max_inflight: int) -> paho.Client:
+        """The MQTT client, its handlers ours (MQTT 5 when asked for No Local)."""
+        if self.no_local:
             connection = dataclasses.replace(connection, protocol=MQTTProtocolVersion.MQTTv5)
-        self._client = make_client(connection, self.client_id)
-        self._client.suppress_exceptions = True  # and every handler is guarded besides
+        client = make_client(connection, self.client_id)
+        client.suppress_exceptions = True  # and every handler is guarded besides
         # Many retained QoS 1 publishes in flight at once: waiting for each PUBACK in turn
         # would make a 1,000-robot rollout as slow as 1,000 round trips. 0 is unlimited, and
         # also spares paho its scan of every message in flight at each PUBACK (a limit makes
         # a rollout quadratic in the number of robots).
-        self._client.max_inflight_messages_set(max_inflight)
-        self._client.on_connect = self._handle_connect
-        self._client.on_disconnect = self._handle_disconnect
-        self._client.on_subscribe = self._handle_subscribe
-        self._client.on_message = self._handle_message
-        self._client.on_connect_fail = self._handle_connect_fail
-        self._client.on_socket_open = self._handle_socket_open
-        self._started = False
+        client.max_inflight_messages_set(max_inflight)
+        client.on_connect = self._handle_connect
+        client.on_disconnect = self._handle_disconnect
+        client.on_subscribe = self._handle_subscribe
+        client.on_message = self._handle_message
+        client.on_connect_fail = self._handle_connect_fail
+        client.on_socket_open = self._handle_socket_open
+        return client
 
     # ------------------------------------------------------------------ lifecycle
 

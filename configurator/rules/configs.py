@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from configurator.composition import (
@@ -17,6 +19,8 @@ from configurator.resolve import ResolvedCapability, resolve_capability
 from configurator.rules.report import Reporter
 from configurator.types import (
     CapabilityConfiguration,
+    Environment,
+    Goal,
     JsonScalar,
     ScenarioConfiguration,
     SettingDefinition,
@@ -214,105 +218,153 @@ def _logics_maybe_meant(repo: Repository, config: CapabilityConfiguration) -> se
     return meant
 
 
+@dataclass(frozen=True)
+class _Scenario:
+    """A scenario configuration with what its checks look up: its capability, resolved, and
+    its environment, each None when it is unknown or unreadable (the environment also when
+    none is named)."""
+
+    repo: Repository
+    entry: Entry[ScenarioConfiguration]
+    resolved: ResolvedCapability | None
+    environment: Environment | None
+
+    @property
+    def model(self) -> ScenarioConfiguration:
+        return self.entry.model
+
+
 def check_scenario(
     repo: Repository,
     entry: Entry[ScenarioConfiguration],
     capabilities: dict[str, ResolvedCapability],
     report: Reporter,
 ) -> None:
+    """Every check of `_SCENARIO_CHECKS` on the scenario, in that order."""
     scenario = entry.model
-    resolved = capabilities.get(scenario.capability)
-    if resolved is None:
+    environment = None
+    if scenario.environment is not None:
+        environment = repo.environments.get(scenario.environment)
+    subject = _Scenario(
+        repo,
+        entry,
+        capabilities.get(scenario.capability),
+        environment.model if environment is not None else None,
+    )
+    for check in _SCENARIO_CHECKS:
+        check(subject, report)
+
+
+def _check_capability_known(subject: _Scenario, report: Reporter) -> None:
+    """RC206: the capability configuration the scenario names exists."""
+    scenario = subject.model
+    if subject.resolved is None:
         report.unknown(
-            entry,
+            subject.entry,
             ["capability"],
             "RC206",
             f"unknown capability configuration '{scenario.capability}'",
             scenario.capability,
-            repo.capabilities,
-            unreadable=repo.is_broken("capability", scenario.capability),
+            subject.repo.capabilities,
+            unreadable=subject.repo.is_broken("capability", scenario.capability),
         )
 
-    if resolved is not None:
-        template = resolved.template
-        if scenario.robot_settings and resolved.config.robot_template is None:
-            report.add(
-                entry,
-                ["robot_settings"],
-                "RC405",
-                f"robot settings need a robot template, and capability '{scenario.capability}' "
-                "names none; set robot_template there or remove robot_settings",
+
+def _check_robot_settings(subject: _Scenario, report: Reporter) -> None:
+    """RC405, RC401, RC4xx: robot settings go with a robot template, which defines them."""
+    scenario, resolved = subject.model, subject.resolved
+    if resolved is None:
+        return
+    template = resolved.template
+    if scenario.robot_settings and resolved.config.robot_template is None:
+        report.add(
+            subject.entry,
+            ["robot_settings"],
+            "RC405",
+            f"robot settings need a robot template, and capability '{scenario.capability}' "
+            "names none; set robot_template there or remove robot_settings",
+            key=True,
+        )
+    elif template is not None:
+        for name, value in scenario.robot_settings.items():
+            _check_setting(
+                report,
+                subject.entry,
+                ["robot_settings", name],
+                name,
+                value,
+                template.settings,
+                f"robot template '{resolved.config.robot_template}'",
+            )
+
+
+def _check_logic_settings(subject: _Scenario, report: Reporter) -> None:
+    """RC406, RC401, RC4xx: logic settings are for logics the capability selects, which
+    define them."""
+    scenario, resolved = subject.model, subject.resolved
+    if resolved is None:
+        return
+    selected_logics = {s.logic_name: s for s in resolved.all_selections()}
+    named = {logic for _, logic in resolved.config.selected_logics()}
+    meant = _logics_maybe_meant(subject.repo, resolved.config)
+    for logic_name, values in scenario.logic_settings.items():
+        selection = selected_logics.get(logic_name)
+        if selection is None and logic_name in named:
+            continue  # its action is unknown or unreadable: reported at the capability
+        if selection is None and logic_name in meant:
+            continue  # the capability's RC205 (a misspelt logic of its action) says it
+        if selection is None:
+            report.unknown(
+                subject.entry,
+                ["logic_settings", logic_name],
+                "RC406",
+                f"logic '{logic_name}' is not selected by capability '{scenario.capability}'",
+                logic_name,
+                selected_logics,
                 key=True,
             )
-        elif template is not None:
-            for name, value in scenario.robot_settings.items():
-                _check_setting(
-                    report,
-                    entry,
-                    ["robot_settings", name],
-                    name,
-                    value,
-                    template.settings,
-                    f"robot template '{resolved.config.robot_template}'",
-                )
-        selected_logics = {s.logic_name: s for s in resolved.all_selections()}
-        named = {logic for _, logic in resolved.config.selected_logics()}
-        meant = _logics_maybe_meant(repo, resolved.config)
-        for logic_name, values in scenario.logic_settings.items():
-            selection = selected_logics.get(logic_name)
-            if selection is None and logic_name in named:
-                continue  # its action is unknown or unreadable: reported at the capability
-            if selection is None and logic_name in meant:
-                continue  # the capability's RC205 (a misspelt logic of its action) says it
-            if selection is None:
-                report.unknown(
-                    entry,
-                    ["logic_settings", logic_name],
-                    "RC406",
-                    f"logic '{logic_name}' is not selected by capability '{scenario.capability}'",
-                    logic_name,
-                    selected_logics,
-                    key=True,
-                )
-                continue
-            for name, value in values.items():
-                _check_setting(
-                    report,
-                    entry,
-                    ["logic_settings", logic_name, name],
-                    name,
-                    value,
-                    selection.logic.settings,
-                    f"logic '{logic_name}'",
-                )
-
-    environment = None
-    if scenario.environment is not None:
-        env_entry = repo.environments.get(scenario.environment)
-        if env_entry is None:
-            report.unknown(
-                entry,
-                ["environment"],
-                "RC207",
-                f"unknown environment '{scenario.environment}'",
-                scenario.environment,
-                repo.environments,
-                unreadable=repo.is_broken("environment", scenario.environment),
+            continue
+        for name, value in values.items():
+            _check_setting(
+                report,
+                subject.entry,
+                ["logic_settings", logic_name, name],
+                name,
+                value,
+                selection.logic.settings,
+                f"logic '{logic_name}'",
             )
-        else:
-            environment = env_entry.model
 
+
+def _check_environment_known(subject: _Scenario, report: Reporter) -> None:
+    """RC207: the environment the scenario names, if any, exists."""
+    name = subject.model.environment
+    if name is not None and subject.environment is None:
+        report.unknown(
+            subject.entry,
+            ["environment"],
+            "RC207",
+            f"unknown environment '{name}'",
+            name,
+            subject.repo.environments,
+            unreadable=subject.repo.is_broken("environment", name),
+        )
+
+
+def _check_knowledge_sets(subject: _Scenario, report: Reporter) -> None:
+    """RC208: each knowledge set is one of the scenario's environment."""
+    scenario, environment = subject.model, subject.environment
     for i, set_name in enumerate(scenario.knowledge_sets):
         if scenario.environment is None:
             report.add(
-                entry,
+                subject.entry,
                 ["knowledge_sets", i],
                 "RC208",
                 f"knowledge set '{set_name}' needs an environment; set 'environment'",
             )
         elif environment is not None and set_name not in environment.knowledge_sets:
             report.unknown(
-                entry,
+                subject.entry,
                 ["knowledge_sets", i],
                 "RC208",
                 f"environment '{scenario.environment}' has no knowledge set '{set_name}'",
@@ -320,71 +372,103 @@ def check_scenario(
                 environment.knowledge_sets,
             )
 
-    meant = meant_actions(repo, resolved.config) if resolved is not None else set()
-    for i, goal in enumerate(scenario.goals):
-        task_entry = repo.tasks.get(goal.task)
-        if task_entry is None:
+
+def _check_goals(subject: _Scenario, report: Reporter) -> None:
+    """Each goal's task, then its location, goal after goal."""
+    resolved = subject.resolved
+    meant = meant_actions(subject.repo, resolved.config) if resolved is not None else set()
+    for i, goal in enumerate(subject.model.goals):
+        _check_goal_task(subject, i, goal, meant, report)
+        _check_goal_location(subject, i, goal, report)
+
+
+def _check_goal_task(
+    subject: _Scenario, i: int, goal: Goal, meant: set[str], report: Reporter
+) -> None:
+    """RC210, RC304: the goal's task exists and the capability's actions achieve it (or would,
+    with the actions its misspelt names were `meant` to be)."""
+    resolved = subject.resolved
+    task_entry = subject.repo.tasks.get(goal.task)
+    if task_entry is None:
+        report.unknown(
+            subject.entry,
+            ["goals", i, "task"],
+            "RC210",
+            f"unknown task '{goal.task}'",
+            goal.task,
+            subject.repo.tasks,
+            unreadable=subject.repo.is_broken("task", goal.task),
+        )
+    elif (
+        resolved is not None
+        and implementation_for(task_entry.model, resolved.config.actions) is None
+        # a misspelt action (RC204) may be what the task misses: once is enough
+        and implementation_for(task_entry.model, {*resolved.config.actions, *meant}) is None
+    ):
+        options = " or ".join(
+            "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations
+        )
+        report.add(
+            subject.entry,
+            ["goals", i, "task"],
+            "RC304",
+            f"task '{goal.task}' is not achievable by capability '{subject.model.capability}': "
+            f"it needs the actions {options}",
+        )
+
+
+def _check_goal_location(subject: _Scenario, i: int, goal: Goal, report: Reporter) -> None:
+    """RC306, RC305: a goal's location names exactly one Location object of the scenario's
+    environment."""
+    if goal.location is None:
+        return
+    environment, name = subject.environment, subject.model.environment
+    loc: list[str | int] = ["goals", i, "location"]
+    if name is None:
+        report.add(
+            subject.entry,
+            loc,
+            "RC306",
+            f"goal location '{goal.location}' needs an environment; set 'environment'",
+        )
+    elif environment is not None:
+        matches = find_location(environment, goal.location)
+        locations = [o for o in environment.objects if o.type == "Location"]
+        if not matches:
             report.unknown(
-                entry,
-                ["goals", i, "task"],
-                "RC210",
-                f"unknown task '{goal.task}'",
-                goal.task,
-                repo.tasks,
-                unreadable=repo.is_broken("task", goal.task),
+                subject.entry,
+                loc,
+                "RC305",
+                f"environment '{name}' has no object '{goal.location}'",
+                goal.location,
+                [o.name for o in locations] + [o.id for o in locations],
             )
-        elif (
-            resolved is not None
-            and implementation_for(task_entry.model, resolved.config.actions) is None
-            # a misspelt action (RC204) may be what the task misses: once is enough
-            and implementation_for(task_entry.model, {*resolved.config.actions, *meant}) is None
-        ):
-            options = " or ".join(
-                "[" + ", ".join(impl) + "]" for impl in task_entry.model.implementations
-            )
+        elif len(matches) > 1:
             report.add(
-                entry,
-                ["goals", i, "task"],
-                "RC304",
-                f"task '{goal.task}' is not achievable by capability '{scenario.capability}': "
-                f"it needs the actions {options}",
+                subject.entry,
+                loc,
+                "RC305",
+                f"'{goal.location}' names {len(matches)} objects of environment '{name}'; "
+                "use the object's id",
             )
-        if goal.location is None:
-            continue
-        if scenario.environment is None:
+        elif matches[0].type != "Location":
             report.add(
-                entry,
-                ["goals", i, "location"],
-                "RC306",
-                f"goal location '{goal.location}' needs an environment; set 'environment'",
+                subject.entry,
+                loc,
+                "RC305",
+                f"'{goal.location}' is a {matches[0].type}, not a Location",
             )
-        elif environment is not None:
-            matches = find_location(environment, goal.location)
-            locations = [o for o in environment.objects if o.type == "Location"]
-            if not matches:
-                report.unknown(
-                    entry,
-                    ["goals", i, "location"],
-                    "RC305",
-                    f"environment '{scenario.environment}' has no object '{goal.location}'",
-                    goal.location,
-                    [o.name for o in locations] + [o.id for o in locations],
-                )
-            elif len(matches) > 1:
-                report.add(
-                    entry,
-                    ["goals", i, "location"],
-                    "RC305",
-                    f"'{goal.location}' names {len(matches)} objects of environment "
-                    f"'{scenario.environment}'; use the object's id",
-                )
-            elif matches[0].type != "Location":
-                report.add(
-                    entry,
-                    ["goals", i, "location"],
-                    "RC305",
-                    f"'{goal.location}' is a {matches[0].type}, not a Location",
-                )
+
+
+# The scenario's checks, in the order their diagnostics are listed.
+_SCENARIO_CHECKS: tuple[Callable[[_Scenario, Reporter], None], ...] = (
+    _check_capability_known,
+    _check_robot_settings,
+    _check_logic_settings,
+    _check_environment_known,
+    _check_knowledge_sets,
+    _check_goals,
+)
 
 
 def check_fleet(repo: Repository, report: Reporter) -> None:

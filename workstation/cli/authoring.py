@@ -7,9 +7,10 @@ from pathlib import Path
 
 import click
 
+from configurator.autofill import AutofillResult, to_yaml
 from configurator.autofill import autofill as fill_capability
-from configurator.autofill import to_yaml
 from configurator.fitting import interfaces_fit
+from configurator.repository import Repository
 from configurator.schemas import dump, generate, modeline_ref
 from configurator.workspace import check
 from contract.diagnostics import did_you_mean, format_text
@@ -80,23 +81,7 @@ def autofill(
     if robot_id is None and from_path is not None:
         raise CliError("--from reads a robot's interfaces: give --robot too", ExitCode.TOOL)
     found = check(repo).repo
-    platform = found.platforms.get(platform_name)
-    problems = []
-    if platform is None:
-        problems.append(
-            f"unknown platform '{platform_name}'{did_you_mean(platform_name, found.platforms)}"
-        )
-    else:
-        if scheme not in platform.schemes:
-            problems.append(
-                f"platform {platform_name} has no mapping scheme '{scheme}'"
-                f"{did_you_mean(scheme, platform.schemes)}"
-            )
-        if template is not None and template not in platform.templates:
-            problems.append(
-                f"platform {platform_name} has no robot template '{template}'"
-                f"{did_you_mean(template, platform.templates)}"
-            )
+    problems = _unknown_names(found, platform_name, scheme, template)
     if problems:
         raise CliError("\nrobotconf: ".join(problems), ExitCode.FINDINGS)
     robot_fit = None
@@ -128,6 +113,32 @@ def autofill(
         modeline_ref("capability"),
         f"written by robotconf autofill for {fitted} ({platform_name}, {scheme})",
     )
+    return _write_and_prove(repo, target, text, result)
+
+
+def _unknown_names(
+    found: Repository, platform_name: str, scheme: str, template: str | None
+) -> list[str]:
+    """What of the platform, scheme and template autofill is given does not exist."""
+    platform = found.platforms.get(platform_name)
+    if platform is None:
+        return [f"unknown platform '{platform_name}'{did_you_mean(platform_name, found.platforms)}"]
+    problems = []
+    if scheme not in platform.schemes:
+        problems.append(
+            f"platform {platform_name} has no mapping scheme '{scheme}'"
+            f"{did_you_mean(scheme, platform.schemes)}"
+        )
+    if template is not None and template not in platform.templates:
+        problems.append(
+            f"platform {platform_name} has no robot template '{template}'"
+            f"{did_you_mean(template, platform.templates)}"
+        )
+    return problems
+
+
+def _write_and_prove(repo: Path, target: Path, text: str, result: AutofillResult) -> ExitCode:
+    """Write the capability configuration, say what it selected and skipped, and check it."""
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(text, encoding="utf-8")
     print(f"wrote {target}")
@@ -136,7 +147,7 @@ def autofill(
     for action, reasons in sorted(result.skipped.items()):
         print(f"  skipped {action}: {'; '.join(reasons)}")
     # The promise of autofill is a file that validates: prove it.
-    errors = [d for d in check(repo).errors if d.path.endswith(f"capabilities/{name}.yaml")]
+    errors = [d for d in check(repo).errors if d.path.endswith(f"capabilities/{target.name}")]
     if errors:
         sys.stderr.write(format_text(errors))
         return ExitCode.FINDINGS

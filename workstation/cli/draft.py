@@ -327,6 +327,19 @@ def draft_command(
     if any(d.is_error for d in added):
         sys.stderr.write(format_text(added))
         raise CliError("the draft does not validate; nothing written", ExitCode.FINDINGS)
+    _tell_written(repo, paths, added, platform_name, template, scheme)
+    return ExitCode.OK
+
+
+def _tell_written(
+    repo: Path,
+    paths: list[Path],
+    added: list[Diagnostic],
+    platform_name: str,
+    template: str,
+    scheme: str,
+) -> None:
+    """What the draft wrote, what the repository says of it now, and what to do next."""
     for path in paths:
         print(f"wrote {path.relative_to(repo).as_posix()}")
     sys.stdout.write(format_text(added))
@@ -340,4 +353,3 @@ def draft_command(
         f"next: robotconf schemas (editors learn {learn}), then e.g. "
         f"robotconf autofill --platform {platform_name} --scheme {scheme} --template {template}"
     )
-    return ExitCode.OK

@@ -20,6 +20,7 @@ from workstation.cli.options import repo_option
 
 if TYPE_CHECKING:
     from contract.mqtt import Connection
+    from reconciler.controller import Controller
     from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
     from reconciler.webhook_server import WebhookServer
@@ -228,6 +229,14 @@ def reconcile(
         mqtt.prefix,
         "5, No Local" if no_local else "3.1.1",
     )
+    _run(controller, telemetry, receiver)
+    return ExitCode.OK
+
+
+def _run(
+    controller: Controller, telemetry: Telemetry | None, receiver: WebhookServer | None
+) -> None:
+    """The control loop with its telemetry, until signalled; then what serves it stops."""
     if telemetry is not None:
         telemetry.start()
     try:
@@ -237,4 +246,3 @@ def reconcile(
             receiver.close()
         if telemetry is not None:
             telemetry.stop()
-    return ExitCode.OK

@@ -7,6 +7,7 @@ import queue
 import re
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -19,6 +20,9 @@ from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.desk import online_robot
 from workstation.cli.options import repo_option
 from workstation.desk import RobotDesk
+
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 _REQUESTER = re.compile(REQUESTER_PATTERN)
 
@@ -51,6 +55,38 @@ def _confirmed(desk: RobotDesk, issued_at: float, wait: float) -> AgentStatus | 
         if status.restart_requested_at == issued_at:
             return status
     return None
+
+
+def _private_key(path: Path | None) -> Ed25519PrivateKey | None:
+    """The key restarts are signed with, if one is given; a key that cannot be read is a
+    one-line error."""
+    if path is None:
+        return None
+    from contract.signing import SigningKeyError, load_private_key
+
+    try:
+        return load_private_key(path)
+    except SigningKeyError as exc:
+        raise CliError(str(exc), ExitCode.TOOL) from None
+
+
+def _send_restart(
+    desk: RobotDesk, robot_id: str, by: str, key: Ed25519PrivateKey | None, timeout: float
+) -> float:
+    """Publish the restart request, signed with `key` if any; when it was issued."""
+    # Microseconds, as `sign` stamps them: the status that confirms it names the same time.
+    issued_at = round(time.time(), 6)
+    request = RestartRequest(robot_id=robot_id, requested_by=by, issued_at=issued_at)
+    if key is not None:
+        from contract.signing import sign
+
+        request = sign(request, key, issued_at)
+    if not desk.send(desk.topics.restart(robot_id), request.payload(), timeout):
+        raise CliError(
+            f"the broker did not take the restart request "
+            f"({desk.view.last_error or 'no acknowledgement'})"
+        )
+    return request.issued_at
 
 
 @click.command("restart")
@@ -97,15 +133,7 @@ def restart(
     if not is_robot_id(robot_id):
         raise CliError(f"{robot_id!r} is not a robot id", ExitCode.FINDINGS)
     by = requester(as_name, mqtt.username)
-    key = None
-    signing_key = signing_key or mqtt.signing_key  # up's own, found with its broker
-    if signing_key is not None:
-        from contract.signing import SigningKeyError, load_private_key
-
-        try:
-            key = load_private_key(signing_key)
-        except SigningKeyError as exc:
-            raise CliError(str(exc), ExitCode.TOOL) from None
+    key = _private_key(signing_key or mqtt.signing_key)  # up's own, found with its broker
     connection = mqtt.connection()
     with RobotDesk(connection, mqtt.prefix, robot_id, logs=False) as desk:
         robot = online_robot(desk, min(wait, 10.0), "a restart would be lost")
@@ -115,19 +143,8 @@ def restart(
                 f"nothing to restart: {robot_id} has no launch request (it is idle)",
                 ExitCode.FINDINGS,
             )
-        # Microseconds, as `sign` stamps them: the status that confirms it names the same time.
-        issued_at = round(time.time(), 6)
-        request = RestartRequest(robot_id=robot_id, requested_by=by, issued_at=issued_at)
-        if key is not None:
-            from contract.signing import sign
-
-            request = sign(request, key, issued_at)
-        if not desk.send(desk.topics.restart(robot_id), request.payload(), min(wait, 10.0)):
-            raise CliError(
-                f"the broker did not take the restart request "
-                f"({desk.view.last_error or 'no acknowledgement'})"
-            )
-        confirmed = _confirmed(desk, request.issued_at, wait)
+        issued_at = _send_restart(desk, robot_id, by, key, min(wait, 10.0))
+        confirmed = _confirmed(desk, issued_at, wait)
     if confirmed is None:
         raise CliError(
             f"{robot_id} did not confirm the restart within {wait:g} s: its agent refused it "

@@ -582,6 +582,27 @@ def test_a_polling_dashboard_does_not_starve_an_operators_tail(
     assert agent.proc is not None and agent.proc.poll() is None
 
 
+def replays_refused(
+    mosquitto: Mosquitto,
+    watch: FleetWatch,
+    agent: Any,
+    replays: tuple[bytes, bytes],
+    current: AgentStatus,
+) -> None:
+    """Two restarts carried out before, published again: both refused, the brain still the
+    one running as `current`."""
+    refusals_before = agent.log_tail(400).count("restart refused")
+    for payload in replays:
+        publish(mosquitto.url, TOPICS.restart(ROBOT), payload, retain=False)
+    wait_for(
+        lambda: agent.log_tail(400).count("restart refused") >= refusals_before + 2,
+        "both replays refused",
+    )
+    latest = watch.latest(ROBOT)
+    assert latest is not None and latest.pid == current.pid, latest
+    assert latest.state is AgentState.RUNNING
+
+
 def test_a_restart_dated_ahead_locks_out_no_later_restart_and_replays_stay_refused(
     mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
 ) -> None:
@@ -618,18 +639,7 @@ def test_a_restart_dated_ahead_locks_out_no_later_restart_and_replays_stay_refus
     finally:
         restarts.close()
 
-    def replays_refused(current: AgentStatus, refusals_before: int) -> None:
-        for payload in (ahead, genuine):
-            publish(mosquitto.url, TOPICS.restart(ROBOT), payload, retain=False)
-        wait_for(
-            lambda: agent.log_tail(400).count("restart refused") >= refusals_before + 2,
-            "both replays refused",
-        )
-        latest = watch.latest(ROBOT)
-        assert latest is not None and latest.pid == current.pid, latest
-        assert latest.state is AgentState.RUNNING
-
-    replays_refused(third, agent.log_tail(400).count("restart refused"))
+    replays_refused(mosquitto, watch, agent, (ahead, genuine), third)
 
     # A dead robot is a killed agent: what it remembers of the restarts survives it.
     assert agent.proc is not None
@@ -637,7 +647,7 @@ def test_a_restart_dated_ahead_locks_out_no_later_restart_and_replays_stay_refus
     agent.proc.wait()
     agent.start()
     fourth = new_brain(watch, agent, third.pid)  # the orphan stopped, the request again
-    replays_refused(fourth, agent.log_tail(400).count("restart refused"))
+    replays_refused(mosquitto, watch, agent, (ahead, genuine), fourth)
     # And nobody is locked out: the next genuine restart is carried out.
     done = robotconf(
         "restart", ROBOT, "--signing-key", str(keys.private), "--as", "ops2", broker=mosquitto

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -217,3 +218,70 @@ def test_unit_tests_are_pure() -> None:
         if mark in path.read_text(encoding="utf-8")
     ]
     assert found == [], "move these to tests/integration: " + "; ".join(found)
+
+
+# The longest a function may be (house rule): longer ones are split into named steps.
+MAX_FUNCTION_LINES = 60
+# Benchmark scripts may run long: they are read top to bottom, once.
+_LENGTH_EXEMPT = {"bench"}
+
+
+def our_python_files() -> list[Path]:
+    """Every Python file of the repository but bench/'s: not in a hidden folder (.git, .venv),
+    a cache, or a virtual environment."""
+    found: list[Path] = []
+    for folder, dirs, files in os.walk(ROOT):
+        here = Path(folder)
+        dirs[:] = sorted(
+            d
+            for d in dirs
+            if not d.startswith(".")
+            and d != "__pycache__"
+            and not (here == ROOT and d in _LENGTH_EXEMPT)
+            and not (here / d / "pyvenv.cfg").exists()
+        )
+        found += [here / name for name in sorted(files) if name.endswith(".py")]
+    return found
+
+
+def long_functions(source: str, filename: str) -> list[str]:
+    """Each function (nested ones and methods too) of `source` over MAX_FUNCTION_LINES lines,
+    decorators not counted, as `filename:line name (lines)`."""
+    return [
+        f"{filename}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1})"
+        for node in ast.walk(ast.parse(source, filename))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno is not None
+        and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES
+    ]
+
+
+def test_no_function_is_over_sixty_lines() -> None:
+    files = our_python_files()
+    folders = {path.relative_to(ROOT).parts[0] for path in files}
+    assert folders >= {*PACKAGES, "tests"} and not folders & _LENGTH_EXEMPT, folders
+    offenders = [
+        found
+        for path in files
+        for found in long_functions(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))
+    ]
+    assert offenders == [], "split these into named steps: " + "; ".join(offenders)
+
+
+def _function(name: str, lines: int, indent: str = "") -> str:
+    """The source of a function `lines` lines long, its `def` line included."""
+    body = "".join(f"{indent}    x{i} = {i}\n" for i in range(lines - 1))
+    return f"{indent}def {name}() -> None:\n{body}"
+
+
+def test_the_length_check_finds_a_long_function() -> None:
+    """Sixty lines pass (a decorator is not counted); sixty-one fail, a method or a function
+    nested in one too, each named by where it starts."""
+    source = (
+        "@decorator\n"
+        + _function("at_the_limit", 60)
+        + "class C:\n"
+        + "    async def too_long(self) -> None:\n"
+        + _function("inner", 61, indent="        ")
+    )
+    assert long_functions(source, "m.py") == ["m.py:63 too_long (62)", "m.py:64 inner (61)"]

@@ -143,6 +143,21 @@ def break_fleet(lab: GitLab) -> str:
     return lab.commit("a robot id the rules refuse")
 
 
+def assert_refusals_scraped(port: int, fixed: str, receivers: dict[str, Receiver]) -> None:
+    """The scrape after refused, recovered (at `fixed`), refused again: the errors, the steps,
+    not ready, and what each receiver was told."""
+    metrics = scrape(port)
+    assert value(metrics, "robotconf_applied_revision_info", revision=fixed) == 1.0
+    assert (value(metrics, "robotconf_reconcile_errors_total", reason="BuildFailed") or 0) >= 3
+    assert (value(metrics, "robotconf_reconcile_duration_seconds_count") or 0) >= 5
+    assert value(metrics, "robotconf_ready") == 0.0
+    told = "robotconf_notifications_total"
+    # refused, recovered, refused again
+    assert value(metrics, told, receiver=f"#3 {receivers['ok'].base}", outcome="sent") == 3.0
+    failed = value(metrics, told, receiver=f"#2 {receivers['500'].base}", outcome="failed")
+    assert failed is not None and failed >= 1
+
+
 def test_a_refused_commit_is_told_once_and_failing_receivers_delay_nothing(
     lab: GitLab,
     mosquitto: Mosquitto,
@@ -193,16 +208,7 @@ def test_a_refused_commit_is_told_once_and_failing_receivers_delay_nothing(
         assert len(slack) == 1, slack
         assert len(ok.events("commit_refused")) == 2
 
-        metrics = scrape(port)
-        assert value(metrics, "robotconf_applied_revision_info", revision=fixed) == 1.0
-        assert (value(metrics, "robotconf_reconcile_errors_total", reason="BuildFailed") or 0) >= 3
-        assert (value(metrics, "robotconf_reconcile_duration_seconds_count") or 0) >= 5
-        assert value(metrics, "robotconf_ready") == 0.0
-        told = "robotconf_notifications_total"
-        # refused, recovered, refused again
-        assert value(metrics, told, receiver=f"#3 {ok.base}", outcome="sent") == 3.0
-        failed = value(metrics, told, receiver=f"#2 {receivers['500'].base}", outcome="failed")
-        assert failed is not None and failed >= 1
+        assert_refusals_scraped(port, fixed, receivers)
     finally:
         assert reconciler.stop() == 0, reconciler.output()[-3000:]
     assert "/hook" not in reconciler.output()  # receivers are named without their path
@@ -279,6 +285,20 @@ def test_a_full_queue_drops_the_oldest_event(receivers: dict[str, Receiver]) -> 
         sender.stop()
 
 
+def scraped_robots(
+    port: int, verdict: str, count: int, what: str
+) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
+    """The first scrape that counts `count` robots of `verdict`."""
+    return wait_for(
+        lambda: (
+            (m := scrape_or_none(port))
+            and value(m, "robotconf_robots", verdict=verdict) == count
+            and m
+        ),
+        what,
+    )
+
+
 def test_robot_transitions_are_told_once_and_scraped(
     fleet: Fleet, receivers: dict[str, Receiver]
 ) -> None:
@@ -288,14 +308,7 @@ def test_robot_transitions_are_told_once_and_scraped(
     fleet.reconciler.stop()
     fleet.start_reconciler("--interval", "1", "--notify", ok.url, "--metrics", f":{port}")
     head = fleet.lab.head()
-    in_sync = wait_for(
-        lambda: (
-            (m := scrape_or_none(port))
-            and value(m, "robotconf_robots", verdict="InSync") == 7
-            and m
-        ),
-        "seven robots in sync, scraped",
-    )
+    in_sync = scraped_robots(port, "InSync", 7, "seven robots in sync, scraped")
     assert value(in_sync, "robotconf_applied_revision_info", revision=head) == 1.0
     assert value(in_sync, "robotconf_ready") == 1.0
     assert value(in_sync, "robotconf_robots", verdict="Degraded") == 0.0
@@ -324,14 +337,7 @@ def test_robot_transitions_are_told_once_and_scraped(
     degraded = ok.events("robot_degraded")
     assert sorted(e["robot"] for e in degraded) == ["tb3-01", "tb3-06"], ok.got()
     assert all(e["reason"] in ("failed", "backoff") and e["revision"] == crash for e in degraded)
-    metrics = wait_for(
-        lambda: (
-            (m := scrape_or_none(port))
-            and value(m, "robotconf_robots", verdict="Degraded") == 2
-            and m
-        ),
-        "two robots degraded, scraped",
-    )
+    metrics = scraped_robots(port, "Degraded", 2, "two robots degraded, scraped")
     assert (value(metrics, "robotconf_publishes_total", action="publish") or 0) >= 2
 
     fleet.lab.replace(scenario, ", STANDIN_CRASH: 3}", "}")

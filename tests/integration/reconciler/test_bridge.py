@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from contract.wire import AgentState
+from contract.wire import AgentState, AgentStatus
 from tests.support.fleet import (
     GitLab,
     Proc,
@@ -76,6 +76,48 @@ def status_cli(lab: GitLab, broker: Mosquitto) -> tuple[int, dict[str, Any]]:
     return done.returncode, json.loads(done.stdout)
 
 
+def desk_reaches_the_site(
+    central: Mosquitto, at_center: FleetWatch, running: AgentStatus
+) -> AgentStatus:
+    """`robotconf logs` and `robotconf restart` of tb3-01 on the central broker: the log comes
+    back, and the robot (`running` so) runs again, restarted by ops; its new status."""
+    logs = subprocess.run(
+        robotconf_argv("logs", "tb3-01", "--broker", central.url, "-n", "100"),
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert logs.returncode == 0 and "--- robotconf agent" in logs.stdout, logs.stderr
+    restart = subprocess.run(
+        robotconf_argv("restart", "tb3-01", "--broker", central.url, "--as", "ops"),
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert restart.returncode == 0, restart.stderr
+    restarted = at_center.wait_for(
+        "tb3-01",
+        lambda s: s.state is AgentState.RUNNING and s.pid != running.pid,
+        "tb3-01 running again after the restart",
+    )
+    assert restarted.restart_requested_by == "ops"
+    return restarted
+
+
+def retire_across_the_bridge(
+    lab: GitLab, at_center: FleetWatch, at_site: FleetWatch, running: AgentStatus
+) -> str:
+    """A commit retiring tb3-05 (`running` so): its request cleared on both brokers, its brain
+    stopped, the commit applied; the commit."""
+    old_pid = running.pid
+    lab.replace("configs/fleet.yaml", "  tb3-05:", "  # tb3-05:")
+    retired = lab.commit("retire tb3-05")
+    at_center.wait_for("tb3-05", lambda s: s.state is AgentState.IDLE, "tb3-05 idle")
+    at_site.wait(lambda: at_site.launch("tb3-05") is None, "tb3-05 cleared at the site")
+    assert at_center.launch("tb3-05") is None
+    assert old_pid is not None and not pid_alive(old_pid)
+    at_center.wait_reconciler(
+        lambda s: s.ready and s.last_applied_revision == retired, "the retirement applied"
+    )
+    return retired
+
+
 def test_the_fleet_runs_through_two_bridged_brokers(
     lab: GitLab, mosquitto: Mosquitto, site: Mosquitto, tmp_path: Path
 ) -> None:
@@ -99,23 +141,7 @@ def test_the_fleet_runs_through_two_bridged_brokers(
         assert verdicts == {robot: "InSync" for robot in requests}
 
         # From the desk on the central broker: a robot's log, and a restart, cross the bridge.
-        logs = subprocess.run(
-            robotconf_argv("logs", "tb3-01", "--broker", central.url, "-n", "100"),
-            capture_output=True, text=True, timeout=60,
-        )  # fmt: skip
-        assert logs.returncode == 0 and "--- robotconf agent" in logs.stdout, logs.stderr
-        restart = subprocess.run(
-            robotconf_argv("restart", "tb3-01", "--broker", central.url, "--as", "ops"),
-            capture_output=True, text=True, timeout=60,
-        )  # fmt: skip
-        assert restart.returncode == 0, restart.stderr
-        restarted = at_center.wait_for(
-            "tb3-01",
-            lambda s: s.state is AgentState.RUNNING and s.pid != converged["tb3-01"].pid,
-            "tb3-01 running again after the restart",
-        )
-        assert restarted.restart_requested_by == "ops"
-        converged["tb3-01"] = restarted
+        converged["tb3-01"] = desk_reaches_the_site(central, at_center, converged["tb3-01"])
 
         # A commit reaches exactly its robots through the bridge.
         lab.replace(
@@ -129,16 +155,7 @@ def test_the_fleet_runs_through_two_bridged_brokers(
         assert moved == {"tb3-04", "tb3-07"}  # the lab's two patrollers
 
         # A robot leaving the fleet: the clear (an empty retained message) crosses too.
-        old_pid = converged["tb3-05"].pid
-        lab.replace("configs/fleet.yaml", "  tb3-05:", "  # tb3-05:")
-        retired = lab.commit("retire tb3-05")
-        at_center.wait_for("tb3-05", lambda s: s.state is AgentState.IDLE, "tb3-05 idle")
-        at_site.wait(lambda: at_site.launch("tb3-05") is None, "tb3-05 cleared at the site")
-        assert at_center.launch("tb3-05") is None
-        assert old_pid is not None and not pid_alive(old_pid)
-        at_center.wait_reconciler(
-            lambda s: s.ready and s.last_applied_revision == retired, "the retirement applied"
-        )
+        retired = retire_across_the_bridge(lab, at_center, at_site, converged["tb3-05"])
 
         code, report = status_cli(lab, central)
         assert code == 0, report

@@ -81,6 +81,73 @@ def start(lab: GitLab, bare: Path, mosquitto: Mosquitto, tmp_path: Path) -> tupl
     return proc, port, metrics
 
 
+def refuse_every_wrong_post(port: int, reconciler: Proc, pushed: str) -> None:
+    """Forged, unsigned, misdirected, malformed, oversized posts, a ping and a GET: each has
+    its answer, and the reconciler lives on."""
+    body = push_body("refs/heads/main", pushed)
+    refusals = [
+        ("forged signature", body, github(body, signed="not the secret"), 403),
+        ("no signature", body, github(body, signed=None), 401),
+        ("another branch", push_body("refs/heads/dev", pushed), None, 202),
+        ("not JSON", b'{"ref": "refs/heads/main",', None, 400),
+        ("too large", b" " * (MAX_BODY + 1), None, 413),
+        ("a ping", b'{"zen": "Design for failure."}', "ping", 204),
+    ]
+    for what, payload, headers, code in refusals:
+        if headers is None or isinstance(headers, str):
+            headers = github(payload, event=headers or "push")
+        answer = post(port, payload, headers)
+        assert answer[0] == code, (what, answer)
+        assert reconciler.alive(), reconciler.output()
+    with pytest.raises(urllib.error.HTTPError) as got:
+        urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30)
+    assert got.value.code == 405 and got.value.headers["Allow"] == "POST"
+
+
+def gitea_and_gitlab_pushes_fetch(lab: GitLab, bare: Path, port: int, watch: FleetWatch) -> None:
+    """Gitea's signed push fetches; GitLab's fetches with its token, and not with a wrong one."""
+    gitea = rename(lab, "Guide bot on the push", "Guide bot pushed to Gitea")
+    lab.git("push", "-q", str(bare), "main")
+    body = push_body("refs/heads/main", gitea)
+    headers = {
+        "Content-Type": "application/json",
+        "X-Gitea-Event": "push",
+        "X-GitHub-Event": "push",
+        "X-Gitea-Signature": signature(body),
+    }
+    assert post(port, body, headers)[0] == 200
+    watch.wait_reconciler(lambda s: s.last_applied_revision == gitea, "Gitea's push applied")
+    gitlab = rename(lab, "Guide bot pushed to Gitea", "Guide bot pushed to GitLab")
+    lab.git("push", "-q", str(bare), "main")
+    body = push_body("refs/heads/main", gitlab)
+    json_ = {"Content-Type": "application/json", "X-Gitlab-Event": "Push Hook"}
+    assert post(port, body, {**json_, "X-Gitlab-Token": SECRET[:-1]})[0] == 403
+    assert post(port, body, {**json_, "X-Gitlab-Token": SECRET})[0] == 200
+    watch.wait_reconciler(lambda s: s.last_applied_revision == gitlab, "GitLab's push applied")
+
+
+def assert_webhooks_counted(metrics: int) -> None:
+    """Every post above, counted by server and outcome."""
+    seen = scrape(metrics)
+    name = "robotconf_webhooks_total"
+    assert value(seen, name, server="github", outcome="fetch") == 1.0
+    assert value(seen, name, server="github", outcome="refused") == 4.0
+    assert value(seen, name, server="github", outcome="ignored") == 2.0
+    assert value(seen, name, server="gitea", outcome="fetch") == 1.0
+    assert value(seen, name, server="gitlab", outcome="refused") == 1.0
+    assert value(seen, name, server="gitlab", outcome="fetch") == 1.0
+    assert value(seen, name, server="unknown", outcome="refused") == 2.0  # GET, slow body
+
+
+def assert_logged_quietly(output: str) -> None:
+    """No traceback, no secret, each refusal one warning, the slow client one line."""
+    assert "Traceback" not in output
+    assert SECRET not in output and SECRET[:-1] not in output
+    refused = [line for line in output.splitlines() if "refused" in line]
+    assert len([line for line in refused if " WARNING " in line]) == len(refused) >= 7
+    assert "timed out" in output  # the slow client, said in one line
+
+
 def test_a_signed_push_fetches_at_once_and_nothing_else_does(
     lab: GitLab, bare: Path, mosquitto: Mosquitto, watch: FleetWatch, tmp_path: Path
 ) -> None:
@@ -100,31 +167,14 @@ def test_a_signed_push_fetches_at_once_and_nothing_else_does(
         lab.git("push", "-q", str(bare), "main")
         wanted = lab.requests(pushed)["tb3-02"].digest
         assert wanted != before
-        body = push_body("refs/heads/main", pushed)
-
-        refusals = [
-            ("forged signature", body, github(body, signed="not the secret"), 403),
-            ("no signature", body, github(body, signed=None), 401),
-            ("another branch", push_body("refs/heads/dev", pushed), None, 202),
-            ("not JSON", b'{"ref": "refs/heads/main",', None, 400),
-            ("too large", b" " * (MAX_BODY + 1), None, 413),
-            ("a ping", b'{"zen": "Design for failure."}', "ping", 204),
-        ]
-        for what, payload, headers, code in refusals:
-            if headers is None or isinstance(headers, str):
-                headers = github(payload, event=headers or "push")
-            answer = post(port, payload, headers)
-            assert answer[0] == code, (what, answer)
-            assert reconciler.alive(), reconciler.output()
-        with pytest.raises(urllib.error.HTTPError) as got:
-            urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30)
-        assert got.value.code == 405 and got.value.headers["Allow"] == "POST"
+        refuse_every_wrong_post(port, reconciler, pushed)
         # None of them fetched: the pushed commit is on the server, unseen.
         assert "fetching" not in reconciler.output()
         status = watch.reconciler()
         assert status is not None and status.last_attempted_revision == first
         assert watch.digest("tb3-02") == before
 
+        body = push_body("refs/heads/main", pushed)
         code, text = post(port, body, github(body))
         assert (code, text) == (
             200,
@@ -135,24 +185,7 @@ def test_a_signed_push_fetches_at_once_and_nothing_else_does(
         assert "push from github for main: fetching" in reconciler.output()
 
         # Still serving, and Gitea's and GitLab's pushes fetch too.
-        gitea = rename(lab, "Guide bot on the push", "Guide bot pushed to Gitea")
-        lab.git("push", "-q", str(bare), "main")
-        body = push_body("refs/heads/main", gitea)
-        headers = {
-            "Content-Type": "application/json",
-            "X-Gitea-Event": "push",
-            "X-GitHub-Event": "push",
-            "X-Gitea-Signature": signature(body),
-        }
-        assert post(port, body, headers)[0] == 200
-        watch.wait_reconciler(lambda s: s.last_applied_revision == gitea, "Gitea's push applied")
-        gitlab = rename(lab, "Guide bot pushed to Gitea", "Guide bot pushed to GitLab")
-        lab.git("push", "-q", str(bare), "main")
-        body = push_body("refs/heads/main", gitlab)
-        json_ = {"Content-Type": "application/json", "X-Gitlab-Event": "Push Hook"}
-        assert post(port, body, {**json_, "X-Gitlab-Token": SECRET[:-1]})[0] == 403
-        assert post(port, body, {**json_, "X-Gitlab-Token": SECRET})[0] == 200
-        watch.wait_reconciler(lambda s: s.last_applied_revision == gitlab, "GitLab's push applied")
+        gitea_and_gitlab_pushes_fetch(lab, bare, port, watch)
 
         # The slow clients were cut off, one without an answer (it never sent a whole request).
         slow.settimeout(60)
@@ -160,25 +193,12 @@ def test_a_signed_push_fetches_at_once_and_nothing_else_does(
         slow_body.settimeout(60)
         assert slow_body.makefile("rb").readline().startswith(b"HTTP/1.1 408 ")
 
-        seen = scrape(metrics)
-        name = "robotconf_webhooks_total"
-        assert value(seen, name, server="github", outcome="fetch") == 1.0
-        assert value(seen, name, server="github", outcome="refused") == 4.0
-        assert value(seen, name, server="github", outcome="ignored") == 2.0
-        assert value(seen, name, server="gitea", outcome="fetch") == 1.0
-        assert value(seen, name, server="gitlab", outcome="refused") == 1.0
-        assert value(seen, name, server="gitlab", outcome="fetch") == 1.0
-        assert value(seen, name, server="unknown", outcome="refused") == 2.0  # GET, slow body
+        assert_webhooks_counted(metrics)
     finally:
         slow.close()
         slow_body.close()
         assert reconciler.stop() == 0, reconciler.output()[-3000:]
-    output = reconciler.output()
-    assert "Traceback" not in output
-    assert SECRET not in output and SECRET[:-1] not in output
-    refused = [line for line in output.splitlines() if "refused" in line]
-    assert len([line for line in refused if " WARNING " in line]) == len(refused) >= 7
-    assert "timed out" in output  # the slow client, said in one line
+    assert_logged_quietly(reconciler.output())
 
 
 @pytest.mark.parametrize(
