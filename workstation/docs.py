@@ -156,7 +156,7 @@ def _cell(text: str) -> str:
     (Python-Markdown's tables keep a code span's `|` and `<` as they are)."""
     pieces = " ".join(text.split()).split("`")
     for index in range(0, len(pieces), 2):  # the even pieces are outside code spans
-        for raw, safe in (("<", "&lt;"), ("|", "\\|")):
+        for raw, safe in (("<", "&lt;"), ("|", "\\|"), ("*", "\\*"), ("_", "\\_")):
             pieces[index] = pieces[index].replace(raw, safe)
     return "`".join(pieces)
 
