@@ -76,13 +76,27 @@ def command_paths() -> list[list[str]]:
     return found
 
 
+INTRO = """\
+Every failure is one line on stderr, `robotconf: <what went wrong>`, never a traceback. Exit
+codes: 0 done; 1 what was checked is wrong (errors from `validate`, a stale file under
+`--check`, a fleet not all in sync for `status`, a robot that did not answer `logs` or
+`restart`); 2 the tool could not do its job (a usage error, no such repository or revision, a
+broker it cannot reach); 130 after Ctrl-C. Set `ROBOTCONF_DEBUG=1` to see a traceback instead
+of the one-line internal-error message.
+
+`--repo DIR` (default: the current folder) wherever a repository is read, `--rev REV` to read
+a commit instead of the work tree. `--broker URL` (`mqtt://host:port`, `mqtts://` for TLS;
+default `$ROBOTCONF_BROKER`, else for `status`, `logs`, `restart`, `draft` and `autofill
+--robot` the broker of a `robotconf up` running in the repository, with its login and key, else
+`mqtt://127.0.0.1:1883`) and `--prefix` (default `robotconf`) wherever MQTT is used.
+"""
+
+
 def commands_page() -> str:
     parts = [
         "# Commands\n\n",
         f"{GENERATED} Each section is what `--help` prints.\n\n",
-        "`robotconf` exits 0 on success, 1 when what it checked is wrong (validation errors, ",
-        "a stale file under `--check`), 2 when it could not do its job (bad options, no such ",
-        "repository, a broker it cannot reach).\n",
+        INTRO,
     ]
     for words in [[], *command_paths()]:
         name = " ".join(["robotconf", *words])
