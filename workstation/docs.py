@@ -1,5 +1,6 @@
 """The docs site's reference pages generated from the code: every command's `--help`, the rule
-codes table, the file formats; `python -m workstation.docs [--check]` writes or checks them.
+codes table, the file formats' fields; `python -m workstation.docs [--check]` writes or checks
+them (rules.md and file-formats.md are hand-written around their generated tables).
 """
 
 from __future__ import annotations
@@ -283,17 +284,18 @@ def _defs_in_order(schema: dict[str, Any]) -> list[str]:
     return seen
 
 
-def format_section(fmt: Format) -> str:
+def format_fields(fmt: Format) -> str:
+    """Where a format's files live, its schema, and a table of its fields and of each nested
+    type's (under a heading of its own, linked from the field that uses it)."""
     schema = fmt.model.model_json_schema()
 
     def link(name: str) -> str:
         return f"[{name}](#{fmt.anchor}-{name.lower()})"
 
-    parts = [f"## {fmt.title} {{#{fmt.anchor}}}\n\n"]
     where = f"Where: {fmt.place}."
     if fmt.schema:
         where += f" Schema: `schemas/{fmt.schema}.schema.json`."
-    parts.append(where + "\n\n")
+    parts = [where + "\n\n"]
     if schema.get("description"):
         parts.append(_cell(schema["description"]) + "\n\n")
     parts.append(_fields_table(schema, link))
@@ -311,21 +313,39 @@ def format_section(fmt: Format) -> str:
     return "".join(parts)
 
 
-def file_formats_page() -> str:
+MARK = "<!-- generated: {} -->\n"
+END = "<!-- end generated -->\n"
+
+
+def splice(text: str, blocks: dict[str, str]) -> str:
+    """The text with each `<!-- generated: NAME -->` ... `<!-- end generated -->` block
+    written anew: the hand-written text around the blocks stays as it is."""
+    named = re.findall(r"<!-- generated: (\S+) -->", text)
+    missing = [name for name in blocks if named.count(name) != 1]
+    unknown = sorted(set(named) - set(blocks))
+    if missing:
+        raise ValueError(
+            f"each of {', '.join(missing)} needs exactly one block "
+            f"`{MARK.format('NAME').strip()}` ... `{END.strip()}`"
+        )
+    if unknown:
+        raise ValueError(f"no such generated block: {', '.join(unknown)}")
+    for name, block in blocks.items():
+        start = text.index(MARK.format(name)) + len(MARK.format(name))
+        end = text.find(END, start)
+        if end < 0:
+            raise ValueError(f"the block {name} has no `{END.strip()}` after it")
+        # Blank lines around the block: Markdown reads a comment line as an HTML block.
+        text = text[:start] + "\n" + block.rstrip("\n") + "\n\n" + text[end:]
+    return text
+
+
+def file_formats_page(current: str) -> str:
+    """file-formats.md is written by hand around its blocks; the field tables are generated."""
     every = formats()
-    parts = [
-        "# File formats\n\n",
-        f"{GENERATED} The tables come from the pydantic types that read each file.\n\n",
-        "Every YAML file of a lab may start with a modeline, "
-        "`# yaml-language-server: $schema=<relative path>/schemas/<kind>.schema.json`, so that "
-        "an editor completes and checks it. `robotconf schemas` writes those schemas from the "
-        "same types and the catalogue: they also list the platforms, templates, actions, "
-        "logics, scenarios and locations that exist, and the settings each capability takes.\n\n",
-        "| format | where |\n| --- | --- |\n",
-        *(f"| [{f.title}](#{f.anchor}) | {f.place} |\n" for f in every),
-    ]
-    parts += ["\n" + format_section(f) for f in every]
-    return "".join(parts)
+    table = "| format | where |\n| --- | --- |\n"
+    table += "".join(f"| [{f.title}](#{f.anchor}) | {f.place} |\n" for f in every)
+    return splice(current, {"formats": table} | {f.anchor: format_fields(f) for f in every})
 
 
 # ---- the pages ---------------------------------------------------------------------------
@@ -339,7 +359,7 @@ def _rules_page(current: str) -> str:
 PAGES: dict[str, Callable[[str], str]] = {
     "docs/reference/commands.md": lambda _current: commands_page(),
     "docs/reference/rules.md": _rules_page,
-    "docs/reference/file-formats.md": lambda _current: file_formats_page(),
+    "docs/reference/file-formats.md": file_formats_page,
 }
 
 

@@ -44,13 +44,19 @@ def test_check_names_the_stale_page_and_writing_makes_it_current(
     assert docs.main(["--check", "--root", str(root)]) == 0
 
 
-def test_a_rules_page_without_its_table_is_a_clear_error(
+def test_a_page_without_what_the_generator_fills_in_is_a_clear_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     root = _copy_site(tmp_path)
     (root / "docs/reference/rules.md").write_text("# Rule codes\n\nno table\n")
     assert docs.main(["--check", "--root", str(root)]) == 2
-    assert "docs/reference/rules.md" in capsys.readouterr().err
+    assert "docs/reference/rules.md: no table of rule codes" in capsys.readouterr().err
+    (root / "docs/reference/rules.md").write_bytes((ROOT / "docs/reference/rules.md").read_bytes())
+    formats = root / "docs/reference/file-formats.md"
+    formats.write_text(formats.read_text().replace("<!-- generated: task -->", ""))
+    assert docs.main(["--check", "--root", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert "docs/reference/file-formats.md: each of task needs exactly one block" in err
 
 
 def test_every_command_is_on_the_page_with_its_own_help() -> None:
@@ -73,11 +79,24 @@ def test_help_on_the_page_does_not_depend_on_the_terminal(monkeypatch: pytest.Mo
 
 
 def test_every_schema_has_its_format_on_the_page() -> None:
-    page = docs.file_formats_page()
+    page = (ROOT / "docs/reference/file-formats.md").read_text(encoding="utf-8")
     for schema in sorted((ROOT / "schemas").glob("*.schema.json")):
         assert f"Schema: `schemas/{schema.name}`" in page, schema.name
     for title in ("Logic", "agent.yaml", "Launch Request", "Rule configuration"):
         assert f"## {title} {{#" in page or f"### {title} {{#" in page, title
+
+
+def test_generated_blocks_are_rewritten_and_the_text_around_them_kept() -> None:
+    text = "# Page\n\nby hand\n\n<!-- generated: a -->\nold\n<!-- end generated -->\n\nafter\n"
+    done = docs.splice(text, {"a": "| new |\n"})
+    assert done == text.replace("old\n", "\n| new |\n\n")
+    assert docs.splice(done, {"a": "| new |\n"}) == done
+    with pytest.raises(ValueError, match="each of b needs exactly one block"):
+        docs.splice(text, {"a": "", "b": ""})
+    with pytest.raises(ValueError, match="no such generated block: a"):
+        docs.splice(text, {})
+    with pytest.raises(ValueError, match="the block a has no `<!-- end generated -->`"):
+        docs.splice("<!-- generated: a -->\nold\n", {"a": ""})
 
 
 def _build(site: Path) -> subprocess.CompletedProcess[str]:
