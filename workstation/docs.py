@@ -385,9 +385,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true", help="fail when a page is stale")
     parser.add_argument("--root", type=Path, default=ROOT, help="the repository (default: ours)")
     args = parser.parse_args(argv)
+    if not (args.root / "docs").is_dir():
+        print(f"python -m workstation.docs: {args.root} has no docs/ folder", file=sys.stderr)
+        return ExitCode.TOOL
     try:
         pages = wanted(args.root)
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError, RuntimeError) as exc:
         print(f"python -m workstation.docs: {exc}", file=sys.stderr)
         return ExitCode.TOOL
     stale = [page for page, (now, new) in pages.items() if now != new]

@@ -57,6 +57,8 @@ def test_a_page_without_what_the_generator_fills_in_is_a_clear_error(
     assert docs.main(["--check", "--root", str(root)]) == 2
     err = capsys.readouterr().err
     assert "docs/reference/file-formats.md: each of task needs exactly one block" in err
+    assert docs.main(["--root", str(tmp_path / "nowhere")]) == 2
+    assert "has no docs/ folder" in capsys.readouterr().err
 
 
 def test_every_command_is_on_the_page_with_its_own_help() -> None:
