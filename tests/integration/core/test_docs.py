@@ -108,7 +108,9 @@ def _build(site: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(command, capture_output=True, text=True, timeout=300)
 
 
-def test_the_site_builds_and_a_broken_link_or_a_missing_page_fails_it(tmp_path: Path) -> None:
+def test_the_site_builds_and_a_broken_link_or_anchor_or_a_missing_page_fails_it(
+    tmp_path: Path,
+) -> None:
     good = _build(_copy_site(tmp_path / "good"))
     assert good.returncode == 0, good.stderr
     broken = _copy_site(tmp_path / "broken")
@@ -117,6 +119,12 @@ def test_the_site_builds_and_a_broken_link_or_a_missing_page_fails_it(tmp_path: 
     done = _build(broken)
     assert done.returncode != 0
     assert "no-such-page.md" in done.stderr
+    anchor = _copy_site(tmp_path / "anchor")
+    with (anchor / "docs/index.md").open("a", encoding="utf-8") as page:
+        page.write("\nSee [a code](reference/rules.md#no-such-anchor).\n")
+    done = _build(anchor)
+    assert done.returncode != 0
+    assert "no-such-anchor" in done.stderr
     missing = _copy_site(tmp_path / "missing")
     (missing / "docs/how-to/desk.md").unlink()
     done = _build(missing)
