@@ -241,7 +241,17 @@ def _type(schema: dict[str, Any], link: Callable[[str], str]) -> str:
     return str(kind) + _limits(schema)
 
 
-def _fields_table(schema: dict[str, Any], link: Callable[[str], str]) -> str:
+def _about(field: dict[str, Any], defs: dict[str, Any]) -> str:
+    """A field's description; a field of a nested type without one has the type's own."""
+    if "description" in field:
+        return str(field["description"])
+    refs = [b["$ref"] for b in [field, *field.get("anyOf", [])] if "$ref" in b]
+    if len(refs) == 1:
+        return str(defs.get(refs[0].rsplit("/", 1)[1], {}).get("description", ""))
+    return ""
+
+
+def _fields_table(schema: dict[str, Any], link: Callable[[str], str], defs: dict[str, Any]) -> str:
     properties: dict[str, dict[str, Any]] = schema.get("properties", {})
     if not properties:
         return "No fields of its own.\n"
@@ -252,7 +262,7 @@ def _fields_table(schema: dict[str, Any], link: Callable[[str], str]) -> str:
     ]
     for name, field in properties.items():
         default = _code(field["default"]) if "default" in field else ""
-        about = _cell(field.get("description", ""))
+        about = _cell(_about(field, defs))
         needed = "yes" if name in required else "no"
         rows.append(f"| `{name}` | {_type(field, link)} | {needed} | {default} | {about} |")
     closed = schema.get("additionalProperties") is False
@@ -298,7 +308,8 @@ def format_fields(fmt: Format) -> str:
     parts = [where + "\n\n"]
     if schema.get("description"):
         parts.append(_cell(schema["description"]) + "\n\n")
-    parts.append(_fields_table(schema, link))
+    defs = schema.get("$defs", {})
+    parts.append(_fields_table(schema, link, defs))
     for name in _defs_in_order(schema):
         nested = schema["$defs"][name]
         parts.append(f"\n### {name} {{#{fmt.anchor}-{name.lower()}}}\n\n")
@@ -307,7 +318,7 @@ def format_fields(fmt: Format) -> str:
             parts.append(" " + _cell(nested["description"]))
         parts.append("\n\n")
         if "properties" in nested:
-            parts.append(_fields_table(nested, link))
+            parts.append(_fields_table(nested, link, defs))
         else:
             parts.append(f"Type: {_type(nested, link)}.\n")
     return "".join(parts)
