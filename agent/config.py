@@ -56,22 +56,42 @@ COMMAND_EXAMPLE = '[python3, -m, cbs, --config, "{launch_request}"]'
 class DescriptionConfig(StrictModel):
     """The robot as it describes itself; strict here although the wire type is tolerant."""
 
-    id: str = Field(pattern=ROBOT_ID_PATTERN)
-    name: str | None = None
-    recommended_template: str | None = None
-    platform: str | None = None
+    id: str = Field(
+        pattern=ROBOT_ID_PATTERN,
+        description="the robot id, a topic level: 1-64 of A-Z a-z 0-9 _ . -, starting with a "
+        "letter or digit",
+    )
+    name: str | None = Field(None, description="published as the robot's description")
+    recommended_template: str | None = Field(
+        None,
+        description="published as the robot's description; a request whose capability targets "
+        "another template (or none) runs, with a warning in the status",
+    )
+    platform: str | None = Field(
+        None, description="when set, a request for another platform is rejected"
+    )
 
     def to_wire(self) -> RobotDescription:
         return RobotDescription(**self.model_dump())
 
 
 class RestartConfig(StrictModel):
-    policy: Literal["on-failure", "always", "never"] = "on-failure"
-    max_restarts: int = Field(default=5, ge=0)
-    backoff_initial: float = Field(default=1.0, gt=0)
-    backoff_max: float = Field(default=60.0, gt=0)
+    """When the brain is started again after it exited, and how soon."""
+
+    policy: Literal["on-failure", "always", "never"] = Field(
+        "on-failure", description="on-failure: restart on a non-zero exit"
+    )
+    max_restarts: int = Field(default=5, ge=0, description="restarts in a row before `failed`")
+    backoff_initial: float = Field(
+        default=1.0, gt=0, description="seconds before the first restart, doubled per failure"
+    )
+    backoff_max: float = Field(default=60.0, gt=0, description="the longest delay (s)")
     # A brain that stayed up this long is healthy again: its next crash starts a fresh backoff.
-    reset_after: float = Field(default=60.0, gt=0)
+    reset_after: float = Field(
+        default=60.0,
+        gt=0,
+        description="a brain that ran this long starts a fresh backoff when it next crashes (s)",
+    )
 
     @model_validator(mode="after")
     def _ordered(self) -> RestartConfig:
@@ -91,7 +111,11 @@ RELOAD_SIGNALS = ("SIGHUP", "SIGUSR1", "SIGUSR2")
 class ReloadConfig(StrictModel):
     """How the brain is told to re-read its request when only reloadable parts changed."""
 
-    signal: Literal["SIGHUP", "SIGUSR1", "SIGUSR2"]
+    signal: Literal["SIGHUP", "SIGUSR1", "SIGUSR2"] = Field(
+        description="a new request whose restart_digest equals the running brain's is written "
+        "over the request file and this signal sent to the brain's process group, instead of a "
+        "restart"
+    )
 
     @field_validator("signal", mode="before")
     @classmethod
@@ -107,15 +131,23 @@ class ReloadConfig(StrictModel):
 
 
 class TlsConfig(StrictModel):
-    ca_file: Path | None = Field(None, strict=False)
-    cert_file: Path | None = Field(None, strict=False)
-    key_file: Path | None = Field(None, strict=False)
-    insecure: bool = False  # skip server certificate checks: lab benches only
+    """The broker connection's TLS (only with mqtts://)."""
+
+    ca_file: Path | None = Field(
+        None, strict=False, description="the CA to trust; none: the system's CAs"
+    )
+    cert_file: Path | None = Field(None, strict=False, description="the client certificate")
+    key_file: Path | None = Field(None, strict=False, description="the client certificate's key")
+    insecure: bool = Field(False, description="skip the server certificate check: lab benches only")
 
 
 class LogConfig(StrictModel):
-    max_bytes: int = Field(default=10 * 1024 * 1024, ge=4096)
-    backups: int = Field(default=3, ge=0)
+    """brain.log in the workdir, rotated (copied, then truncated) past a size."""
+
+    max_bytes: int = Field(
+        default=10 * 1024 * 1024, ge=4096, description="rotate past this size (checked every 2 s)"
+    )
+    backups: int = Field(default=3, ge=0, description="rotated copies kept: brain.log.1, ...")
 
 
 INTERFACES_EXAMPLE = "interfaces: {interval: 30}"
@@ -129,8 +161,16 @@ class InterfacesConfig(StrictModel):
     there. `command` replaces `ros2 topic/service/action list -t` by a program printing JSON."""
 
     interval: float = Field(gt=0, description="seconds from the end of one reading to the next")
-    command: list[str] | None = None
-    timeout: float = Field(default=DEFAULT_INTERFACES_TIMEOUT, gt=0)
+    command: list[str] | None = Field(
+        None,
+        description='a program (argument list) printing one JSON object {"topics": [{"name", '
+        '"type"}...], "services": [...], "actions": [...]}; none: ros2 on the brain\'s PATH',
+    )
+    timeout: float = Field(
+        default=DEFAULT_INTERFACES_TIMEOUT,
+        gt=0,
+        description="seconds each command may take before its process group is killed",
+    )
 
     @field_validator("command", mode="before")
     @classmethod
@@ -218,33 +258,73 @@ MAX_MAX_DEFER = 86_400.0  # a day: beyond that a hold is a robot out of the flee
 
 
 class AgentConfig(StrictModel):
-    broker: str = Field(default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER))
-    prefix: str = DEFAULT_PREFIX
+    """One robot's agent: its broker, its robot, its brain. Relative paths are relative to the
+    folder of agent.yaml."""
+
+    broker: str = Field(
+        default_factory=lambda: os.environ.get(BROKER_ENV, DEFAULT_BROKER),
+        description=f"mqtt://host[:port] or mqtts://host[:port]; default: ${BROKER_ENV}, else "
+        f"{DEFAULT_BROKER}",
+    )
+    prefix: str = Field(DEFAULT_PREFIX, description="the topic prefix")
     description: DescriptionConfig
-    command: list[str]
-    workdir: Path = Field(strict=False)
-    stop_timeout: float = Field(default=10.0, gt=0)
-    startsecs: float = Field(default=1.0, ge=0)
-    # Seconds a stop, restart or reload waits while the brain's hold file exists (README
-    # "Robots that are busy"); 0: the hold file is ignored.
-    max_defer: float = Field(default=DEFAULT_MAX_DEFER, ge=0, le=MAX_MAX_DEFER)
+    command: list[str] = Field(
+        description="the brain's argument list (never a shell string); {launch_request} "
+        "becomes the request file's path, as one argument"
+    )
+    workdir: Path = Field(
+        strict=False,
+        description="where launch-request.json (mode 0600), brain.log, brain.pid and agent.seq "
+        "live; created if missing, must be writable",
+    )
+    stop_timeout: float = Field(
+        default=10.0, gt=0, description="seconds from SIGTERM (to the brain's group) to SIGKILL"
+    )
+    startsecs: float = Field(
+        default=1.0, ge=0, description="seconds the brain must stay up to count as running"
+    )
+    max_defer: float = Field(
+        default=DEFAULT_MAX_DEFER,
+        ge=0,
+        le=MAX_MAX_DEFER,
+        description="seconds a stop, restart or reload waits at most while the brain's hold "
+        "file exists; 0: the hold file is ignored",
+    )
     restart: RestartConfig = Field(default_factory=lambda: RestartConfig())
-    keepalive: int = Field(default=30, ge=5, le=3600)
+    keepalive: int = Field(
+        default=30,
+        ge=5,
+        le=3600,
+        description="MQTT keepalive (s): how soon the broker notices a dead agent",
+    )
     log: LogConfig = Field(default_factory=lambda: LogConfig())
-    # Absent: every new request restarts the brain.
-    reload: ReloadConfig | None = None
-    username: str | None = None
-    password_file: Path | None = Field(None, strict=False)
+    reload: ReloadConfig | None = Field(
+        None, description="absent: every new request restarts the brain"
+    )
+    username: str | None = Field(None, description="the broker login")
+    password_file: Path | None = Field(
+        None, strict=False, description="the broker password, read from this file"
+    )
     tls: TlsConfig | None = None
-    # The reconciler's Ed25519 public key (`robotconf keys generate`): when set, only requests
-    # it signed are accepted.
-    public_key: Path | None = Field(None, strict=False)
-    # Extra environment of the brain only (ROS_DOMAIN_ID, RMW_IMPLEMENTATION...): never logged
-    # or published, as it may hold secrets; so it stays out of the model's repr too.
-    # ROS_DOMAIN_ID is checked on reading (`_env_problems`), located at its own line.
-    env: dict[EnvName, EnvValue] = Field(default_factory=dict, repr=False)
-    # Absent: the robot reports no interfaces, and readers take them as unknown.
-    interfaces: InterfacesConfig | None = None
+    public_key: Path | None = Field(
+        None,
+        strict=False,
+        description="the reconciler's Ed25519 public key (robotconf keys generate): when set, "
+        "unsigned, tampered or wrongly signed requests are rejected, and so is a signed one "
+        "older than the newest this robot accepted (unless it runs it)",
+    )
+    # Never logged or published, as it may hold secrets; so it stays out of the model's repr
+    # too. ROS_DOMAIN_ID is checked on reading (`_env_problems`), located at its own line.
+    env: dict[EnvName, EnvValue] = Field(
+        default_factory=dict,
+        repr=False,
+        description="extra environment of the brain only (ROS_DOMAIN_ID, RMW_IMPLEMENTATION): "
+        "values are text; the agent's own ROBOTCONF_* are refused",
+    )
+    interfaces: InterfacesConfig | None = Field(
+        None,
+        description="report the robot's ROS interfaces; absent: none reported (unknown)",
+    )
 
     @field_validator("broker")
     @classmethod

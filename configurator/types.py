@@ -56,7 +56,9 @@ class RobotTemplate(StrictModel):
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
     mappings: list[str] = Field(description="names of the mappings this robot has")
-    settings: dict[str, SettingDefinition] = Field(default_factory=dict)
+    settings: dict[str, SettingDefinition] = Field(
+        default_factory=dict, description="robot setting -> its type, default and bounds"
+    )
 
 
 class MappingScheme(StrictModel):
@@ -64,7 +66,7 @@ class MappingScheme(StrictModel):
 
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
-    mappings: dict[str, MappingBinding]
+    mappings: dict[str, MappingBinding] = Field(description="mapping -> how it is bound")
 
 
 class Logic(StrictModel):
@@ -72,7 +74,9 @@ class Logic(StrictModel):
 
     description: str = ""
     mappings: list[str] = Field(default_factory=list, description="mappings the logic needs")
-    settings: dict[str, SettingDefinition] = Field(default_factory=dict)
+    settings: dict[str, SettingDefinition] = Field(
+        default_factory=dict, description="logic setting -> its type, default and bounds"
+    )
 
 
 class Action(StrictModel):
@@ -80,9 +84,11 @@ class Action(StrictModel):
 
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
-    platforms: list[str] = Field(min_length=1)
+    platforms: list[str] = Field(min_length=1, description="the platforms it is available on")
     requires: list[str] = Field(default_factory=list, description="actions selected alongside")
-    logics: dict[str, Logic] = Field(min_length=1)
+    logics: dict[str, Logic] = Field(
+        min_length=1, description="logic -> what it needs; a capability chooses one or several"
+    )
 
 
 class Task(StrictModel):
@@ -90,7 +96,11 @@ class Task(StrictModel):
 
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
-    implementations: list[list[str]] = Field(min_length=1)
+    implementations: list[list[str]] = Field(
+        min_length=1,
+        description="alternative lists of actions; the task is achievable when every action "
+        "of one list is selected",
+    )
 
 
 class OntologyObject(BaseModel):
@@ -98,8 +108,8 @@ class OntologyObject(BaseModel):
 
     model_config = ConfigDict(extra="allow", coerce_numbers_to_str=True)
 
-    id: str
-    name: str
+    id: str = Field(description="a goal's location may name it")
+    name: str = Field(description="a goal's location may name it")
     type: str = Field(description="e.g. Location")
 
 
@@ -109,8 +119,11 @@ class Environment(StrictModel):
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
     type: str = Field(description="e.g. 2D, Gazebo, Real")
-    objects: list[OntologyObject] = Field(default_factory=list)
-    knowledge_sets: dict[str, JsonObject] = Field(default_factory=dict)
+    objects: list[OntologyObject] = Field(default_factory=list, description="what is in it")
+    knowledge_sets: dict[str, JsonObject] = Field(
+        default_factory=dict,
+        description="name -> a JSON object a scenario may give its robots at launch",
+    )
     ros_domain_id: int | None = Field(
         None,
         ge=0,
@@ -161,8 +174,8 @@ class CapabilityConfiguration(StrictModel):
 
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
-    platform: str
-    mapping_scheme: str
+    platform: str = Field(description="the robot's software platform")
+    mapping_scheme: str = Field(description="how mappings are bound on the platform")
     robot_template: str | None = Field(None, description="when set, the config must fit it")
     actions: dict[str, LogicChoice] = Field(
         description="action -> chosen logic, or a list of several logics"
@@ -181,7 +194,7 @@ class CapabilityConfiguration(StrictModel):
 class Goal(StrictModel):
     """An initial task for the robot's planner, optionally at a location of the environment."""
 
-    task: str
+    task: str = Field(description="the task to achieve")
     location: str | None = Field(None, description="id or name of a Location object")
 
 
@@ -190,19 +203,28 @@ class ScenarioConfiguration(StrictModel):
 
     name: str | None = Field(None, description="must equal the file name when given")
     description: str = ""
-    capability: str
-    environment: str | None = None
-    robot_settings: dict[str, JsonScalar] = Field(default_factory=dict)
-    logic_settings: dict[str, dict[str, JsonScalar]] = Field(default_factory=dict)
-    knowledge_sets: list[str] = Field(default_factory=list)
-    knowledge: JsonObject = Field(default_factory=dict)
-    goals: list[Goal] = Field(default_factory=list)
+    capability: str = Field(description="the capability configuration it runs")
+    environment: str | None = Field(None, description="the world it runs in")
+    robot_settings: dict[str, JsonScalar] = Field(
+        default_factory=dict, description="robot setting -> value, within the template's bounds"
+    )
+    logic_settings: dict[str, dict[str, JsonScalar]] = Field(
+        default_factory=dict,
+        description="logic -> its setting -> value, for the logics the capability chose",
+    )
+    knowledge_sets: list[str] = Field(
+        default_factory=list, description="the environment's sets, deep-merged in order"
+    )
+    knowledge: JsonObject = Field(
+        default_factory=dict, description="deep-merged over the knowledge sets"
+    )
+    goals: list[Goal] = Field(default_factory=list, description="the robot's initial tasks")
 
 
 class RobotAssignment(StrictModel):
     """Which scenario one robot runs."""
 
-    scenario: str
+    scenario: str = Field(description="the scenario this robot runs")
     name: str | None = Field(None, description="display name; defaults to the robot id")
     suspended: bool = Field(False, description="leave the robot as it is")
     labels: dict[str, str] = Field(
@@ -264,7 +286,9 @@ class RolloutPolicy(StrictModel):
 class Fleet(StrictModel):
     """The desired robot assignments."""
 
-    robots: dict[str, RobotAssignment] = Field(default_factory=dict)
+    robots: dict[str, RobotAssignment] = Field(
+        default_factory=dict, description="robot id -> what it runs"
+    )
     allow_empty: bool = Field(False, description="allow a commit that unassigns every robot")
     rollout: RolloutPolicy | None = Field(
         None, description="roll out in health-gated waves; absent: every robot at once"

@@ -1,7 +1,8 @@
 """Every diagnostic code, declared once: its severity and the rule it stands for.
 
-Diagnostics refuse a code that is not declared here, and README.md's table of rule codes is
-generated from it: `python -m contract.codes README.md` rewrites the table.
+Diagnostics refuse a code that is not declared here, and the docs' table of rule codes
+(docs/reference/rules.md) is generated from it: `python -m contract.codes FILE` rewrites the
+table in any file, found by its head row (`python -m workstation.docs` writes every page).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ class Severity(str, Enum):
     WARNING = "warning"
 
 
-# Why a lab cannot tune a rule (configurator/ruleconfig.py): each group's reason, in README's
+# Why a lab cannot tune a rule (configurator/ruleconfig.py): each group's reason, in the docs'
 # table. A rule without one may be set to error, warning or off in `.robotconf.yaml` and
 # silenced in place by `# robotconf: ignore CODE`.
 UNREAD = "the file is not read: nothing in it is checked"
@@ -39,7 +40,7 @@ TUNABLE = ""
 class Rule:
     code: str
     severity: Severity
-    summary: str  # README's row for the code: what it refuses, in a line
+    summary: str  # the docs' row for the code: what it refuses, in a line
     fixed: str  # why a lab cannot tune it; TUNABLE (empty) when it can
 
     @property
@@ -354,13 +355,16 @@ def _row(rule: Rule) -> str:
 
 
 def readme_table() -> str:
-    """README's table of rule codes, a row per declared code; a warning says so, and a rule a
-    lab cannot tune says why."""
+    """The table of rule codes (docs/reference/rules.md), a row per declared code; a warning
+    says so, and a rule a lab cannot tune says why."""
     return TABLE_HEAD + "".join(_row(r) for r in RULES.values())
 
 
 def with_readme_table(readme: str) -> str:
-    """The README text with its table of rule codes (head and following rows) generated anew."""
+    """The text with its table of rule codes (head and following rows) generated anew."""
+    if TABLE_HEAD not in readme:
+        head = " ".join(TABLE_HEAD.splitlines())
+        raise ValueError(f"no table of rule codes: its head rows `{head}` are missing")
     start = readme.index(TABLE_HEAD)
     end = start + len(TABLE_HEAD)
     while readme.startswith("| RC", end):
@@ -370,11 +374,16 @@ def with_readme_table(readme: str) -> str:
 
 def main(argv: list[str]) -> int:
     if len(argv) != 1:
-        print("usage: python -m contract.codes README.md", file=sys.stderr)
+        print(
+            "usage: python -m contract.codes FILE (e.g. docs/reference/rules.md)", file=sys.stderr
+        )
         return ExitCode.TOOL
     path = Path(argv[0])
-    text = path.read_text(encoding="utf-8")
-    path.write_text(with_readme_table(text), encoding="utf-8")
+    try:
+        path.write_text(with_readme_table(path.read_text(encoding="utf-8")), encoding="utf-8")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        print(f"python -m contract.codes: {path}: {exc}", file=sys.stderr)
+        return ExitCode.TOOL
     return ExitCode.OK
 
 

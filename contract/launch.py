@@ -40,12 +40,14 @@ _PENDING_DIGEST = "sha256:" + "0" * 64
 # Strict as every document type: the agent validates the JSON object it received with these
 # models, and JSON gives every field its own type (strings, numbers, lists, objects) already.
 class LaunchCapability(StrictModel):
-    name: str
-    platform: str
-    robot_template: str | None
-    mapping_scheme: str
+    """The capability configuration, resolved: what only a restart of the brain applies."""
+
+    name: str = Field(description="the capability configuration's name")
+    platform: str = Field(description="the robot's software platform")
+    robot_template: str | None = Field(description="the template it fits, if it names one")
+    mapping_scheme: str = Field(description="the scheme that bound the mappings")
     tasks: list[str] = Field(description="tasks the selected actions achieve")
-    actions: list[str]
+    actions: list[str] = Field(description="the selected actions")
     # One logic is its name (every request before multi-logic actions, byte for byte), several
     # a list in the order the capability writes them.
     logics: dict[str, str | list[str]] = Field(
@@ -55,19 +57,27 @@ class LaunchCapability(StrictModel):
 
 
 class LaunchGoal(StrictModel):
-    task: str
+    """An initial task for the robot's planner."""
+
+    task: str = Field(description="the task to achieve")
     location: JsonObject | None = Field(None, description="the environment object, expanded")
 
 
 class LaunchScenario(StrictModel):
-    name: str
+    """The scenario the robot runs, with every default filled and every name resolved."""
+
+    name: str = Field(description="the scenario configuration's name")
     capability: LaunchCapability
-    environment_name: str | None
-    environment_type: str | None
-    robot_settings: JsonObject
-    logic_settings: dict[str, JsonObject]
-    environment_knowledge: JsonObject
-    goals: list[LaunchGoal]
+    environment_name: str | None = Field(description="the environment, if the scenario has one")
+    environment_type: str | None = Field(description="its type, e.g. Gazebo or Real")
+    robot_settings: JsonObject = Field(description="every robot setting, defaults filled")
+    logic_settings: dict[str, JsonObject] = Field(
+        description="selected logic -> its settings, defaults filled"
+    )
+    environment_knowledge: JsonObject = Field(
+        description="the knowledge sets deep-merged in order, the scenario's knowledge over them"
+    )
+    goals: list[LaunchGoal] = Field(description="the initial tasks, locations expanded")
 
 
 class _Published(StrictModel):
@@ -96,8 +106,8 @@ class LaunchRequest(_Published):
 
     apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
     kind: Literal["LaunchRequest"] = "LaunchRequest"
-    robot_id: str = Field(pattern=ROBOT_ID_PATTERN)
-    robot_name: str
+    robot_id: str = Field(pattern=ROBOT_ID_PATTERN, description="the robot it is for")
+    robot_name: str = Field(description="its display name")
     revision: str = Field(description="the git commit it was rendered from")
     digest: str = Field(pattern=DIGEST_PATTERN, description="sha256 of the content")
     # Optional: an older reconciler does not send it, and its requests always restart.

@@ -57,6 +57,6 @@ MappingKind = Literal["topic", "service", "action_client"]
 class MappingBinding(StrictModel):
     """How one mapping is bound on a platform (a ROS topic, service or action client)."""
 
-    kind: MappingKind
+    kind: MappingKind = Field(description="a topic, a service, or an action the brain calls")
     name: str = Field(description="e.g. the topic name /cmd_vel")
     type: str = Field(description="e.g. geometry_msgs/msg/Twist")

@@ -29,7 +29,8 @@ def validate(repo: Path, rev: str | None, fmt: str, files: tuple[str, ...]) -> E
     from the commit with --rev), and silences one finding with a comment on its line:
       .robotconf.yaml     rules: {RC505: warning, RC608: off}   (error, warning or off)
       configs/fleet.yaml  tb3-04: {...}  # robotconf: ignore RC505, RC608
-    Rules that could make a robot unsafe or undeliverable cannot be tuned (README's table).
+    Rules that could make a robot unsafe or undeliverable cannot be tuned (the docs'
+    reference/rules.md says why for each).
     Exit 1 on errors; warnings alone exit 0."""
     checked = check(repo, rev)
     diagnostics = checked.diagnostics

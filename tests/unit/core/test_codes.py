@@ -1,4 +1,4 @@
-"""The registry of diagnostic codes: the code uses exactly what it declares, README shows it."""
+"""The registry of diagnostic codes: the code uses exactly what it declares, the docs show it."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from tests.support.lab import ROOT
 
 CODE = re.compile(r"\bRC\d{3}\b")
 REGISTRY = ROOT / "contract" / "codes.py"
-UPDATE = "python -m contract.codes README.md"
+PAGE = ROOT / "docs" / "reference" / "rules.md"
+UPDATE = "python -m workstation.docs"
 
 
 def _sources() -> list[Path]:
@@ -56,20 +57,41 @@ def test_every_declared_code_is_used_as_a_literal() -> None:
     assert used <= set(RULES)
 
 
-def test_readme_table_is_generated_from_the_registry() -> None:
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    if with_readme_table(readme) != readme:
-        table = readme[readme.index("| code | rule |") :].split("\n\n", 1)[0] + "\n"
-        stale = sorted(set(table.splitlines()) ^ set(readme_table().splitlines()))
+def _stale_rows(text: str) -> list[str]:
+    table = text[text.index("| code | rule |") :].split("\n\n", 1)[0] + "\n"
+    return sorted(set(table.splitlines()) ^ set(readme_table().splitlines()))
+
+
+def test_the_docs_table_is_generated_from_the_registry() -> None:
+    page = PAGE.read_text(encoding="utf-8")
+    if with_readme_table(page) != page:
         pytest.fail(
-            "README.md's table of rule codes is not contract/codes.py's; after editing the "
-            f"registry, run `{UPDATE}`. Rows that differ:\n" + "\n".join(stale)
+            "docs/reference/rules.md's table of rule codes is not contract/codes.py's; after "
+            f"editing the registry, run `{UPDATE}`. Rows that differ:\n"
+            + "\n".join(_stale_rows(page))
         )
 
 
-def test_the_readme_table_is_rewritten_row_for_row() -> None:
+def test_a_readme_table_if_any_is_generated_too() -> None:
+    # The README links to the docs page; a copy of the table left there must not go stale.
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    current = with_readme_table(readme)
+    if "| code | rule | tunable |" in readme and with_readme_table(readme) != readme:
+        pytest.fail(
+            "README.md's table of rule codes is stale: run `python -m contract.codes README.md` "
+            "(or drop it and link docs/reference/rules.md). Rows that differ:\n"
+            + "\n".join(_stale_rows(readme))
+        )
+
+
+def test_a_text_without_the_table_is_refused_with_its_head_named() -> None:
+    with pytest.raises(
+        ValueError, match=r"no table of rule codes: .*\| code \| rule \| tunable \|"
+    ):
+        with_readme_table("# Rule codes\n\nnothing here\n")
+
+
+def test_the_table_is_rewritten_row_for_row() -> None:
+    current = with_readme_table(PAGE.read_text(encoding="utf-8"))
     row = f"| RC204 | {RULES['RC204'].summary} | no: {RULES['RC204'].fixed} |\n"
     assert row in current
     edited = current.replace(row, "| RC204 | something else | yes |\n| RC999 | invented |\n")
