@@ -2,17 +2,15 @@
 
 The only place where the state machine, the brain process and the broker link meet; one thread
 drives one robot's agent or several (`run_agents`: a simulation host's robots). Each event has
-one handler (`HANDLERS`), each effect one (`EFFECTS`); the desk's requests, the status and the
+one handler (`HANDLERS`); the brain (`BrainRunner`), the desk's requests, the status and the
 interfaces report are collaborators of their own.
 """
 
 from __future__ import annotations
 
 import contextlib
-import errno
 import gc
 import logging
-import os
 import selectors
 import signal
 import time
@@ -22,6 +20,7 @@ from types import FrameType
 from typing import Any, TypeVar
 
 from agent import admission, process
+from agent.brain_runner import BrainRunner
 from agent.broker_link import BrokerLink
 from agent.config import AgentConfig
 from agent.desk_requests import DeskRequests
@@ -41,39 +40,23 @@ from agent.events import (
 from agent.interfaces_report import InterfacesReport
 from agent.logs import LogStream, Redactor
 from agent.status_report import StatusReport
-from agent.supervisor import (
-    Effect,
-    Kill,
-    Policy,
-    Reload,
-    Spawn,
-    Supervisor,
-    Terminate,
-    describe_exit,
-)
+from agent.supervisor import Effect, Policy, Supervisor
 from agent.workdir import (
     HOLD_FILE,
     ISSUED_FILE,
     LOG_FILE,
     PID_FILE,
-    REQUEST_FILE,
     SEQ_FILE,
-    STAGED_FILE,
     IssuedStore,
     SeqStore,
     hold_exists,
-    remove_hold,
-    write_atomic,
 )
-from contract.launch import LaunchRequest
-from contract.wire import AgentState
 
 log = logging.getLogger("robotconf.agent")
 # The robot whose agent runs right now on this thread: one process may host several, and each
 # log line names its robot (`RobotIdFilter`), whichever module logged it.
 _acting_for: ContextVar[str | None] = ContextVar("robotconf_agent_robot", default=None)
 
-LOG_CHECK_INTERVAL = 2.0  # seconds between brain log size checks
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
 
 
@@ -115,12 +98,14 @@ class Agent:
         self.supervisor = Supervisor(
             config.robot_id, policy_of(config), held=lambda: hold_exists(self.hold_file)
         )
-        self._was_deferred = False
         self.brain_log = process.BrainLog(
             workdir / LOG_FILE, config.log.max_bytes, config.log.backups
         )
         self.logs = LogStream(
             workdir / LOG_FILE, config.robot_id, redactor_of(config), backups=config.log.backups
+        )
+        self.runner = BrainRunner(
+            config, self.supervisor, self.inbox, self.brain_log, self.logs, self.hold_file
         )
         self.link = BrokerLink(
             config.connection(),
@@ -131,21 +116,8 @@ class Agent:
             self.seq,
         )
         self.verify = verifier_of(config)
-        self.brain: process.Brain | None = None
-        self._exit_fds: dict[int, process.Brain] = {}  # exit descriptors watched, until reaped
-        self._accepted_payload: tuple[str, bytes] = ("", b"")  # digest, bytes as received
-        # agent.yaml's `env` reaches the brain only (never a log or a status: it may hold
-        # secrets); the agent's own ROBOTCONF_* variables, which it refuses to override, last.
-        self._brain_env = process.brain_environment(
-            {
-                **config.env,
-                "ROBOTCONF_LAUNCH_REQUEST": str(workdir / REQUEST_FILE),
-                "ROBOTCONF_ROBOT_ID": config.robot_id,
-                "ROBOTCONF_HOLD_FILE": str(self.hold_file),
-            }
-        )
         self.interfaces = InterfacesReport.of(
-            config, self.introspection_env, redactor_of(config), self.link
+            config, self.runner.introspection_env, redactor_of(config), self.link
         )
         self.status = StatusReport(self.link, self.supervisor, self.seq, self._interfaces_error)
         self.desk = DeskRequests(
@@ -158,7 +130,6 @@ class Agent:
             self.link,
         )
         self._last_connect_problem: str | None = None
-        self._next_log_check = 0.0
 
     # ------------------------------------------------------------ lifecycle
 
@@ -195,8 +166,8 @@ class Agent:
         for fd, mask in ready.items():
             if fd == self.inbox.fileno():
                 self.inbox.clear_wakeups()
-            elif fd in self._exit_fds:
-                brain = self._exit_fds.pop(fd)
+            elif fd in self.runner.exit_fds:
+                brain = self.runner.exit_fds.pop(fd)
                 self.inbox.put_local(BrainExited(brain.pid, brain.reap()))
             elif fd in probe_fds:
                 probe_ready.append(fd)
@@ -216,24 +187,14 @@ class Agent:
             handled = True
         if self.interfaces is not None and (probe_ready or now >= self.interfaces.due()):
             handled |= self.interfaces.read(probe_ready, now, self.status.connected)
-        self._maybe_rotate_log(now)
+        self.runner.rotate_log_if_due(now)
         if self.status.connected:
             self.desk.send_logs(now)
-        self._tell_deferral()
+        self.runner.tell_deferral()
         report = self.status.held_until
         if handled or (report is not None and now >= report):
             # The status changes with events and deadlines, nothing else.
             self.status.publish(force=False)
-
-    def _tell_deferral(self) -> None:
-        """A line in the agent's and the brain's log as a deferral begins and as it ends."""
-        deferred = self.supervisor.phase is AgentState.DEFERRED
-        if deferred == self._was_deferred:
-            return
-        self._was_deferred = deferred
-        line = self.supervisor.message
-        (log.warning if "ran out" in line else log.info)("%s", line)
-        self.brain_log.note(line)
 
     def watches(self) -> dict[int, tuple[int, object]]:
         """fd -> (selector events, identity): the inbox, the broker socket, the brain's exit.
@@ -248,7 +209,7 @@ class Agent:
             generation, fd, writing = link
             events = selectors.EVENT_READ | (selectors.EVENT_WRITE if writing else 0)
             wanted[fd] = (events, ("link", generation))
-        for fd, exiting in self._exit_fds.items():
+        for fd, exiting in self.runner.exit_fds.items():
             wanted[fd] = (selectors.EVENT_READ, ("brain", exiting.pid))
         if self.interfaces is not None:
             for fd, identity in self.interfaces.watches().items():
@@ -263,8 +224,9 @@ class Agent:
         due = now + IDLE_WAKEUP
         if self.supervisor.deadline is not None:
             due = min(due, self.supervisor.deadline)
-        if self.brain is not None:
-            due = min(due, self._next_log_check)
+        log_check = self.runner.log_check_due()
+        if log_check is not None:
+            due = min(due, log_check)
         if self.status.held_until is not None:
             due = min(due, self.status.held_until)
         if self.interfaces is not None:
@@ -353,195 +315,43 @@ class Agent:
 
     def _accept(self, outcome: admission.Accept, payload: bytes, now: float) -> None:
         sup = self.supervisor
-        warnings = [*outcome.warnings, *self._environment(outcome.request)[1]]
+        warnings = [*outcome.warnings, *self.runner.environment(outcome.request)[1]]
         for warning in warnings:
             log.warning("%s", warning)
         if self.verify is not None:
             self.issued.accepted(outcome.request.issued_at)
         # The brain gets the bytes as published (validated above), not a re-serialisation.
-        self._accepted_payload = (outcome.request.digest, payload)
+        self.runner.accepted_payload = (outcome.request.digest, payload)
         desired = sup.desired
         if desired is None or desired.request.digest != outcome.request.digest:
-            problem = self._stage(payload)
+            problem = self.runner.stage(payload)
             if problem is not None:
                 log.error("%s", problem)
                 self._apply(sup.reject(problem, now))
                 return
         self._apply(sup.accept(outcome.request, warnings, now))
 
-    def _environment(self, request: LaunchRequest) -> tuple[dict[bytes, bytes], list[str]]:
-        """The brain's environment for `request`, and the conflicts it has (warnings)."""
-        return process.request_environment(self._brain_env, self.config.env, request)
-
-    def _stage(self, payload: bytes) -> str | None:
-        """Writes the next request beside the current one before anything is stopped: a full
-        or read-only disk must leave the running brain running. None when it is written."""
-        staged = self.workdir / STAGED_FILE
-        try:
-            write_atomic(staged, payload, mode=0o600, durable=False)
-        except OSError as exc:
-            with contextlib.suppress(OSError):
-                staged.unlink()
-            return (
-                f"cannot write the new request to {staged}: {_os_error(exc)}; "
-                "the running brain is left as it is"
-            )
-        return None
-
     def _on_brain_exit(self, event: BrainExited, now: float) -> None:
-        if self.brain is not None and self.brain.pid == event.pid:
-            self.brain = None
-            self._remove(PID_FILE)
-        how = describe_exit(event.code)
-        self.brain_log.note(f"brain pid {event.pid} {how}")
-        log.info("brain pid %d %s", event.pid, how)
-        self._apply(self.supervisor.exited(event.pid, event.code, now))
-
-    # ------------------------------------------------------------ effects: one handler each
+        self._apply(self.runner.exited(event, now))
 
     def _apply(self, effects: list[Effect]) -> None:
+        """The supervisor's effects, each carried out with what it answers, in order."""
         for effect in effects:
-            EFFECTS[type(effect)](self, effect)
-
-    def _terminate(self, effect: Terminate) -> None:
-        log.info("stopping brain pid %d (SIGTERM to its process group)", effect.pid)
-        process.signal_group(effect.pid, signal.SIGTERM)
-
-    def _kill(self, effect: Kill) -> None:
-        log.warning("killing brain pid %d (SIGKILL to its process group)", effect.pid)
-        process.signal_group(effect.pid, signal.SIGKILL)
-
-    def _install(self, request: LaunchRequest) -> None:
-        """Puts `request` in place of the request file, atomically; raises OSError."""
-        path = self.workdir / REQUEST_FILE
-        digest, payload = self._accepted_payload
-        staged = self.workdir / STAGED_FILE
-        if digest == request.digest and staged.exists():
-            os.replace(staged, path)  # a rename needs no space: staged before the stop
-            return
-        if digest != request.digest:
-            payload = request.payload()
-        # Not durable: after a power cut the retained request arrives again.
-        write_atomic(path, payload, mode=0o600, durable=False)
-
-    def _reload(self, effect: Reload) -> None:
-        """The new request over the old one, then the signal: the brain re-reads a whole
-        file, never a half-written one, and finds the new one when it is told to look."""
-        request = effect.request
-        try:
-            self._install(request)
-        except OSError as exc:
-            problem = (
-                f"cannot write the new request to {exc.filename or REQUEST_FILE}: "
-                f"{_os_error(exc)}; the running brain is left as it is"
-            )
-            log.error("%s", problem)
-            self._apply(self.supervisor.reload_failed(request, problem, time.monotonic()))
-            return
-        name = effect.signal.name
-        log.info("reloading brain pid %d with %s (%s)", effect.pid, request.digest, name)
-        self.brain_log.note(
-            f"reloading pid {effect.pid} with {request.digest} ({request.revision}): {name}"
-        )
-        process.signal_group(effect.pid, effect.signal)
-        try:
-            process.write_pidfile(self.workdir / PID_FILE, effect.pid, request.digest)
-        except OSError as exc:
-            log.warning("cannot write the pidfile: %s", exc)
-
-    def _spawn(self, effect: Spawn) -> None:
-        request = effect.request
-        now = time.monotonic()
-        path = self.workdir / REQUEST_FILE
-        argv = process.substitute(self.config.command, path)
-        problem = remove_hold(self.hold_file)
-        if problem is not None:
-            log.warning("%s; it defers this brain's stops until it is gone", problem)
-        try:
-            self._install(request)
-            log_fd = self.brain_log.open_for_child()
-        except OSError as exc:
-            problem = f"cannot write {exc.filename}: {exc.strerror}"
-            self._apply(self.supervisor.spawn_failed(problem, now))
-            return
-        try:
-            brain = process.spawn(
-                argv,
-                cwd=self.workdir,
-                log_fd=log_fd,
-                env=self._environment(request)[0],
-                on_exit=lambda pid, code: self.inbox.put(BrainExited(pid, code)),
-            )
-        except OSError as exc:
-            reason = exc.strerror or str(exc)
-            message = f"cannot start {argv[0]!r}: {reason}"
-            log.error("%s", message)
-            self.brain_log.note(message)
-            self._apply(self.supervisor.spawn_failed(message, now))
-            return
-        finally:
-            os.close(log_fd)
-        self.brain = brain
-        if brain.exit_fd is not None:
-            self._exit_fds[brain.exit_fd] = brain
-        try:
-            process.write_pidfile(self.workdir / PID_FILE, brain.pid, request.digest)
-        except OSError as exc:
-            log.warning("cannot write the pidfile: %s", exc)
-        self.brain_log.note(f"started pid {brain.pid} for {request.digest} ({request.revision})")
-        log.info("started brain pid %d for %s", brain.pid, request.digest)
-        self._next_log_check = now + LOG_CHECK_INTERVAL
-        self._apply(self.supervisor.spawned(brain.pid, now))
-
-    def _maybe_rotate_log(self, now: float) -> None:
-        if self.brain is None or now < self._next_log_check:
-            return
-        self._next_log_check = now + LOG_CHECK_INTERVAL
-        if self.brain_log.rotate_if_needed():
-            log.info("rotated %s", self.brain_log.path)
-            self.logs.rotated()
-
-    # ------------------------------------------------------------ the brain's environment
-
-    def introspection_env(self) -> dict[bytes, bytes]:
-        """The environment the interfaces source runs with, asked for at every reading: the
-        brain's for the request it runs (or is to run), so that the request's ROS domain,
-        agent.yaml's override of it and its RMW apply; before any request, the agent's own."""
-        sup = self.supervisor
-        assignment = sup.brain or sup.desired
-        if assignment is None:
-            return self._brain_env
-        return self._environment(assignment.request)[0]
+            self._apply(self.runner.carry_out(effect))
 
     def _interfaces_error(self) -> str | None:
         return self.interfaces.error if self.interfaces is not None else None
 
-    def _remove(self, name: str) -> None:
-        try:
-            (self.workdir / name).unlink()
-        except FileNotFoundError:
-            pass
-        except OSError as exc:
-            log.warning("cannot remove %s: %s", name, exc)
 
-
-# A table entry names a type and the method that takes it; through `_route` and `_carry`, a
-# method that takes another type is a type error.
+# A table entry names an event type and the method that takes it; through `_route`, a method
+# that takes another type is a type error.
 E = TypeVar("E", bound=Event)
-F = TypeVar("F", bound=Effect)
 EventHandler = Callable[[Agent, Any, float], None]
-EffectHandler = Callable[[Agent, Any], None]
 
 
 def _route(
     kind: type[E], handler: Callable[[Agent, E, float], None]
 ) -> tuple[type[object], EventHandler]:
-    return kind, handler
-
-
-def _carry(
-    kind: type[F], handler: Callable[[Agent, F], None]
-) -> tuple[type[object], EffectHandler]:
     return kind, handler
 
 
@@ -560,15 +370,6 @@ HANDLERS: dict[type[object], EventHandler] = dict(
         _route(Shutdown, Agent._on_shutdown),
     ]
 )
-# Every effect the supervisor asks for, and what carries it out.
-EFFECTS: dict[type[object], EffectHandler] = dict(
-    [
-        _carry(Spawn, Agent._spawn),
-        _carry(Terminate, Agent._terminate),
-        _carry(Kill, Agent._kill),
-        _carry(Reload, Agent._reload),
-    ]
-)
 
 
 def redactor_of(config: AgentConfig) -> Redactor:
@@ -583,12 +384,6 @@ def redactor_of(config: AgentConfig) -> Redactor:
     if password:
         secrets.append(password)
     return Redactor(secrets, config.env.keys())
-
-
-def _os_error(exc: OSError) -> str:
-    """`[Errno 28] No space left on device` as `ENOSPC: No space left on device`."""
-    name = errno.errorcode.get(exc.errno or 0, "error")
-    return f"{name}: {exc.strerror or exc}"
 
 
 class RobotIdFilter(logging.Filter):

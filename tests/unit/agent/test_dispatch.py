@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import typing
 
+from agent.brain_runner import EFFECTS
 from agent.events import Event
-from agent.runtime import EFFECTS, HANDLERS
+from agent.runtime import HANDLERS
 from agent.supervisor import Effect
 
 
