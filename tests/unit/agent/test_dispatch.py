@@ -4,10 +4,12 @@ supervisor asks for has one, and nothing else is in them (no broker)."""
 from __future__ import annotations
 
 import typing
+from pathlib import Path
 
 from agent.brain_runner import EFFECTS
+from agent.config import parse_config
 from agent.events import Event
-from agent.runtime import HANDLERS
+from agent.runtime import HANDLERS, Agent
 from agent.supervisor import Effect
 
 
@@ -27,3 +29,24 @@ def test_each_handler_is_a_method_of_its_own() -> None:
     """A copied line that sends two events to one handler is a slip, not a design."""
     assert len(set(HANDLERS.values())) == len(HANDLERS)
     assert len(set(EFFECTS.values())) == len(EFFECTS)
+
+
+def test_an_event_without_a_handler_is_reported_and_the_agent_goes_on(tmp_path: Path) -> None:
+    """Should an event reach the loop without a table entry, it is an internal error said in
+    the status and the log, never an exception out of the loop."""
+    text = (
+        "broker: mqtt://127.0.0.1:1\n"
+        "description: {id: tb3-01}\n"
+        "command: [brain, '{launch_request}']\n"
+        f"workdir: {tmp_path / 'work'}\n"
+    )
+    agent = Agent(parse_config(text, "agent.yaml"))
+    try:
+        agent._handle_guarded(Unhandled(), 0.0)  # type: ignore[arg-type]
+        assert agent.supervisor.message == "internal error (KeyError); see the agent log"
+    finally:
+        agent.inbox.close()
+
+
+class Unhandled:
+    """An event type no table names."""
