@@ -1,7 +1,8 @@
 """The brain's log for the desk (`robotconf logs`): tails and a followed stream, redacted, cut to
 the message bound, paced at about RATE lines a second and shared fairly between who asks.
 
-No MQTT here: the runtime asks `LogStream` for the chunks due and publishes them.
+No MQTT here: `DeskRequests` (agent/desk_requests.py) asks `LogStream` for the chunks due and
+publishes them.
 """
 
 from __future__ import annotations

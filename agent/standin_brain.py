@@ -125,6 +125,32 @@ def _reload(path: Path, running: LaunchRequest) -> LaunchRequest:
     return request
 
 
+def _load(path: Path) -> LaunchRequest | int:
+    """The request in `path`, or the exit code after saying on stderr why it cannot be read."""
+    from pydantic import ValidationError
+
+    try:
+        return _read(path)
+    except OSError as exc:
+        print(f"stand-in brain: cannot read {path}: {exc.strerror}", file=sys.stderr)
+        return 2
+    except ValidationError as exc:
+        print(f"stand-in brain: malformed launch request {path}:", file=sys.stderr)
+        for error in exc.errors():
+            where = ".".join(str(p) for p in error["loc"]) or "(top level)"
+            print(f"  {where}: {error['msg']}", file=sys.stderr)
+        return 1
+
+
+def _crash_code(request: LaunchRequest) -> int | None:
+    """The code a request asks this brain to crash with, so that a bad commit can be rehearsed
+    end to end (a rollout stopping at its canaries): knowledge {STANDIN_CRASH: CODE}."""
+    crash = request.scenario.environment_knowledge.get(CRASH_KEY)
+    if crash in (None, False, 0):
+        return None
+    return crash if isinstance(crash, int) and not isinstance(crash, bool) else 1
+
+
 def main(argv: list[str]) -> int:
     stop = threading.Event()
     wake = threading.Event()
@@ -148,29 +174,17 @@ def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.ignore_sigterm:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    from pydantic import ValidationError
-
-    try:
-        request = _read(args.request)
-    except OSError as exc:
-        print(f"stand-in brain: cannot read {args.request}: {exc.strerror}", file=sys.stderr)
-        return 2
-    except ValidationError as exc:
-        print(f"stand-in brain: malformed launch request {args.request}:", file=sys.stderr)
-        for error in exc.errors():
-            where = ".".join(str(p) for p in error["loc"]) or "(top level)"
-            print(f"  {where}: {error['msg']}", file=sys.stderr)
-        return 1
+    loaded = _load(args.request)
+    if isinstance(loaded, int):
+        return loaded
+    request = loaded
     for line in describe(request, os.environ):
         print(line)
     sys.stdout.flush()
-    # A request can ask for a crash, so that a bad commit can be rehearsed end to end (a
-    # rollout stopping at its canaries): knowledge {STANDIN_CRASH: CODE}.
-    crash = request.scenario.environment_knowledge.get(CRASH_KEY)
-    if crash not in (None, False, 0):
-        code = crash if isinstance(crash, int) and not isinstance(crash, bool) else 1
-        print(f"stand-in brain: crashing with code {code}, as {CRASH_KEY} asks", flush=True)
-        return code
+    crash = _crash_code(request)
+    if crash is not None:
+        print(f"stand-in brain: crashing with code {crash}, as {CRASH_KEY} asks", flush=True)
+        return crash
 
     held = os.environ.get(HOLD_VARIABLE)
     if held and (args.hold is not None or args.hold_while is not None):

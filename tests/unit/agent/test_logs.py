@@ -311,13 +311,13 @@ def test_a_bug_while_sending_the_log_stops_the_stream_not_the_agent(tmp_path: Pa
     agent = Agent(parse_config(text, "agent.yaml"))
     write(tmp_path / "work" / "brain.log", "a line")
     agent.logs.ask(ask(lines=1, follow=True), 0.0)
-    agent.connected = True
+    agent.status.connected = True
 
     def broken(now: float) -> list[LogsChunk]:
         raise RuntimeError("injected")
 
     agent.logs.take = broken  # type: ignore[method-assign]
-    agent._send_logs(1.0)  # logged, not raised
+    agent.desk.send_logs(1.0)  # logged, not raised
     assert not agent.logs.following
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from agent.runtime import STOPPING_QUIET, publish_delay
+from agent.status_report import STOPPING_QUIET, publish_delay
 from contract.wire import AgentState, AgentStatus
 
 
