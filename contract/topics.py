@@ -68,7 +68,6 @@ def _roles(*roles: Role) -> frozenset[Role]:
     return frozenset(roles)
 
 
-ROBOT_R, RECONCILER_R, OPERATOR_R = Role.ROBOT, Role.RECONCILER, Role.OPERATOR
 SERVICE_READERS = frozenset(SERVICES)
 
 # The order of the rows is the order of the ACL's lines and of the docs' table.
@@ -76,49 +75,50 @@ TOPICS: tuple[Topic, ...] = (
     Topic(
         "launch", f"robots/{ROBOT}/launch", "reconciler → agent",
         "LaunchRequest or StopRequest (contract/launch.py)",
-        SERVICE_READERS | {ROBOT_R}, _roles(RECONCILER_R), True, 1,
+        SERVICE_READERS | {Role.ROBOT}, _roles(Role.RECONCILER), True, 1,
         "the robot's Launch Request, signed when the lab signs; the reconciler reads them back "
         "(what is published is its only memory)",
     ),
     Topic(
         "status", f"robots/{ROBOT}/status", "agent → everyone", "AgentStatus (contract/wire.py)",
-        SERVICE_READERS | {ROBOT_R}, _roles(ROBOT_R), True, 1,
+        SERVICE_READERS | {Role.ROBOT}, _roles(Role.ROBOT), True, 1,
         "the agent's state and its brain's; also its Last Will (offline). The robot reads its "
         "own back, to overwrite a late Last Will of an older connection",
     ),
     Topic(
         "description", f"robots/{ROBOT}/description", "agent → everyone",
-        "RobotDescription (contract/wire.py)", SERVICE_READERS, _roles(ROBOT_R), True, 1,
+        "RobotDescription (contract/wire.py)", SERVICE_READERS, _roles(Role.ROBOT), True, 1,
         "what the robot says about itself when it connects",
     ),
     Topic(
         "interfaces", f"robots/{ROBOT}/interfaces", "agent → everyone",
-        "RobotInterfaces (contract/interfaces.py)", SERVICE_READERS, _roles(ROBOT_R), True, 1,
+        "RobotInterfaces (contract/interfaces.py)", SERVICE_READERS, _roles(Role.ROBOT), True, 1,
         "the ROS interfaces the robot really has (agent.yaml `interfaces`), for drift and drafts",
     ),
     Topic(
         "reconciler_status", "reconciler/status", "reconciler → everyone",
-        "ReconcilerStatus (contract/wire.py)", SERVICE_READERS, _roles(RECONCILER_R), True, 1,
+        "ReconcilerStatus (contract/wire.py)", SERVICE_READERS, _roles(Role.RECONCILER), True, 1,
         "ready or stalled and why, with a heartbeat; its Last Will says offline",
     ),
     Topic(
         "reconciler_rollout", "reconciler/rollout", "reconciler → itself",
-        "WaveRecord (reconciler/wave_memory.py)", _roles(RECONCILER_R), _roles(RECONCILER_R),
+        "WaveRecord (reconciler/wave_memory.py)", _roles(Role.RECONCILER), _roles(Role.RECONCILER),
         True, 1, "what the current wave of a rollout established: a restarted reconciler resumes",
     ),
     Topic(
         "restart", f"robots/{ROBOT}/restart", "operator or reconciler → agent",
-        "RestartRequest (contract/launch.py)", _roles(ROBOT_R), _roles(RECONCILER_R, OPERATOR_R),
+        "RestartRequest (contract/launch.py)", _roles(Role.ROBOT),
+        _roles(Role.RECONCILER, Role.OPERATOR),
         False, 1, "start the brain again (`robotconf restart`); no robot may ask another",
     ),
     Topic(
         "logs_request", f"robots/{ROBOT}/logs/request", "operator → agent",
-        "LogsRequest (contract/wire.py)", _roles(ROBOT_R), _roles(OPERATOR_R), False, 1,
+        "LogsRequest (contract/wire.py)", _roles(Role.ROBOT), _roles(Role.OPERATOR), False, 1,
         "ask for the brain's log (`robotconf logs`); a retained one is ignored",
     ),
     Topic(
         "logs", f"robots/{ROBOT}/logs", "agent → operators", "LogsChunk (contract/wire.py)",
-        _roles(OPERATOR_R), _roles(ROBOT_R), False, 1,
+        _roles(Role.OPERATOR), _roles(Role.ROBOT), False, 1,
         "the log's tail for a session, or the followed stream: only while someone asks",
     ),
     Topic(
