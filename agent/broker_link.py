@@ -33,7 +33,8 @@ from agent.events import (
 from agent.workdir import SeqStore
 from contract.backoff import Backoff
 from contract.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
-from contract.wire import AgentState, AgentStatus, RobotDescription, Topics
+from contract.topics import Role, subscriptions
+from contract.wire import AgentState, AgentStatus, RobotDescription, Topics, agent_client_id
 
 log = logging.getLogger("robotconf.agent.broker_link")
 
@@ -75,6 +76,9 @@ class BrokerLink:
         self.logs_request_topic = self.topics.logs_request(robot_id)
         self.logs_topic = self.topics.logs(robot_id)
         self.interfaces_topic = self.topics.interfaces(robot_id)
+        # Every topic a robot may read (contract/topics.py): its launch, status, restart and
+        # log request topics.
+        self.reads = subscriptions(Role.ROBOT, prefix, robot_id=robot_id)
         self._connection = connection
         self._keepalive = keepalive
         self._inbox = inbox
@@ -93,7 +97,7 @@ class BrokerLink:
         self._retry_at = 0.0
         self._backoff = Backoff(RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY)
         self._next_misc = 0.0
-        self.client = make_client(connection, client_id=f"robotconf-agent-{robot_id}")
+        self.client = make_client(connection, client_id=agent_client_id(robot_id))
         # A callback that raises must not end the loop: paho logs it and goes on.
         self.client.suppress_exceptions = True
         self.client.on_pre_connect = self._on_pre_connect
@@ -131,12 +135,7 @@ class BrokerLink:
         # Restarts and log requests from the desk come on topics of their own (the ACL lets
         # operators write them, and robots only read their own).
         client.subscribe(
-            [
-                (self.launch_topic, QOS),
-                (self.status_topic, 0),
-                (self.restart_topic, QOS),
-                (self.logs_request_topic, QOS),
-            ]
+            [(topic, 0 if topic == self.status_topic else QOS) for topic in self.reads]
         )
         self._inbox.put_local(Connected(self._conn_seq))
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 from typing import Literal
@@ -17,67 +18,61 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from contract.diagnostics import Diagnostic
 from contract.models import ROBOT_ID_PATTERN
+from contract.topics import BY_KEY, ROBOT
 
 DEFAULT_PREFIX = "robotconf"
 BROKER_ENV = "ROBOTCONF_BROKER"
 DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
 
 
+def _one(key: str) -> Callable[[Topics, str], str]:
+    """A method of `Topics` giving the name of table row `key` for one robot."""
+    topic = BY_KEY[key]
+    head, _, tail = topic.pattern.partition(ROBOT)
+
+    def name(self: Topics, robot_id: str) -> str:
+        return f"{self.prefix}/{head}{robot_id}{tail}"
+
+    name.__doc__ = f"{topic.about} ({topic.direction})."
+    return name
+
+
+def _fixed(key: str) -> property:
+    """A property of `Topics`: the name of a table row without ids, or the filter of a per-robot
+    row's topics of every robot (`+`)."""
+    topic = BY_KEY[key]
+
+    def name(self: Topics) -> str:
+        return topic.name(self.prefix)
+
+    name.__doc__ = f"{topic.about} ({topic.direction})."
+    return property(name)
+
+
 @dataclass(frozen=True)
 class Topics:
-    """Topic names under one prefix."""
+    """Topic names under one prefix, made from the table of topics (contract/topics.py)."""
 
     prefix: str = DEFAULT_PREFIX
 
-    def launch(self, robot_id: str) -> str:
-        return f"{self.prefix}/robots/{robot_id}/launch"
-
-    def status(self, robot_id: str) -> str:
-        return f"{self.prefix}/robots/{robot_id}/status"
-
-    def description(self, robot_id: str) -> str:
-        return f"{self.prefix}/robots/{robot_id}/description"
-
-    def interfaces(self, robot_id: str) -> str:
-        """The ROS interfaces the robot really has (agent -> everyone; retained)."""
-        return f"{self.prefix}/robots/{robot_id}/interfaces"
-
-    def logs(self, robot_id: str) -> str:
-        """The brain's log while someone asks for it (agent -> operators; not retained)."""
-        return f"{self.prefix}/robots/{robot_id}/logs"
-
-    def logs_request(self, robot_id: str) -> str:
-        """Operators ask for a robot's log here (operators -> agent; not retained)."""
-        return f"{self.prefix}/robots/{robot_id}/logs/request"
-
-    def restart(self, robot_id: str) -> str:
-        """Restart requests (operators and the reconciler -> agent; not retained)."""
-        return f"{self.prefix}/robots/{robot_id}/restart"
+    launch = _one("launch")
+    status = _one("status")
+    description = _one("description")
+    interfaces = _one("interfaces")
+    logs = _one("logs")
+    logs_request = _one("logs_request")
+    restart = _one("restart")
+    reconciler_status = _fixed("reconciler_status")
+    reconciler_rollout = _fixed("reconciler_rollout")
+    all_launch = _fixed("launch")
+    all_status = _fixed("status")
+    all_description = _fixed("description")
+    all_interfaces = _fixed("interfaces")
 
     @property
-    def reconciler_status(self) -> str:
-        return f"{self.prefix}/reconciler/status"
-
-    @property
-    def reconciler_rollout(self) -> str:
-        """What the current wave of a rollout established (reconciler only; retained)."""
-        return f"{self.prefix}/reconciler/rollout"
-
-    @property
-    def all_launch(self) -> str:
-        return f"{self.prefix}/robots/+/launch"
-
-    @property
-    def all_status(self) -> str:
-        return f"{self.prefix}/robots/+/status"
-
-    @property
-    def all_description(self) -> str:
-        return f"{self.prefix}/robots/+/description"
-
-    @property
-    def all_interfaces(self) -> str:
-        return f"{self.prefix}/robots/+/interfaces"
+    def sync(self) -> str:
+        """The head of every client's private marker topic (`<sync>/<client id>`)."""
+        return BY_KEY["sync"].name(self.prefix).removesuffix("/+")
 
     def robot_of(self, topic: str) -> tuple[str, str] | None:
         """(robot id, leaf) for a topic under `<prefix>/robots/`, else None."""
@@ -88,6 +83,12 @@ class Topics:
         if len(parts) != 2:
             return None
         return parts[0], parts[1]
+
+
+def agent_client_id(robot_id: str) -> str:
+    """The MQTT client id of a robot's agent (Mosquitto's robot listener makes it the user name,
+    the robot id; `up`'s broker takes only these two)."""
+    return f"robotconf-agent-{robot_id}"
 
 
 def validate_prefix(prefix: str) -> str:

@@ -29,6 +29,7 @@ from contract.launch import LaunchRequest, StopRequest
 from contract.mqtt import Connection
 from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from contract.signing import Signed
+from contract.topics import Role, subscriptions
 from contract.wire import (
     AgentState,
     AgentStatus,
@@ -181,8 +182,14 @@ class Controller:
         repair (`_sample_active`), sampled now and then."""
         return RetainedView(
             self.connection,
-            [self.topics.all_launch, self.topics.reconciler_status, self.topics.reconciler_rollout],
-            f"{self.topics.prefix}/sync",
+            subscriptions(
+                Role.RECONCILER,
+                self.topics.prefix,
+                "launch",
+                "reconciler_status",
+                "reconciler_rollout",
+            ),
+            self.topics.sync,
             role="reconciler",
             on_synced=self._wake.set,
             on_topic=self._on_topic,
@@ -415,8 +422,8 @@ class Controller:
         if wanted and self.interfaces is None:
             self.interfaces = RetainedView(
                 self.connection,
-                [self.topics.all_interfaces],
-                f"{self.topics.prefix}/sync",
+                subscriptions(Role.RECONCILER, self.topics.prefix, "interfaces"),
+                self.topics.sync,
                 role="reconciler-interfaces",
                 on_synced=self._wake.set,
                 on_change=self._on_interfaces,
@@ -453,8 +460,8 @@ class Controller:
         if wanted and self.health is None:
             self.health = RetainedView(
                 self.connection,
-                [self.topics.all_status],
-                f"{self.topics.prefix}/sync",
+                subscriptions(Role.RECONCILER, self.topics.prefix, "status"),
+                self.topics.sync,
                 role="reconciler-health",
                 on_synced=self._wake.set,
                 on_change=self._on_health,
@@ -623,8 +630,8 @@ class Controller:
         self._sampled_connection = connection
         statuses, lost = take_snapshot_said(
             self.connection,
-            [self.topics.all_status],
-            f"{self.topics.prefix}/sync",
+            subscriptions(Role.RECONCILER, self.topics.prefix, "status"),
+            self.topics.sync,
             role="reconciler-sample",
             timeout=SAMPLE_TIMEOUT,
         )

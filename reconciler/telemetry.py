@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from configurator.drift import Drift, DriftMemo
 from contract.mqtt import Connection
+from contract.topics import Role, subscriptions
 from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
@@ -58,8 +59,8 @@ class Telemetry:
         self._drift = DriftMemo()  # each robot's drift, again only when request or report move
         self.view = RetainedView(
             connection,
-            [self.topics.all_status, self.topics.all_interfaces],
-            f"{prefix}/sync",
+            subscriptions(Role.RECONCILER, prefix, "status", "interfaces"),
+            self.topics.sync,
             role="reconciler-alerts",
             on_change=self._wake.set,
             on_synced=self._wake.set,

@@ -1,5 +1,6 @@
 """The embedded broker of `robotconf up`: amqtt (pure Python, MQTT 3.1.1) on its own thread,
-taking no client without the password `up` generates for it.
+taking no client without a password `up` generates, each client held to its topics as the
+generated Mosquitto ACL holds it (a robot to its own).
 
 Imported only by `up` when no `--broker` is given, so nothing else needs amqtt.
 """
@@ -16,6 +17,7 @@ from collections.abc import Iterator
 from importlib import metadata
 from typing import Any
 
+from contract.wire import DEFAULT_PREFIX
 from workstation.broker_login import BrokerLogin
 
 DEFAULT_PORT = 1883
@@ -81,8 +83,10 @@ def _version() -> str:
 
 
 class EmbeddedBroker:
-    """An amqtt broker on 127.0.0.1 that takes only clients giving `login`; the port is `port`
-    when given, else `preferred` (1883) when free, else any free one."""
+    """An amqtt broker on 127.0.0.1 that takes only clients giving a login of the folder of
+    `login` (the operator's; up's reconciler and each robot have theirs beside it), with the rules
+    of the ACL for topics under `prefix`; the port is `port` when given, else `preferred` (1883)
+    when free, else any free one."""
 
     def __init__(
         self,
@@ -93,8 +97,10 @@ class EmbeddedBroker:
         preferred: int = DEFAULT_PORT,
         connect_timeout: float = CONNECT_TIMEOUT,
         max_clients: int = MAX_CLIENTS,
+        prefix: str = DEFAULT_PREFIX,
     ) -> None:
         self.login = login
+        self.prefix = prefix
         self.host = host
         self.port = port or 0
         self.preferred = preferred
@@ -156,21 +162,22 @@ class EmbeddedBroker:
             raise BrokerStartError(f"port {port}: {_reason(self._error)}")
 
     def _run(self) -> None:
-        from workstation.broker_gate import GatedBroker, LoginPlugin
+        from workstation.broker_gate import GatedBroker, LoginPlugin, TopicRulesPlugin
 
         loop = asyncio.new_event_loop()
         self._loop = loop
         asyncio.set_event_loop(loop)
-        plugin = f"{LoginPlugin.__module__}.{LoginPlugin.__name__}"
+
+        def path(plugin: type) -> str:
+            return f"{plugin.__module__}.{plugin.__name__}"
+
         config = {
             "listeners": {"default": {"type": "tcp", "bind": f"{self.host}:{self.port}"}},
             # No logging or $SYS plugins: a quiet broker for one machine. Every local user can
-            # reach 127.0.0.1: only clients with up's login are let in.
+            # reach 127.0.0.1: only clients with up's logins are let in, each to its topics.
             "plugins": {
-                plugin: {
-                    "username": self.login.username,
-                    "password_file": str(self.login.password_file),
-                }
+                path(LoginPlugin): {"folder": str(self.login.password_file.parent)},
+                path(TopicRulesPlugin): {"prefix": self.prefix},
             },
         }
 
@@ -181,6 +188,7 @@ class EmbeddedBroker:
                 connect_timeout=self.connect_timeout,
                 max_clients=self.max_clients,
                 loop=loop,
+                prefix=self.prefix,
             )
             _harden(self._broker)
             await self._broker.start()

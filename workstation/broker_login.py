@@ -1,5 +1,5 @@
-"""The one login of `robotconf up`'s embedded broker: user `operator` and a password generated once
-into a file only its owner can read. No amqtt here: `up` makes it before the broker starts."""
+"""The logins of `robotconf up`'s embedded broker: a password generated once per user (`operator`,
+`reconciler`, each robot by its id) into a file only its owner can read. No amqtt here."""
 
 from __future__ import annotations
 
@@ -10,7 +10,10 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-USERNAME = "operator"  # the one user: up's reconciler, its agents, and the operator's commands
+from contract.models import is_robot_id
+
+USERNAME = "operator"  # the operator's commands (the desk); up's reconciler and robots have theirs
+RECONCILER = "reconciler"
 PASSWORD_NAME = "operator.password"
 
 
@@ -35,17 +38,26 @@ class BrokerLogin:
         return same and username == self.username
 
 
-def broker_login(folder: Path) -> BrokerLogin:
-    """The login of the broker whose files are in `folder` (0700): its password file (0600) is
-    made once with a random password, and kept, so that agents and the operator's commands
-    keep working across `up`s."""
+def broker_login(folder: Path, username: str = USERNAME) -> BrokerLogin:
+    """The login of `username` on the broker whose files are in `folder` (0700): its password
+    file (`<user>.password`, 0600) is made once with a random password, and kept, so that agents
+    and the operator's commands keep working across `up`s."""
+    if not is_robot_id(username):  # a file name too: never a path
+        raise ValueError(f"{username!r} is not a user name of the embedded broker")
     folder.mkdir(parents=True, exist_ok=True)
     os.chmod(folder, 0o700)
-    path = folder / PASSWORD_NAME
+    path = folder / f"{username}.password"
     if not path.is_file() or not path.read_text(encoding="utf-8").strip():
         path.unlink(missing_ok=True)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
         with os.fdopen(fd, "w", encoding="utf-8") as out:
             out.write(secrets.token_urlsafe(32) + "\n")
     os.chmod(path, 0o600)
-    return BrokerLogin(USERNAME, path)
+    return BrokerLogin(username, path)
+
+
+def accepts(folder: Path, username: str | None, password: str | bytes | None) -> bool:
+    """True when `username` has a login in `folder` and `password` is its password."""
+    if username is None or not is_robot_id(username):
+        return False
+    return BrokerLogin(username, folder / f"{username}.password").accepts(username, password)

@@ -15,6 +15,7 @@ from pydantic import ValidationError
 from contract.mqtt import Connection
 from contract.safejson import PayloadError
 from contract.textsafe import printable
+from contract.topics import Role, subscriptions
 from contract.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
 from reconciler.observed import RobotSeen, parse_retained
 from reconciler.retained import RetainedView, read_object, take_snapshot
@@ -55,17 +56,11 @@ class RobotDesk:
         self._logs_topic = self.topics.logs(robot_id)
         self.statuses: queue.Queue[AgentStatus] = queue.Queue(QUEUE_LIMIT)
         self.chunks: queue.Queue[LogsChunk] = queue.Queue(QUEUE_LIMIT)
-        filters = [
-            self.topics.status(robot_id),
-            self.topics.description(robot_id),
-            self.topics.launch(robot_id),
-        ]
-        if logs:
-            filters.append(self._logs_topic)
+        keys = ["status", "description", "launch"] + (["logs"] if logs else [])
         self.view = RetainedView(
             connection,
-            filters,
-            f"{prefix}/sync",
+            subscriptions(Role.OPERATOR, prefix, *keys, robot_id=robot_id),
+            self.topics.sync,
             role="desk",
             on_payload=self._arrived,
             max_payload=MAX_ANSWER_BYTES,
@@ -92,8 +87,8 @@ class RobotDesk:
         t = self.topics
         messages = take_snapshot(
             self.connection,
-            [t.all_status, t.all_description, t.all_launch],
-            f"{t.prefix}/sync",
+            subscriptions(Role.OPERATOR, t.prefix, "status", "description", "launch"),
+            t.sync,
             "desk-robots",
             timeout,
         )

@@ -15,6 +15,7 @@ from configurator.render import RenderError, render_fleet
 from configurator.source import SourceError
 from configurator.workspace import check
 from contract.mqtt import Connection
+from contract.topics import Role, subscriptions
 from contract.wire import ReconcilerStatus, Topics
 from reconciler.observed import ReadMemo, parse_retained
 from reconciler.retained import RetainedView
@@ -151,14 +152,8 @@ def open_view(
     topics = Topics(prefix)
     return RetainedView(
         connection,
-        [
-            topics.all_launch,
-            topics.all_status,
-            topics.all_description,
-            topics.all_interfaces,
-            topics.reconciler_status,
-        ],
-        f"{prefix}/sync",
+        subscriptions(Role.VIEWER, prefix),  # every topic `robotconf status` may read
+        topics.sync,
         role="status",
         on_change=on_change,
         on_synced=on_change,

@@ -256,10 +256,14 @@ class Agents:
     this process (and its brain with it), so that not even a SIGKILL of `up` leaves them."""
 
     def __init__(
-        self, workdir: Path, connection: Connection, prefix: str, public_key: Path | None = None
+        self,
+        workdir: Path,
+        connection: Callable[[str], Connection],
+        prefix: str,
+        public_key: Path | None = None,
     ) -> None:
         self.workdir = workdir
-        self.connection = connection
+        self.connection = connection  # of each robot
         self.prefix = prefix
         self.public_key = public_key
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
@@ -272,7 +276,12 @@ class Agents:
             folder.mkdir(parents=True, exist_ok=True)
             config = folder / "agent.yaml"
             settings = agent_yaml(
-                fleet, robot_id, self.workdir, self.connection, self.prefix, self.public_key
+                fleet,
+                robot_id,
+                self.workdir,
+                self.connection(robot_id),
+                self.prefix,
+                self.public_key,
             )
             config.write_text(yaml.safe_dump(settings, sort_keys=False), encoding="utf-8")
             with (folder / "agent.log").open("ab") as out:
@@ -386,26 +395,51 @@ def _run_up(
     recover_agents(setup.workdir, say)
     for note in setup.notes:
         say(f"note: {note}")
-    broker, login, url = _start_broker(setup, given_broker, say)
+    broker, login, url = _start_broker(setup, given_broker, prefix, say)
     try:
-        connection = connect(url)
-        if login is not None:  # up's reconciler, its agents and the operator: one login
-            connection = dataclasses.replace(
-                connection, username=login.username, password_file=login.password_file
-            )
+        logins = Logins(connect(url), login)
         if broker is None:
-            _given_answers(connection, prefix, setup.broker_origin)
-        return _serve(setup, connection, prefix, signing, screen)
+            _given_answers(logins.operator, prefix, setup.broker_origin)
+        return _serve(setup, logins, prefix, signing, screen)
     finally:
         if broker is not None:
             broker.stop()
         say("stopped")
 
 
+class Logins:
+    """Who connects how: the operator's commands (the desk), `up`'s reconciler and each robot.
+    On the embedded broker each has a login of its own (`login`, the operator's, and others in
+    its folder), held to its topics as the generated ACL holds it; a given broker's one login is
+    everyone's."""
+
+    def __init__(self, connection: Connection, login: Any) -> None:
+        self._connection = connection
+        self.folder: Path | None = None if login is None else login.password_file.parent
+        self.operator = self._as(login)
+        self.reconciler = self.of("reconciler")
+
+    def of(self, user: str) -> Connection:
+        """The connection of `user`: a robot (its id) or a service user of the embedded broker."""
+        if self.folder is None:
+            return self._connection
+        from workstation.broker_login import broker_login
+
+        return self._as(broker_login(self.folder, user))
+
+    def _as(self, login: Any) -> Connection:
+        if login is None:
+            return self._connection
+        return dataclasses.replace(
+            self._connection, username=login.username, password_file=login.password_file
+        )
+
+
 def _start_broker(
-    setup: UpSetup, given_broker: str | None, say: Callable[[str], None]
+    setup: UpSetup, given_broker: str | None, prefix: str, say: Callable[[str], None]
 ) -> tuple[Any, Any, str]:
-    """The embedded broker and its login (None, None with a given broker), and the URL."""
+    """The embedded broker and the operator's login (None, None with a given broker), and the
+    URL; the other logins are made beside the operator's (`Logins`)."""
     if given_broker:
         say(f"broker: {redact_url(given_broker)} (given by {setup.broker_origin})")
         return None, None, given_broker
@@ -413,15 +447,16 @@ def _start_broker(
     from workstation.broker_login import broker_login
 
     login = broker_login(setup.workdir / "broker")
-    broker = EmbeddedBroker(login, preferred=setup.port)
+    broker = EmbeddedBroker(login, preferred=setup.port, prefix=prefix)
     try:
         broker.start()
     except BrokerStartError as exc:
         raise CliError(f"{exc}; or pass --broker mqtt://HOST:PORT") from None
     taken = "" if broker.port == setup.port else f" (port {setup.port} is taken)"
     say(
-        f"broker: embedded amqtt at {broker.url}{taken}, for user {login.username} only: its "
-        f"password is in {login.password_file} (0600), readable by you alone"
+        f"broker: embedded amqtt at {broker.url}{taken}, for up's logins only, each held to its "
+        f"topics as the ACL of broker-config holds it; user {login.username}'s password is in "
+        f"{login.password_file} (0600), readable by you alone"
     )
     return broker, login, broker.url
 
@@ -429,7 +464,7 @@ def _start_broker(
 def _given_answers(connection: Connection, prefix: str, origin: str) -> None:
     """Raises CliError when a given broker does not answer within GIVEN_BROKER_WAIT: a stale
     $ROBOTCONF_BROKER must not leave `up` waiting for ever with nothing started."""
-    probe = RetainedView(connection, [], f"{prefix}/sync", role="up-probe")
+    probe = RetainedView(connection, [], Topics(prefix).sync, role="up-probe")
     with probe:
         if probe.wait_synced(GIVEN_BROKER_WAIT, or_refused=True):
             return
@@ -441,9 +476,10 @@ def _given_answers(connection: Connection, prefix: str, origin: str) -> None:
 
 
 def _serve(
-    setup: UpSetup, connection: Connection, prefix: str, signing: bool, screen: UpScreen
+    setup: UpSetup, logins: Logins, prefix: str, signing: bool, screen: UpScreen
 ) -> ExitCode:
     say = screen.say
+    connection = logins.operator
     signer, public_key, private_key = None, None, None
     if signing:
         keys = _demo_keys(setup.workdir / "keys")
@@ -454,15 +490,15 @@ def _serve(
     changed = threading.Event()
     controller = Controller(
         LocalBranch(setup.root, setup.branch),
-        connection,
+        logins.reconciler,
         prefix,
         RESYNC_INTERVAL,
         on_reconciled=lambda status: changed.set(),
         signer=signer,
         builder=setup.builder,
     )
-    agents = Agents(setup.workdir, connection, prefix, public_key)
-    view = open_view(connection, prefix, changed.set)
+    agents = Agents(setup.workdir, logins.of, prefix, public_key)
+    view = open_view(logins.reconciler, prefix, changed.set)
 
     def at_once() -> None:  # a second Ctrl-C: do not wait (the brains get SIGTERM as orphans)
         for proc in agents.procs.values():

@@ -30,6 +30,7 @@ from contract.files import read_regular, write_atomic
 from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
 from contract.safejson import PayloadError, parse_object
 from contract.textsafe import printable
+from contract.topics import Role, subscriptions
 from contract.wire import Topics
 from contract.yamlio import MAX_FILE_BYTES
 from reconciler.retained import RetainedView, read_object
@@ -56,9 +57,13 @@ def from_broker(mqtt: BrokerOptions, robot_id: str, wait: float) -> RobotInterfa
     """The robot's retained interfaces message; a CliError when there is none or it is
     unreadable, or when the robot's source failed (an error proves nothing to draft from)."""
     connection = mqtt.connection()
-    topic = Topics(mqtt.prefix).interfaces(robot_id)
+    [topic] = subscriptions(Role.VIEWER, mqtt.prefix, "interfaces", robot_id=robot_id)
     view = RetainedView(
-        connection, [topic], f"{mqtt.prefix}/sync", role="draft", max_payload=MAX_INTERFACES_BYTES
+        connection,
+        [topic],
+        Topics(mqtt.prefix).sync,
+        role="draft",
+        max_payload=MAX_INTERFACES_BYTES,
     )
     with view:
         if not view.wait_synced(wait, or_refused=True):

@@ -36,6 +36,7 @@ from configurator.workspace import Checked, check
 from contract.diagnostics import did_you_mean, format_text, summary_line
 from contract.errors import CliError, ExitCode
 from contract.textsafe import json_printable, printable
+from contract.topics import Role, subscriptions
 from contract.wire import Topics
 from workstation.cli.broker_options import BrokerOptions, broker_options
 from workstation.cli.options import repo_option, rev_option
@@ -187,7 +188,7 @@ def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
     connection = mqtt.connection()
     topics = Topics(mqtt.prefix)
     messages, lost = take_snapshot_said(
-        connection, [topics.all_interfaces], f"{mqtt.prefix}/sync", "plan", wait
+        connection, subscriptions(Role.VIEWER, mqtt.prefix, "interfaces"), topics.sync, "plan", wait
     )
     if messages is None:
         sys.stderr.write(

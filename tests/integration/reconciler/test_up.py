@@ -410,27 +410,31 @@ def test_the_embedded_broker_takes_many_clients_at_once_without_an_error(tmp_pat
     logging.getLogger().addHandler(keep)
     broker = EmbeddedBroker(broker_login(tmp_path), port=free_port("127.0.0.1"))
     broker.start()
-    password = broker.login.password()
+    # The reconciler's login: it writes and reads every robot's launch topic (topics.py).
+    password = broker_login(tmp_path, "reconciler").password()
     clients: list[paho.Client] = []
     try:
         publisher = paho.Client(CallbackAPIVersion.VERSION2)
-        publisher.username_pw_set("operator", password)
+        publisher.username_pw_set("reconciler", password)
         publisher.connect("127.0.0.1", broker.port)
         publisher.loop_start()
         clients.append(publisher)
         for n in range(50):
-            publisher.publish(f"r/{n}/status", "x", qos=1, retain=True).wait_for_publish(10)
+            topic = f"robotconf/robots/r{n}/launch"
+            publisher.publish(topic, "x", qos=1, retain=True).wait_for_publish(10)
         subscribed = threading.Semaphore(0)
 
         def on_connect(client: paho.Client, first: Any, *_: Any) -> None:
-            client.subscribe([(f"r/{n}/#", 0) for n in range(first, first + 5)])
+            client.subscribe(
+                [(f"robotconf/robots/r{n}/launch", 0) for n in range(first, first + 5)]
+            )
 
         def on_subscribe(*_: Any) -> None:
             subscribed.release()
 
         def connect(n: int) -> None:
             client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"c{n}", userdata=n)
-            client.username_pw_set("operator", password)
+            client.username_pw_set("reconciler", password)
             client.on_connect = on_connect
             client.on_subscribe = on_subscribe
             client.connect("127.0.0.1", broker.port)
@@ -456,13 +460,15 @@ def test_the_embedded_broker_takes_many_clients_at_once_without_an_error(tmp_pat
 class Client:
     """A paho client of the embedded broker; what its CONNACKs said and what it received."""
 
-    def __init__(self, port: int, client_id: str, password: str | None = None) -> None:
+    def __init__(
+        self, port: int, client_id: str, password: str | None = None, user: str = "operator"
+    ) -> None:
         self.connacks: list[Any] = []
         self.received: list[bytes] = []
         self.subscribed = threading.Event()
         self.paho = paho.Client(CallbackAPIVersion.VERSION2, client_id=client_id)
         if password is not None:
-            self.paho.username_pw_set("operator", password)
+            self.paho.username_pw_set(user, password)
         self.paho.on_connect = lambda c, u, f, code, p: self.connacks.append(code)
         self.paho.on_message = lambda c, u, message: self.received.append(message.payload)
         self.paho.on_subscribe = lambda *_: self.subscribed.set()
@@ -480,33 +486,34 @@ class Client:
 
 
 def test_the_embedded_broker_takes_only_up_s_login(tmp_path: Path) -> None:
-    """Every local user can reach 127.0.0.1: without up's login a client reads no robot's log and,
-    with an agent's client id, does not knock that agent off its subscriptions (amqtt alone would
-    drop them before refusing it); a client that never sends its CONNECT is closed."""
+    """Every local user can reach 127.0.0.1: without up's login a client reads no robot's log
+    request and, with an agent's client id, does not knock that agent off its subscriptions (amqtt
+    alone would drop them before refusing it); a client that never sends its CONNECT is closed."""
     login = broker_login(tmp_path / "broker")
     assert oct((tmp_path / "broker").stat().st_mode & 0o777) == "0o700"
     broker = EmbeddedBroker(login, port=free_port("127.0.0.1"), connect_timeout=1.0)
     broker.start()
     password = login.password()
+    robot = broker_login(tmp_path / "broker", "tb3-01").password()  # the agent's, as up makes it
     clients: list[Client] = []
     try:
-        agent = Client(broker.port, "robotconf-agent-tb3-01", password)
+        agent = Client(broker.port, "robotconf-agent-tb3-01", robot, user="tb3-01")
         clients.append(agent)
         assert not agent.refused
-        agent.paho.subscribe("robotconf/robots/tb3-01/logs", qos=1)
+        agent.paho.subscribe("robotconf/robots/tb3-01/logs/request", qos=1)
         assert agent.subscribed.wait(30)
         spy = Client(broker.port, "spy")
         thief = Client(broker.port, "robotconf-agent-tb3-01")
         guess = Client(broker.port, "guess", password[:-1])
         clients += [spy, thief, guess]
         assert spy.refused and thief.refused and guess.refused
-        spy.paho.subscribe("robotconf/robots/+/logs", qos=1)
+        spy.paho.subscribe("robotconf/robots/+/logs/request", qos=1)
 
         operator = Client(broker.port, "operator", password)
         clients.append(operator)
-        operator.paho.publish("robotconf/robots/tb3-01/logs", b"a brain's line", qos=1)
-        wait_for(lambda: agent.received, "the agent, still subscribed, to get the line")
-        assert agent.received == [b"a brain's line"]
+        operator.paho.publish("robotconf/robots/tb3-01/logs/request", b"a request", qos=1)
+        wait_for(lambda: agent.received, "the agent, still subscribed, to get the request")
+        assert agent.received == [b"a request"]
         assert spy.received == [] and thief.received == []
 
         with socket.create_connection(("127.0.0.1", broker.port)) as silent:
