@@ -1,6 +1,7 @@
 """The docs site's reference pages generated from the code: every command's `--help`, the rule
-codes table, the file formats' fields; `python -m workstation.docs [--check]` writes or checks
-them (rules.md and file-formats.md are hand-written around their generated tables).
+codes table, the file formats' fields and the MQTT topic table; `python -m workstation.docs
+[--check]` writes or checks them (rules.md and file-formats.md are hand-written around their
+generated tables).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pydantic import BaseModel
 
 from contract.codes import with_readme_table
 from contract.errors import ExitCode
+from contract.topics import page as topics_page
 
 ROOT = Path(__file__).resolve().parents[1]
 # Help is laid out for an 80-column terminal whatever the terminal generating it is.
@@ -371,6 +373,7 @@ PAGES: dict[str, Callable[[str], str]] = {
     "docs/reference/commands.md": lambda _current: commands_page(),
     "docs/reference/rules.md": _rules_page,
     "docs/reference/file-formats.md": file_formats_page,
+    "docs/reference/topics.md": lambda _current: topics_page(),
 }
 
 
