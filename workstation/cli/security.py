@@ -120,24 +120,8 @@ def broker_config(
         prefix = validate_prefix(prefix)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    checked = check(repo, rev)
-    if not checked.ok or checked.repo.fleet is None:
-        sys.stderr.write(format_text(checked.errors))
-        raise CliError("broker-config needs a valid configs/fleet.yaml", ExitCode.FINDINGS)
-    robots = sorted(checked.repo.fleet.model.robots)
     users = ServiceUsers(reconciler_user, viewer_user, operator_user)
-    if len(users.names()) < 3:
-        raise CliError(
-            "--reconciler-user, --viewer-user and --operator-user must be three different names"
-        )
-    clash = clashes(robots, users)
-    if clash:
-        raise CliError(
-            f"robot id(s) {', '.join(clash)} equal a service user name; "
-            "rename the robot or pass --reconciler-user/--viewer-user/--operator-user",
-            ExitCode.FINDINGS,
-        )
-    acl_file, conf_file = out / "acl", out / "mosquitto.conf"
+    robots = _fleet_robots(repo, rev, users)
     listener = Listener(
         port=port,
         bind=bind,
@@ -152,31 +136,67 @@ def broker_config(
     conf = render_conf(listener, service_port, install_dir or out.resolve(), len(robots))
     # Robots and services in separate files: each listener knows only its own users.
     passwd = {out / "passwd": set(robots), out / "passwd-services": users.names()}
-
     if check_only:
-        stale = []
-        if not acl_file.is_file() or acl_file.read_text(encoding="utf-8") != acl:
-            stale.append(f"{acl_file} differs from the fleet")
-        for passwd_file, wanted in passwd.items():
-            have = _passwd_users(passwd_file)
-            if have != wanted:
-                missing, extra = sorted(wanted - have), sorted(have - wanted)
-                stale.append(
-                    f"{passwd_file}: missing {', '.join(missing) or '-'}; "
-                    f"extra {', '.join(extra) or '-'}"
-                )
-        if stale:
-            raise CliError(
-                "\nrobotconf: ".join([*stale, "run robotconf broker-config to update"]),
-                ExitCode.FINDINGS,
-            )
-        print(f"{out}: current for {len(robots)} robot(s)")
-        return ExitCode.OK
+        return _check_current(out, acl, passwd, len(robots))
+    secrets_dir = secrets or out / "secrets"
+    _write_all(out, secrets_dir, acl, conf, passwd)
+    print(f"robots connect on port {port}; the reconciler, viewers and operators on {service_port}")
+    print(f"passwords: {secrets_dir}/<user>.password (0600); give each robot its own file")
+    print("the broker reads passwd and acl: make them readable by its user (chown mosquitto)")
+    return ExitCode.OK
 
+
+def _fleet_robots(repo: Path, rev: str | None, users: ServiceUsers) -> list[str]:
+    """The fleet's robot ids, once the repository validates and none is a service user."""
+    checked = check(repo, rev)
+    if not checked.ok or checked.repo.fleet is None:
+        sys.stderr.write(format_text(checked.errors))
+        raise CliError("broker-config needs a valid configs/fleet.yaml", ExitCode.FINDINGS)
+    robots = sorted(checked.repo.fleet.model.robots)
+    if len(users.names()) < 3:
+        raise CliError(
+            "--reconciler-user, --viewer-user and --operator-user must be three different names"
+        )
+    clash = clashes(robots, users)
+    if clash:
+        raise CliError(
+            f"robot id(s) {', '.join(clash)} equal a service user name; "
+            "rename the robot or pass --reconciler-user/--viewer-user/--operator-user",
+            ExitCode.FINDINGS,
+        )
+    return robots
+
+
+def _check_current(out: Path, acl: str, passwd: dict[Path, set[str]], robots: int) -> ExitCode:
+    """--check: the written ACL and password files against what the fleet asks for."""
+    acl_file = out / "acl"
+    stale = []
+    if not acl_file.is_file() or acl_file.read_text(encoding="utf-8") != acl:
+        stale.append(f"{acl_file} differs from the fleet")
+    for passwd_file, wanted in passwd.items():
+        have = _passwd_users(passwd_file)
+        if have != wanted:
+            missing, extra = sorted(wanted - have), sorted(have - wanted)
+            stale.append(
+                f"{passwd_file}: missing {', '.join(missing) or '-'}; "
+                f"extra {', '.join(extra) or '-'}"
+            )
+    if stale:
+        raise CliError(
+            "\nrobotconf: ".join([*stale, "run robotconf broker-config to update"]),
+            ExitCode.FINDINGS,
+        )
+    print(f"{out}: current for {robots} robot(s)")
+    return ExitCode.OK
+
+
+def _write_all(
+    out: Path, secrets_dir: Path, acl: str, conf: str, passwd: dict[Path, set[str]]
+) -> None:
+    """The password files (hashed by mosquitto_passwd), the ACL and mosquitto.conf."""
     tool = _mosquitto_passwd()
     if tool is None:
         raise CliError("mosquitto_passwd not found; install Debian's mosquitto package")
-    secrets_dir = secrets or out / "secrets"
     secrets_dir.mkdir(parents=True, exist_ok=True)
     os.chmod(secrets_dir, 0o700)
     out.mkdir(parents=True, exist_ok=True)
@@ -184,14 +204,11 @@ def broker_config(
         problem = _write_passwd(tool, passwd_file, wanted, secrets_dir)
         if problem is not None:
             raise CliError(problem)
+    acl_file, conf_file = out / "acl", out / "mosquitto.conf"
     acl_file.write_text(acl, encoding="utf-8")
     conf_file.write_text(conf, encoding="utf-8")
-    count = len(robots) + len(users.names())
+    count = sum(len(users) for users in passwd.values())
     print(f"wrote {conf_file}, {acl_file}, {', '.join(str(p) for p in passwd)} ({count} users)")
-    print(f"robots connect on port {port}; the reconciler, viewers and operators on {service_port}")
-    print(f"passwords: {secrets_dir}/<user>.password (0600); give each robot its own file")
-    print("the broker reads passwd and acl: make them readable by its user (chown mosquitto)")
-    return ExitCode.OK
 
 
 def _write_passwd(tool: str, passwd_file: Path, users: set[str], secrets_dir: Path) -> str | None:

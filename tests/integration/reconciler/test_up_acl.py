@@ -71,34 +71,65 @@ class Client:
         self.paho.disconnect()
 
 
+class UpBroker:
+    """The embedded broker of a running `up`, and clients of it with the logins `up` made."""
+
+    def __init__(self, root: Path, output: str) -> None:
+        self.port = int(re.findall(r"embedded amqtt at mqtt://[\d.]+:(\d+)", output)[0])
+        self.logins = root / ".robotconf" / "up" / "broker"
+        self.clients: list[Client] = []
+
+    def client(self, client_id: str, user: str, will: str | None = None) -> Client:
+        password = (self.logins / f"{user}.password").read_text(encoding="utf-8").strip()
+        made = Client(self.port, client_id, user, password, will)
+        self.clients.append(made)
+        return made
+
+    def close(self) -> None:
+        for made in self.clients:
+            made.close()
+
+
+def _writes_to_other_robots_are_dropped(robot: Client, desk: Client) -> None:
+    """Its writes to another robot's topics are dropped; to its own, delivered (in order: the
+    fence on its own logs topic comes after them)."""
+    robot.paho.publish(f"{ROBOTS}/tb3-01/status", b"forged status", qos=1, retain=True)
+    robot.paho.publish(f"{ROBOTS}/tb3-01/interfaces", b"forged interfaces", qos=1, retain=True)
+    robot.paho.publish(f"{ROBOTS}/tb3-02/logs", b"fence", qos=1)
+    wait_for(lambda: desk.got(f"{ROBOTS}/tb3-02/logs"), "the robot's own log line")
+    assert desk.got(f"{ROBOTS}/tb3-02/logs") == [b"fence"]
+    forged = [p for _, p in desk.received if p.startswith(b"forged")]
+    assert forged == []
+
+
+def _only_its_own_log_request_reaches_it(robot: Client, desk: Client) -> None:
+    """The desk asks tb3-01 for its log, then tb3-02: only tb3-02's own ask reaches it."""
+    for robot_id in ("tb3-01", "tb3-02"):
+        ask = LogsRequest(session=f"s-{robot_id}", lines=1).model_dump_json().encode()
+        desk.paho.publish(f"{ROBOTS}/{robot_id}/logs/request", ask, qos=1)
+    wait_for(lambda: robot.got(f"{ROBOTS}/tb3-02/logs/request"), "its own log request")
+    topics = {topic for topic, _ in robot.received}
+    assert topics == {f"{ROBOTS}/tb3-02/launch", f"{ROBOTS}/tb3-02/logs/request"}, topics
+
+
 def test_a_robot_of_up_reads_and_writes_its_own_topics_and_no_other_robots(
     lab: GitLab, tmp_path: Path
 ) -> None:
     up = Proc(robotconf_argv("up", "--repo", str(lab.root)), tmp_path / "up.out", cwd=lab.root)
-    clients: list[Client] = []
+    broker: UpBroker | None = None
     try:
         wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
-        port = int(re.findall(r"embedded amqtt at mqtt://[\d.]+:(\d+)", up.output())[0])
-        logins = lab.root / ".robotconf" / "up" / "broker"  # as `up` made them
-
-        def login(user: str) -> str:
-            return (logins / f"{user}.password").read_text(encoding="utf-8").strip()
-
-        def client(client_id: str, user: str, will: str | None = None) -> Client:
-            made = Client(port, client_id, user, login(user), will)
-            clients.append(made)
-            return made
-
+        broker = UpBroker(lab.root, up.output())
         # Refused at the door: another robot's client id (it would take over that agent's
         # session), and a Last Will on another robot's status (amqtt sends wills unchecked).
-        assert client("robotconf-agent-tb3-01", "tb3-02").refused
-        assert client("tb3-02", "tb3-02", will=f"{ROBOTS}/tb3-01/status").refused
+        assert broker.client("robotconf-agent-tb3-01", "tb3-02").refused
+        assert broker.client("tb3-02", "tb3-02", will=f"{ROBOTS}/tb3-01/status").refused
 
-        desk = client("desk", "operator")
+        desk = broker.client("desk", "operator")
         assert desk.subscribe(
             f"{ROBOTS}/tb3-01/status", f"{ROBOTS}/tb3-01/interfaces", f"{ROBOTS}/tb3-02/logs"
         ) == [False, False, False]
-        robot = client("tb3-02", "tb3-02")  # the id alone is a robot's own client id too
+        robot = broker.client("tb3-02", "tb3-02")  # the id alone is a robot's own client id too
         assert not robot.refused
         # Another robot's request topic and every robot's launch are refused; its own are not.
         assert robot.subscribe(
@@ -107,36 +138,17 @@ def test_a_robot_of_up_reads_and_writes_its_own_topics_and_no_other_robots(
             f"{ROBOTS}/tb3-02/launch",
             f"{ROBOTS}/tb3-02/logs/request",
         ) == [True, True, False, False]
-
-        # Its writes to another robot's topics are dropped; to its own, delivered (in order: the
-        # fence on its own logs topic comes after them).
-        robot.paho.publish(f"{ROBOTS}/tb3-01/status", b"forged status", qos=1, retain=True)
-        robot.paho.publish(f"{ROBOTS}/tb3-01/interfaces", b"forged interfaces", qos=1, retain=True)
-        robot.paho.publish(f"{ROBOTS}/tb3-02/logs", b"fence", qos=1)
-        wait_for(lambda: desk.got(f"{ROBOTS}/tb3-02/logs"), "the robot's own log line")
-        assert desk.got(f"{ROBOTS}/tb3-02/logs") == [b"fence"]
-        forged = [p for _, p in desk.received if p.startswith(b"forged")]
-        assert forged == []
-
-        # The desk asks tb3-01 for its log, then tb3-02: only tb3-02's own ask reaches it.
-        for robot_id in ("tb3-01", "tb3-02"):
-            ask = LogsRequest(session=f"s-{robot_id}", lines=1).model_dump_json().encode()
-            desk.paho.publish(f"{ROBOTS}/{robot_id}/logs/request", ask, qos=1)
-        wait_for(lambda: robot.got(f"{ROBOTS}/tb3-02/logs/request"), "its own log request")
-        print(
-            "RECEIVED", [t for t, _ in robot.received], robot.subacks, [t for t, _ in desk.received]
-        )
-        topics = {topic for topic, _ in robot.received}
-        assert topics == {f"{ROBOTS}/tb3-02/launch", f"{ROBOTS}/tb3-02/logs/request"}, topics
+        _writes_to_other_robots_are_dropped(robot, desk)
+        _only_its_own_log_request_reaches_it(robot, desk)
 
         # What is retained for tb3-01 is still its agent's own.
-        reader = client("reader", "operator")
+        reader = broker.client("reader", "operator")
         reader.subscribe(f"{ROBOTS}/tb3-01/status", f"{ROBOTS}/tb3-01/interfaces")
         status = wait_for(lambda: reader.got(f"{ROBOTS}/tb3-01/status"), "tb3-01's status")
         assert AgentStatus.model_validate_json(status[-1]).robot_id == "tb3-01"
         assert all(not p.startswith(b"forged") for _, p in reader.received)
     finally:
-        for made in clients:
-            made.close()
+        if broker is not None:
+            broker.close()
         code = up.stop(signal.SIGINT, timeout=60)
     assert code == 0, up.output()
