@@ -1,12 +1,23 @@
-"""Start-up time of whole `robotconf` processes: `--help`, `validate` on the example lab, and
-`python -c pass` as the floor. N runs each (default 10); median and min, as a table.
+"""Start-up of whole `robotconf` processes against the floor, `python -c "import yaml, pydantic"`:
+starting Python and importing PyYAML and pydantic, what every run of a hook pays anyway.
 
-    python bench/startup.py [-n 10]
+    python bench/startup.py [-n 15] [--repo PATH] [--before CHECKOUT]
+
+--before runs `--help` and `validate` of an older checkout too (PYTHONPATH=CHECKOUT), in the
+same rounds, so before and after meet the same machine.
+
+Each round runs every command once, in turn (A B C D, A B C D, ...), so a machine that speeds
+up or slows down during the call moves them all alike; one warm-up round is not counted (it
+also writes the bytecode an installed package would have: PYTHONDONTWRITEBYTECODE is dropped
+for the children). Medians of wall and CPU (user + system) seconds, each as a ratio to the
+floor; the target is 1.6x of the floor's wall median for `--help` and `validate`.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -15,41 +26,99 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+TARGET = 1.6
+FLOOR = "import yaml, pydantic"
+# Not a target: what any process that validates with pydantic pays at least (BaseModel's
+# import, one model built, pydantic's plugin look-up), to show how much of a ratio is ours.
+PYDANTIC_LEAST = (
+    "import yaml\nfrom pydantic import BaseModel\nclass A(BaseModel):\n    x: int\nA(x=1)"
+)
 
 
-def robotconf() -> list[str]:
+def robotconf() -> str:
     """The installed entry point next to this Python, else the one on PATH."""
     beside = Path(sys.executable).parent / "robotconf"
     found = str(beside) if beside.exists() else shutil.which("robotconf")
     if found is None:
         raise SystemExit("robotconf is not installed: run ./dev setup first")
-    return [found]
+    return found
 
 
-def timed(argv: list[str], runs: int) -> list[float]:
-    times = []
-    for _ in range(runs):
-        start = time.perf_counter()
-        done = subprocess.run(argv, cwd=ROOT, capture_output=True)
-        times.append(time.perf_counter() - start)
-        if done.returncode not in (0, 1):
-            raise SystemExit(f"{' '.join(argv)} exited {done.returncode}: {done.stderr.decode()}")
+Case = tuple[str, list[str], dict[str, str]]  # label, argv, environment variables set
+
+
+def cases(repo: Path, before: Path | None) -> list[Case]:
+    python, entry = sys.executable, robotconf()
+    table: list[Case] = [
+        ("python -c pass", [python, "-c", "pass"], {}),
+        ("floor: import yaml, pydantic", [python, "-c", FLOOR], {}),
+        ("(pydantic's least)", [python, "-c", PYDANTIC_LEAST], {}),
+        ("robotconf --help", [entry, "--help"], {}),
+        ("robotconf validate", [entry, "validate", "--repo", str(repo)], {}),
+    ]
+    if before is not None:
+        older = {"PYTHONPATH": str(before)}
+        table.append(("  before: --help", [entry, "--help"], older))
+        table.append(("  before: validate", [entry, "validate", "--repo", str(repo)], older))
+    return table
+
+
+def run_once(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """Wall and CPU seconds of one whole process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run(argv, cwd=ROOT, capture_output=True, env=env)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode not in (0, 1):
+        raise SystemExit(f"{' '.join(argv)} exited {done.returncode}: {done.stderr.decode()}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
+def measure(table: list[Case], rounds: int) -> dict[str, list[tuple[float, float]]]:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    times: dict[str, list[tuple[float, float]]] = {label: [] for label, _, _ in table}
+    for round_number in range(rounds + 1):
+        for label, argv, extra in table:
+            timing = run_once(argv, {**env, **extra})
+            if round_number:  # round 0 warms up
+                times[label].append(timing)
     return times
 
 
+def report(times: dict[str, list[tuple[float, float]]], rounds: int) -> bool:
+    """Prints the table; True when `--help` and `validate` are within TARGET of the floor."""
+    floor = times["floor: import yaml, pydantic"]
+    floor_wall = statistics.median(w for w, _ in floor)
+    floor_cpu = statistics.median(c for _, c in floor)
+    print(f"{'command':<30} {'wall':>7} {'x floor':>8} {'cpu':>7} {'x floor':>8}")
+    held = True
+    for label, runs in times.items():
+        wall = statistics.median(w for w, _ in runs)
+        cpu = statistics.median(c for _, c in runs)
+        print(
+            f"{label:<30} {wall:>6.3f}s {wall / floor_wall:>7.2f}x "
+            f"{cpu:>6.3f}s {cpu / floor_cpu:>7.2f}x"
+        )
+        if label.startswith("robotconf"):  # ours, not the older checkout's
+            held = held and wall / floor_wall <= TARGET
+    print(f"medians of {rounds} alternating rounds (one warm-up round not counted)")
+    verdict = "holds" if held else "does NOT hold"
+    print(f"target: --help and validate within {TARGET}x of the floor's wall median: {verdict}")
+    return held
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("-n", "--runs", type=int, default=10, help="runs per command (default 10)")
-    runs = parser.parse_args().runs
-    cases = [
-        ("python -c pass", [sys.executable, "-c", "pass"]),
-        ("robotconf --help", [*robotconf(), "--help"]),
-        ("robotconf validate", [*robotconf(), "validate", "--repo", str(ROOT)]),
-    ]
-    print(f"{'command':<22} {'median':>8} {'min':>8}   ({runs} runs each)")
-    for label, argv in cases:
-        times = timed(argv, runs)
-        print(f"{label:<22} {statistics.median(times):>7.3f}s {min(times):>7.3f}s")
+    parser = argparse.ArgumentParser(description="start-up of robotconf against the floor")
+    parser.add_argument("-n", "--runs", type=int, default=15, help="rounds (default 15)")
+    parser.add_argument(
+        "--repo", type=Path, default=ROOT, help="repository to validate (default: the example)"
+    )
+    parser.add_argument("--before", type=Path, help="an older checkout to compare with")
+    args = parser.parse_args()
+    before = args.before.resolve() if args.before else None
+    report(measure(cases(args.repo.resolve(), before), args.runs), args.runs)
 
 
 if __name__ == "__main__":

@@ -14,11 +14,10 @@ from configurator.drift import logics_needing
 from configurator.gcpause import collector_paused
 from configurator.rendered import RenderedRequest, ScenarioRequests
 from configurator.repository import Repository
-from configurator.resolve import ResolvedCapability, resolve_capability
+from configurator.resolve import bound_mappings, resolve_capability
 from configurator.rosnames import UnresolvableName, absolute_namespace
 from configurator.types import (
     JsonObject,
-    MappingBinding,
     RobotAssignment,
     RolloutPolicy,
     SettingDefinition,
@@ -67,16 +66,6 @@ def _settings(definitions: dict[str, SettingDefinition], chosen: dict[str, Any])
     values: JsonObject = {name: d.default for name, d in definitions.items()}
     values.update(chosen)
     return values
-
-
-def bound_mappings(resolved: ResolvedCapability) -> dict[str, MappingBinding]:
-    """The mappings the selected logics need, as the scheme binds them (names unresolved);
-    one the scheme does not bind is left out (validation reports it)."""
-    if resolved.scheme is None:
-        return {}
-    needed = sorted({m for s in resolved.all_selections() for m in s.logic.mappings})
-    bindings = resolved.scheme.mappings
-    return {m: bindings[m] for m in needed if m in bindings}
 
 
 def request_for(

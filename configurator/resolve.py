@@ -9,6 +9,7 @@ from configurator.types import (
     Action,
     CapabilityConfiguration,
     Logic,
+    MappingBinding,
     MappingScheme,
     RobotTemplate,
     logic_names,
@@ -65,3 +66,13 @@ def resolve_capability(repo: Repository, config: CapabilityConfiguration) -> Res
         if found:
             resolved.selections[action_name] = found
     return resolved
+
+
+def bound_mappings(resolved: ResolvedCapability) -> dict[str, MappingBinding]:
+    """The mappings the selected logics need, as the scheme binds them (names unresolved);
+    one the scheme does not bind is left out (validation reports it)."""
+    if resolved.scheme is None:
+        return {}
+    needed = sorted({m for s in resolved.all_selections() for m in s.logic.mappings})
+    bindings = resolved.scheme.mappings
+    return {m: bindings[m] for m in needed if m in bindings}

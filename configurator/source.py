@@ -8,14 +8,16 @@ from __future__ import annotations
 import os
 import re
 import stat
-import subprocess
 import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import IO, Protocol
+from typing import IO, TYPE_CHECKING, Protocol
 
 from contract.files import NotRegularFile, file_kind, read_regular
 from contract.yamlio import MAX_FILE_BYTES
+
+if TYPE_CHECKING:
+    import subprocess
 
 ROOTS = ("configs", "models")
 # The one file read outside ROOTS: the lab's rule configuration (configurator/ruleconfig.py).
@@ -332,6 +334,8 @@ class GitSource:
             # up in both directions at once.
             ids.write("".join(f"{object_id}\n" for _, object_id in wanted).encode("ascii"))
             ids.seek(0)
+            import subprocess  # a commit's files only: the work tree starts no process
+
             try:
                 proc = subprocess.Popen(
                     ["git", "cat-file", "--batch"],
@@ -390,6 +394,8 @@ _GIT_ENV = {
 
 
 def _git(root: Path, *args: str) -> subprocess.CompletedProcess[bytes]:
+    import subprocess  # see GitSource.read_each
+
     try:
         return subprocess.run(
             ["git", *args], cwd=root, capture_output=True, env=_GIT_ENV, timeout=300

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
-import json
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
@@ -40,6 +38,8 @@ class Diagnostic:
 
 def closest(name: str, known: Iterable[str]) -> str | None:
     """The known name a near miss was meant to be (what did-you-mean suggests), if any."""
+    import difflib  # only a near miss pays for it: validate's start-up matters (pre-commit)
+
     candidates = sorted(set(known))
     close = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
     if close:
@@ -90,6 +90,8 @@ def _tally(diagnostics: list[Diagnostic]) -> tuple[int, int]:
 
 
 def format_json(diagnostics: list[Diagnostic]) -> str:
+    import json  # text output, the pre-commit default, does without it
+
     rows = [dict(asdict(d), severity=d.severity.value) for d in diagnostics]
     errors, warnings = _tally(diagnostics)
     summary = {"errors": errors, "warnings": warnings, "diagnostics": rows}

@@ -6,9 +6,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from configurator.render import bound_mappings
 from configurator.repository import Entry, Repository
-from configurator.resolve import resolve_capability
+from configurator.resolve import bound_mappings, resolve_capability
 from configurator.rosnames import (
     length_problem,
     mapping_name_problem,

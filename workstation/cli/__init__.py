@@ -12,12 +12,15 @@ def main(argv: list[str] | None = None) -> int:
 
     A robot-only install (`pip install robotconf`, no `[server]` extra) has no click: there
     `robotconf agent ...` still runs the agent, and any other command says what to install."""
-    args = sys.argv[1:] if argv is None else argv
+    from configurator.gcpause import collector_paused
+
     try:
-        from workstation.cli.main import main as run
+        with collector_paused():  # as in LazyGroup.get_command: what importing makes lives on
+            from workstation.cli.main import main as run
     except ModuleNotFoundError as exc:
         if exc.name != "click":
             raise
+        args = sys.argv[1:] if argv is None else argv
         if args[:1] == ["agent"]:
             from agent.cli import main as run_agent
 
@@ -29,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return int(ExitCode.TOOL)
-    return run(args)
+    return run(argv)
 
 
 __all__ = ["main"]

@@ -173,6 +173,35 @@ def test_validate_imports_neither_rich_nor_the_broker_side() -> None:
     loaded = loaded_modules("validate", "--repo", str(ROOT))
     assert "configurator.workspace" in loaded  # it did run
     assert not _top(loaded) & {"rich", "paho", "git", "reconciler", "agent"}
+    # Nor rendering: its models are built at import, and every commit pays validate's start-up.
+    rendering = {"configurator.render", "configurator.drift", "contract.launch", "contract.wire"}
+    assert not loaded & rendering, loaded & rendering
+
+
+def freeze_count(call: str) -> int:
+    """Objects the collector ignores after `call` ran validate (the robotconf process is
+    `main()` with no arguments: the command line is the process's own)."""
+    code = (
+        "import gc, io, sys\n"
+        "from contextlib import redirect_stderr, redirect_stdout\n"
+        f"sys.argv = ['robotconf', 'validate', '--repo', {str(ROOT)!r}]\n"
+        "from workstation.cli import main\n"
+        "with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):\n"
+        f"    code = {call}\n"
+        "print(code, gc.get_freeze_count())\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    code, frozen = done.stdout.split()
+    assert code == "0", done.stdout
+    return int(frozen)
+
+
+def test_robotconf_keeps_the_collector_off_what_its_imports_made() -> None:
+    """A robotconf process freezes what importing the command made (it lives as long as the
+    process; collections need not walk it again); a caller's own objects are never frozen."""
+    assert freeze_count("main()") > 10_000
+    assert freeze_count(f"main(['validate', '--repo', {str(ROOT)!r}])") == 0
 
 
 @pytest.mark.parametrize("module", ["agent.cli", "agent.runtime", "contract.errors"])
