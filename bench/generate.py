@@ -12,10 +12,17 @@ objects of the scenario's environment, all settings are within their bounds, and
 robot has its own ROS 2 namespace (the schemes' names are relative), so no two robots of one
 world share a topic.
 
-The output is deterministic for a given seed and set of sizes. YAML is written as plain text
+`--shape namespaced` writes the lab the project recommends at scale: every robot in a namespace
+of its own (nested under its site, `site_3/robot_00042`), robot templates that list every
+mapping of their platform, logics that need more of them, and schemes that name them relative
+(`ns0/sensor_007`) or under `{namespace}/`: each request binds about 40 mappings, each resolved
+in its robot's namespace (about 6.6 KB a request, against about 3 KB in the default shape).
+
+The output is deterministic for a given seed, shape and set of sizes. YAML is written as plain text
 (no YAML library needed), each file with the editor modeline pointing at `schemas/`.
 
-    python bench/generate.py [TARGET] [--robots N] [--scenarios N] ... [--seed S] [--git]
+    python bench/generate.py [TARGET] [--robots N] [--scenarios N] ... [--seed S]
+                             [--shape default|namespaced] [--git]
 
 TARGET defaults to bench/out/lab. An existing TARGET is replaced only when it is empty or was
 written by this generator (it holds `.bench-generator.json`).
@@ -40,6 +47,7 @@ DEFAULT_TARGET = Path(__file__).resolve().parent / "out" / "lab"
 BASE_MAPPINGS = ("cmd_vel", "odometry", "scan", "imu")
 MAPPING_KINDS = ("topic", "topic", "topic", "service", "action_client")
 ENV_TYPES = ("Gazebo", "2D", "Real")
+SHAPES = ("default", "namespaced")
 
 
 @dataclass(frozen=True)
@@ -196,8 +204,9 @@ class Capability:
 
 
 class Generator:
-    def __init__(self, sizes: Sizes, root: Path) -> None:
+    def __init__(self, sizes: Sizes, root: Path, shape: str = "default") -> None:
         self.s = sizes
+        self.namespaced = shape == "namespaced"
         self.root = root
         self.rng = random.Random(sizes.seed)
         self.files = 0
@@ -257,9 +266,10 @@ class Generator:
                     iface = {"topic": "msg", "service": "srv", "action_client": "action"}[kind]
                     camel = "".join(part.capitalize() for part in mapping.split("_"))
                     type_ = f"lab_msgs/{iface}/{camel}" if ros2 else f"lab_msgs/{camel}"
-                    lines.append(
-                        f"  {mapping}: {{kind: {kind}, name: ns{j}/{mapping}, type: {type_}}}\n"
-                    )
+                    name = f"ns{j}/{mapping}"
+                    if self.namespaced and m_index % 2:
+                        name = q(f"{{namespace}}/{mapping}")
+                    lines.append(f"  {mapping}: {{kind: {kind}, name: {name}, type: {type_}}}\n")
                 self.write(f"{base}/mapping-schemes/{scheme}.yaml", "".join(lines))
             count = per_platform
             if p_index == len(self.platforms) - 1:
@@ -270,6 +280,8 @@ class Generator:
         rng = self.rng
         name = f"{platform.lower()}-robot-{index:02d}"
         extras = rng.sample(self.extra_mappings, len(self.extra_mappings) // 2)
+        if self.namespaced:  # a template that lists all its platform's mappings: all logics fit
+            extras = list(self.extra_mappings)
         mappings = list(BASE_MAPPINGS) + sorted(extras)
         linear = round(rng.uniform(0.2, 0.3), 2)
         angular = round(rng.uniform(1.5, 3.0), 2)
@@ -307,7 +319,9 @@ class Generator:
                 requires = [rng.choice(everywhere)]
             logics: list[Logic] = []
             for k in range(max(1, self.s.logics)):
-                if k == 0:  # always fits every template: only base mappings
+                if self.namespaced:
+                    mappings = self.namespaced_logic_mappings(k)
+                elif k == 0:  # always fits every template: only base mappings
                     mappings = rng.sample(BASE_MAPPINGS, rng.randint(1, 2))
                 elif k == 1:
                     mappings = rng.sample(BASE_MAPPINGS, 1) + rng.sample(
@@ -338,6 +352,13 @@ class Generator:
                     lines.append("    settings:\n")
                     lines += [f"      {k}: {v.yaml()}\n" for k, v in logic.settings.items()]
             self.write(f"models/actions/{name}.yaml", "".join(lines))
+
+    def namespaced_logic_mappings(self, k: int) -> list[str]:
+        """A logic of the namespaced shape: a few base mappings and more sensors than the
+        default shape's logics need (every template lists them all)."""
+        rng, extras = self.rng, self.extra_mappings
+        base = rng.sample(BASE_MAPPINGS, rng.randint(1, 3))
+        return base + rng.sample(extras, min(len(extras), rng.randint(6, 8) + 2 * k))
 
     def gen_tasks(self) -> None:
         rng = self.rng
@@ -511,9 +532,12 @@ class Generator:
         for i in range(self.s.robots):
             scenario = rng.choice(self.scenarios)
             extra = ", suspended: true" if i % 50 == 49 else ""
+            namespace = f"robot_{i:05d}"
+            if self.namespaced:
+                namespace = f"site_{i % 7}/{namespace}"
             lines.append(
                 f'  robot-{i:05d}: {{scenario: {scenario}, name: "Robot {i}", '
-                f"namespace: robot_{i:05d}{extra}}}\n"
+                f"namespace: {namespace}{extra}}}\n"
             )
         self.write("configs/fleet.yaml", "".join(lines))
 
@@ -554,18 +578,38 @@ def git_commit(target: Path, message: str) -> None:
     git("-c", "commit.gpgsign=false", "commit", "-q", "-m", message)
 
 
-def generate(target: Path, sizes: Sizes, use_git: bool = False) -> int:
+def marker(sizes: Sizes, shape: str = "default") -> dict[str, int | str]:
+    """What MARKER holds: the sizes and, but for the default shape, the shape."""
+    written: dict[str, int | str] = dict(asdict(sizes))
+    if shape != "default":
+        written["shape"] = shape
+    return written
+
+
+def add_shape_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--shape",
+        choices=SHAPES,
+        default="default",
+        help="default: ~3 KB requests; namespaced: the recommended lab, every robot in a "
+        "namespace of its own and ~40 mappings resolved in it (~6.6 KB requests)",
+    )
+
+
+def generate(target: Path, sizes: Sizes, use_git: bool = False, shape: str = "default") -> int:
     """Write the repository into TARGET; return the number of YAML files written."""
+    if shape not in SHAPES:
+        raise ValueError(f"unknown shape {shape!r}: one of {', '.join(SHAPES)}")
     prepare_target(target)
-    gen = Generator(sizes, target)
+    gen = Generator(sizes, target, shape)
     gen.run()
-    (target / MARKER).write_text(json.dumps(asdict(sizes), sort_keys=True) + "\n")
+    (target / MARKER).write_text(json.dumps(marker(sizes, shape), sort_keys=True) + "\n")
     if use_git:
         git_commit(target, f"Generated benchmark lab (seed {sizes.seed})")
     return gen.files
 
 
-def parse_args(argv: list[str] | None) -> tuple[Path, Sizes, bool]:
+def parse_args(argv: list[str] | None) -> tuple[Path, Sizes, bool, str]:
     defaults = Sizes()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -579,6 +623,7 @@ def parse_args(argv: list[str] | None) -> tuple[Path, Sizes, bool]:
         parser.add_argument(
             f"--{key}", type=int, default=value, metavar="N", help=f"default: {value}"
         )
+    add_shape_option(parser)
     parser.add_argument("--git", action="store_true", help="git init and commit the result")
     args = parser.parse_args(argv)
     values = {key: getattr(args, key) for key in asdict(defaults)}
@@ -588,13 +633,13 @@ def parse_args(argv: list[str] | None) -> tuple[Path, Sizes, bool]:
             parser.error(f"--{key} must be at least {low}")
     if values["templates"] < values["platforms"]:
         parser.error("--templates must be at least --platforms")
-    return args.target, Sizes(**values), args.git
+    return args.target, Sizes(**values), args.git, args.shape
 
 
 def main(argv: list[str] | None = None) -> int:
-    target, sizes, use_git = parse_args(argv)
+    target, sizes, use_git, shape = parse_args(argv)
     start = time.perf_counter()
-    files = generate(target, sizes, use_git)
+    files = generate(target, sizes, use_git, shape)
     print(
         f"generate: {files} YAML files in {target} ({time.perf_counter() - start:.2f} s)",
         file=sys.stderr,

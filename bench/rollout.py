@@ -477,13 +477,16 @@ class Result:
     gap_p50: float | None = None
 
 
-def start_reconciler(lab: Path, url: str, interval: float, log: Path) -> subprocess.Popen[bytes]:
-    """`robotconf reconcile` watching `lab`'s main branch, its output in `log`."""
+def start_reconciler(
+    lab: Path, url: str, interval: float, log: Path, code: Path = ROOT
+) -> subprocess.Popen[bytes]:
+    """`robotconf reconcile` watching `lab`'s main branch, its output in `log`; `code`: the
+    checkout whose reconciler runs (this one by default)."""
     with log.open("wb") as out:
         return subprocess.Popen(
             [*ROBOTCONF, "reconcile", "--repo", str(lab), "--branch", "main",
              "--broker", url, "--interval", f"{interval:g}"],
-            cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+            cwd=code, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
 
 

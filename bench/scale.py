@@ -26,7 +26,8 @@ Targets: change p50 <= 0.3 s; publish <= 1.5x the floor; RSS <= 150 MB; the read
 message and knows of no loss. Exit 0 when they are
 met, 1 when one is missed.
 
-    python bench/scale.py [--robots 10000] [--rounds 9] [--keep] [--json F]
+    python bench/scale.py [--robots 10000] [--rounds 9] [--shape namespaced] [--code DIR]
+                          [--keep] [--json F]
 """
 
 from __future__ import annotations
@@ -199,10 +200,10 @@ def assignments(lab: Path) -> dict[str, list[str]]:
     return out
 
 
-def measure(robots: int, rounds: int, folder: Path) -> Result:
+def measure(robots: int, rounds: int, folder: Path, shape: str, code: Path) -> Result:
     lab = folder / "lab"
-    print(f"generating {robots} robots ...", flush=True)
-    generate.generate(lab, generate.Sizes(robots=robots), use_git=True)
+    print(f"generating {robots} robots ({shape} shape) ...", flush=True)
+    generate.generate(lab, generate.Sizes(robots=robots), use_git=True, shape=shape)
     by_scenario = assignments(lab)
     assigned = sum(len(r) for r in by_scenario.values())
     broker = Broker(folder, robots)
@@ -211,7 +212,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
     try:
         print("starting the reconciler ...", flush=True)
         started = time.perf_counter()
-        reconciler = start_reconciler(lab, broker.url, 3600, folder / "reconciler.log")
+        reconciler = start_reconciler(lab, broker.url, 3600, folder / "reconciler.log", code)
         seen = launches.wait(lambda s: len(s) >= assigned, TIMEOUT)
         times = sorted(t for t, _ in seen.values())
         first, delivered = times[-1] - started, times[-1] - times[0]
@@ -277,13 +278,20 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--robots", type=int, default=10_000)
     parser.add_argument("--rounds", type=int, default=9)
+    generate.add_shape_option(parser)
+    parser.add_argument(
+        "--code",
+        type=Path,
+        default=ROOT,
+        help="the checkout whose reconciler runs, for a before figure (default: this one)",
+    )
     parser.add_argument("--keep", action="store_true", help="keep the work folder")
     parser.add_argument("--json", type=Path, help="write the result here")
     args = parser.parse_args(argv)
     base = "/dev/shm" if Path("/dev/shm").is_dir() else None
     folder = Path(tempfile.mkdtemp(prefix="scale-", dir=base))
     try:
-        result = measure(args.robots, args.rounds, folder)
+        result = measure(args.robots, args.rounds, folder, args.shape, args.code.resolve())
     finally:
         if not args.keep:
             subprocess.run(["rm", "-rf", str(folder)], check=False)

@@ -3,6 +3,7 @@ and a mapping name resolved to the fully qualified name one robot uses. Pure."""
 
 from __future__ import annotations
 
+import functools
 import re
 
 # The rules are the design article "Topic and Service name mapping to DDS": a token is
@@ -15,6 +16,8 @@ NAMESPACE_SUBSTITUTION = "{namespace}"
 # one per token for the `/` each becomes: C + N + 8 <= 255 for a fully qualified name.
 _DDS_LIMIT = 255
 _PREFIX_RESERVE = 8
+# What a fully qualified name may cost (`name_cost`) within that limit.
+NAME_BUDGET = _DDS_LIMIT - _PREFIX_RESERVE
 
 
 class UnresolvableName(ValueError):
@@ -43,6 +46,11 @@ def _tokens_problem(tokens: list[str]) -> str | None:
         if problem is not None:
             return problem
     return None
+
+
+def name_cost(name: str) -> int:
+    """A name's characters and tokens (one per '/'): what DDS's limit counts."""
+    return len(name) + name.count("/")
 
 
 def length_problem(full_name: str) -> str | None:
@@ -89,6 +97,8 @@ def suggest_namespace(text: str) -> str:
     return "/".join(tokens) or "robot"
 
 
+# A lab has a few hundred mapping names, asked about for each scenario that binds them.
+@functools.lru_cache(maxsize=4096)
 def mapping_name_problem(name: str) -> str | None:
     """Why `name` is not a mapping name, or None. A mapping name is a ROS 2 topic, service or
     action name: absolute (`/cmd_vel`), relative (`cmd_vel`, resolved in the robot's

@@ -54,6 +54,7 @@ from reconciler.observed import (
 from reconciler.report import Followed, StatusWriter, one_line, status_of
 from reconciler.retained import (
     Ignored,
+    Payload,
     Presence,
     RetainedView,
     read_object,
@@ -528,9 +529,10 @@ class Controller:
         self._report(decision.progressing(), actions)
         started = time.monotonic()
         # Signed at publish time: issued_at is when the robot was told, not when it was built.
+        # Each payload is made as it is sent (`Payload`): 10,000 are never held at once.
         sign = self._sign
-        items = [
-            (self.topics.launch(r), sign(req.model()).payload() if sign else req.payload())
+        items: list[tuple[str, Payload]] = [
+            (self.topics.launch(r), _signed(sign, req) if sign else req.payload)
             for r, req in actions.publish.items()
         ]
         # What the view keeps of each request is known without reading it back; a Stop's,
@@ -719,6 +721,11 @@ class Controller:
         if message != self._last_log:
             log.log(level, "%s", message)
             self._last_log = message
+
+
+def _signed(sign: Signer, request: RenderedRequest) -> Callable[[], bytes]:
+    """What makes the request's signed payload when it is sent."""
+    return lambda: sign(request.model()).payload()
 
 
 class RequestSizes:

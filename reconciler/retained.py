@@ -5,6 +5,7 @@ Shared by the reconciler (launch topics) and `robotconf status` (every robot top
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import functools
@@ -101,10 +102,22 @@ def _guarded(handler: Callable[P, None]) -> Callable[P, None]:
 # Messages in flight at once when publishing many: enough to keep a broker busy (a PUBACK
 # comes back within a millisecond on a LAN), few enough that what paho holds stays small.
 PUBLISH_WINDOW = 2000
+# ... and at most this many payload bytes: the default lab's 2,000 requests of 3 KB; 6.6 KB
+# ones (each robot in its own namespace) are fewer at once (paho holds two copies of each).
+PUBLISH_WINDOW_BYTES = 6 * 1024 * 1024
 # Seconds without a message before a snapshot's marker is sent again (it may have been dropped).
 MARKER_QUIET = 0.5
 # Topics missing from a snapshot read again, alone, to tell a lossy read from absent robots.
 CONFIRM_SAMPLE = 100
+
+
+# A message's payload, or what makes it: 10,000 requests of 6.6 KB are made one by one as
+# they are sent, not all held at once (66 MB).
+Payload = bytes | Callable[[], bytes]
+
+
+def made(payload: Payload) -> bytes:
+    return payload if isinstance(payload, bytes) else payload()
 
 
 def _settled(info: paho.MQTTMessageInfo, deadline: float) -> None:
@@ -112,6 +125,29 @@ def _settled(info: paho.MQTTMessageInfo, deadline: float) -> None:
     which when it collects every outcome)."""
     with contextlib.suppress(RuntimeError, ValueError):
         info.wait_for_publish(max(0.0, deadline - time.monotonic()))
+
+
+class _Window:
+    """The messages of one publish in flight, at most PUBLISH_WINDOW of them and
+    PUBLISH_WINDOW_BYTES: paho holds each message's packet until it is written and its
+    payload until the PUBACK, 60 MB for 10,000 at once."""
+
+    def __init__(self, deadline: float) -> None:
+        self.deadline = deadline
+        self.flight: collections.deque[tuple[paho.MQTTMessageInfo, int]] = collections.deque()
+        self.size = 0
+
+    def make_room(self, size: int) -> None:
+        """Waits for the oldest in flight until one more of `size` bytes fits (or none is)."""
+        flight = self.flight
+        while flight and (len(flight) >= PUBLISH_WINDOW or self.size + size > PUBLISH_WINDOW_BYTES):
+            info, sent = flight.popleft()
+            _settled(info, self.deadline)
+            self.size -= sent
+
+    def add(self, info: paho.MQTTMessageInfo, size: int) -> None:
+        self.flight.append((info, size))
+        self.size += size
 
 
 def client_id(role: str) -> str:
@@ -301,7 +337,7 @@ class RetainedView:
 
     def publish_retained(
         self,
-        items: Sequence[tuple[str, bytes]],
+        items: Sequence[tuple[str, Payload]],
         timeout: float,
         kept: Sequence[bytes | None] | None = None,
     ) -> bool:
@@ -311,12 +347,13 @@ class RetainedView:
         acknowledgement, so the next diff does not publish them again before their echo, unless
         a message arrived on the topic meanwhile (the echo, or a newer one: it is the truth).
         `kept`: what the copy keeps of each item, as `keep` would make it (the caller knows it
-        without reading the payload back); None, or left out: `keep` of the payload.
+        without reading the payload back); None, or left out: `keep` of the payload. A payload
+        may be what makes it (`Payload`): it is then made as it is sent.
         """
         if not self._synced.is_set():
             return False
         copies = [
-            self._kept(topic, payload) if copy is None else copy
+            self._kept(topic, made(payload)) if copy is None else copy
             for (topic, payload), copy in zip(items, kept or [None] * len(items), strict=True)
         ]
         with self._lock:
@@ -325,15 +362,14 @@ class RetainedView:
         infos: list[tuple[str, bytes, paho.MQTTMessageInfo]] = []
         # 10,000 publishes allocate enough to set off collections that walk every object
         # the reconciler holds (its whole rendered fleet); none of them is a cycle.
+        window = _Window(deadline)
         with collector_paused():
             for (topic, payload), copy in zip(items, copies, strict=True):
-                if len(infos) >= PUBLISH_WINDOW:
-                    # At most a window in flight: paho holds each message's packet until it
-                    # is written and its payload until the PUBACK, 60 MB for 10,000 at once.
-                    _settled(infos[-PUBLISH_WINDOW][2], deadline)
-                infos.append(
-                    (topic, copy, self._client.publish(topic, payload, qos=1, retain=True))
-                )
+                data = made(payload)
+                window.make_room(len(data))
+                info = self._client.publish(topic, data, qos=1, retain=True)
+                window.add(info, len(data))
+                infos.append((topic, copy, info))
         ok = True
         for topic, copy, info in infos:
             try:

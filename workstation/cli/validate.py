@@ -10,7 +10,8 @@ from pathlib import Path
 
 import click
 
-from configurator.workspace import check
+from configurator.gcpause import collector_paused
+from configurator.workspace import Checked, check
 from contract.diagnostics import format_github, format_json, format_text, summary_line
 from contract.errors import ExitCode
 from workstation.cli.options import repo_option, rev_option
@@ -32,7 +33,13 @@ def validate(repo: Path, rev: str | None, fmt: str, files: tuple[str, ...]) -> E
     Rules that could make a robot unsafe or undeliverable cannot be tuned (the docs'
     reference/rules.md says why for each).
     Exit 1 on errors; warnings alone exit 0."""
-    checked = check(repo, rev)
+    # Paused until what the build made is freed (by reference counting, as `_report`
+    # returns): a collection while it lives would walk it all for nothing.
+    with collector_paused():
+        return _report(check(repo, rev), fmt)
+
+
+def _report(checked: Checked, fmt: str) -> ExitCode:
     diagnostics = checked.diagnostics
     if fmt == "json":
         sys.stdout.write(format_json(diagnostics))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 
 from contract.mqtt import Connection
@@ -103,3 +105,38 @@ def test_what_the_caller_does_not_say_to_keep_is_kept_as_the_view_keeps_it(
         assert mine == {items[0][0]: b"told", items[1][0]: b"REQUEST 1"}  # b"": nothing kept
     finally:
         made.stop()
+
+
+def test_payloads_made_as_they_are_sent_within_a_window_of_bytes(
+    mosquitto: Mosquitto, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A payload may be what makes it: each is made once, when it is sent; a window of bytes
+    holds back the rest (here two payloads of 10 bytes at most), and one payload larger than
+    the whole window still goes, alone."""
+    monkeypatch.setattr(retained, "PUBLISH_WINDOW_BYTES", 25)
+    made: list[int] = []
+
+    def maker(i: int, size: int = 10) -> Callable[[], bytes]:
+        def make() -> bytes:
+            made.append(i)
+            return f"request {i}".encode().ljust(size, b".")
+
+        return make
+
+    items: list[tuple[str, retained.Payload]] = [
+        (f"robotconf/robots/m{i}/launch", maker(i, 40 if i == 5 else 10)) for i in range(30)
+    ]
+    quiet = view(mosquitto, no_local=True)
+    try:
+        assert quiet.publish_retained(items, 10, [b"kept"] * 30)
+        assert made == list(range(30))
+    finally:
+        quiet.stop()
+    again = view(mosquitto, no_local=True)
+    try:
+        held = {t: p for t, p in again.snapshot().items() if "/m" in t}
+        assert len(held) == 30
+        assert held["robotconf/robots/m5/launch"] == b"request 5".ljust(40, b".")
+        assert held["robotconf/robots/m29/launch"] == b"request 29"
+    finally:
+        again.stop()

@@ -97,6 +97,27 @@ def test_one_namespace_for_two_robots_clashes(lab: Lab) -> None:
     assert "give them different namespaces, or put them on different domains" in d.message
 
 
+def test_a_namespace_nested_in_another_clashes_where_their_names_meet(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: camera/image_raw,", "name: camera/odom,")
+    assert lab.check().diagnostics == []
+    # tb3-01's camera/odom in tb3_01 is tb3-02's odom in tb3_01/camera.
+    lab.replace(FLEET, "namespace: tb3_02}", "namespace: tb3_01/camera}")
+    d = lab.only("RC505")
+    assert d.line == lab.line_of(FLEET, "tb3-02:")
+    assert "robots 'tb3-01' and 'tb3-02' both use /tb3_01/camera/odom (odometry)" in d.message
+
+
+def test_a_name_at_the_root_clashes_with_one_in_a_namespace(lab: Lab) -> None:
+    lab.replace(GAZEBO, "name: sim/bluetooth_rssi,", "name: sim/odom,")
+    assert lab.check().diagnostics == []
+    # tb3-03 without a namespace has /sim/odom, as tb3-02 has its odom in namespace sim.
+    lab.replace(FLEET, ", namespace: tb3_03}", "}")
+    lab.replace(FLEET, "namespace: tb3_02}", "namespace: sim}")
+    d = lab.only("RC505")
+    assert d.line == lab.line_of(FLEET, "tb3-03:")
+    assert "robots 'tb3-02' and 'tb3-03' both use /sim/odom (bluetooth_rssi)" in d.message
+
+
 def test_shared_services_other_worlds_and_platforms_do_not_clash(lab: Lab) -> None:
     # Two guides call the world's door controller (a service): shared on purpose.
     lab.replace(
