@@ -23,10 +23,11 @@ Pure: the I/O happens in the source given to `check` (git or the work tree).
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterator
+from collections.abc import Hashable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+from configurator.drift import logics_needing
 from configurator.gcpause import collector_paused
 from configurator.loader import LoadedFile, load_repository
 from configurator.render import FleetRender, render_fleet, request_for, scenario_requests
@@ -35,10 +36,10 @@ from configurator.repository import Entry, Platform, Repository
 from configurator.rules import DERIVED, Unit, rule_units
 from configurator.rules.report import Reporter
 from configurator.source import Source
-from configurator.types import RobotAssignment
+from configurator.types import Action, RobotAssignment
 from configurator.workspace import Checked, judged
 from contract.diagnostics import Diagnostic
-from contract.launch import LaunchScenario, canonical_json
+from contract.launch import LaunchCapability, LaunchScenario, canonical_json
 
 V = TypeVar("V")
 
@@ -267,6 +268,37 @@ class BuildStats:
     robots_rendered: int = 0
 
 
+class _NeedsMemo:
+    """`logics_needing` of each capability, kept from one build to the next while the
+    capability and the actions it selects are the very objects they were (an unchanged file
+    keeps its models): otherwise worked out again. Holding the objects keeps their ids from
+    being reused; what a build did not ask for is dropped at the next."""
+
+    Kept = tuple[LaunchCapability, tuple[Action | None, ...], dict[str, tuple[str, ...]]]
+
+    def __init__(self) -> None:
+        self._last: dict[int, _NeedsMemo.Kept] = {}
+        self._now: dict[int, _NeedsMemo.Kept] = {}
+
+    def next_build(self) -> None:
+        self._last, self._now = self._now, {}
+
+    def __call__(
+        self, capability: LaunchCapability, actions: Mapping[str, Action]
+    ) -> dict[str, tuple[str, ...]]:
+        used = tuple(actions.get(name) for name in capability.logics)
+        kept = self._now.get(id(capability)) or self._last.get(id(capability))
+        if (
+            kept is None
+            or kept[0] is not capability
+            or len(kept[1]) != len(used)
+            or any(a is not b for a, b in zip(kept[1], used, strict=True))
+        ):
+            kept = (capability, used, logics_needing(capability, actions))
+        self._now[id(capability)] = kept
+        return kept[2]
+
+
 class BuildCache:
     """What earlier builds proved, reused by the next: see the module's docstring. One cache
     serves one repository; `check` a source, then `render` its result if it is valid."""
@@ -289,6 +321,7 @@ class BuildCache:
         self._rendered_snapshot: Snapshot = {}
         self._scenarios: dict[str, _Value] = {}
         self._robots: dict[str, _Rendered] = {}
+        self._needs = _NeedsMemo()
         self._recorder = _Recorder()
         self.stats = BuildStats()
 
@@ -460,7 +493,9 @@ class BuildCache:
             if (
                 before is None
                 or before.request.scenario_requests is not scenario
-                or before.assignment != assignment
+                # `is` first: an unchanged fleet.yaml keeps its models, and comparing 10,000
+                # pydantic models field by field costs a tenth of a commit's build.
+                or (before.assignment is not assignment and before.assignment != assignment)
             ):
                 request = request_for(repo, robot_id, assignment, scenario)
                 self.stats.robots_rendered += 1
@@ -471,6 +506,7 @@ class BuildCache:
             robots[robot_id] = _Rendered(assignment, request)
             return request
 
-        fleet = render_fleet(repo, scenario_of, request_of)
+        self._needs.next_build()
+        fleet = render_fleet(repo, scenario_of, request_of, self._needs)
         self._scenarios, self._robots = scenarios, robots
         return fleet

@@ -5,7 +5,7 @@ Pure: the caller has validated the repository; a request is never rendered from 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,6 +17,7 @@ from configurator.repository import Repository
 from configurator.resolve import bound_mappings, resolve_capability
 from configurator.rosnames import UnresolvableName, absolute_namespace
 from configurator.types import (
+    Action,
     JsonObject,
     RobotAssignment,
     RolloutPolicy,
@@ -163,19 +164,27 @@ def render_scenario(repo: Repository, scenario_name: str) -> LaunchScenario:
 
 ScenarioOf = Callable[[str], ScenarioRequests]
 RequestOf = Callable[[str, RobotAssignment, ScenarioRequests], RenderedRequest]
+NeedsOf = Callable[[LaunchCapability, Mapping[str, Action]], dict[str, tuple[str, ...]]]
 
 
 def render_fleet(
-    repo: Repository, scenario_of: ScenarioOf | None = None, request_of: RequestOf | None = None
+    repo: Repository,
+    scenario_of: ScenarioOf | None = None,
+    request_of: RequestOf | None = None,
+    needs_of: NeedsOf = logics_needing,
 ) -> FleetRender:
-    """Every robot's request. `scenario_of` and `request_of` may serve what an earlier build
-    rendered (configurator/incremental.py); by default each scenario is rendered once here."""
+    """Every robot's request. `scenario_of`, `request_of` and `needs_of` may serve what an
+    earlier build worked out (configurator/incremental.py); by default each scenario is
+    rendered once here."""
     with collector_paused():
-        return _render_fleet(repo, scenario_of, request_of)
+        return _render_fleet(repo, scenario_of, request_of, needs_of)
 
 
 def _render_fleet(
-    repo: Repository, scenario_of: ScenarioOf | None, request_of: RequestOf | None
+    repo: Repository,
+    scenario_of: ScenarioOf | None,
+    request_of: RequestOf | None,
+    needs_of: NeedsOf,
 ) -> FleetRender:
     if repo.fleet is None:
         raise RenderError("configs/fleet.yaml does not exist: no robot is assigned")
@@ -207,12 +216,12 @@ def _render_fleet(
         labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
             result.suspended.add(robot_id)
-    result.needed_by = _needed_by(repo, requests.values())
+    result.needed_by = _needed_by(repo, requests.values(), needs_of)
     return result
 
 
 def _needed_by(
-    repo: Repository, requests: Iterable[RenderedRequest]
+    repo: Repository, requests: Iterable[RenderedRequest], needs_of: NeedsOf
 ) -> dict[str, dict[str, tuple[str, ...]]]:
     """Per capability the fleet uses, which of its logics need each mapping: what drift
     messages name (a request says which logics, not which needs what)."""
@@ -222,7 +231,7 @@ def _needed_by(
     for scenario in scenarios.values():
         capability = scenario.scenario.capability
         if capability.name not in found:
-            found[capability.name] = logics_needing(capability, actions)
+            found[capability.name] = needs_of(capability, actions)
     return found
 
 

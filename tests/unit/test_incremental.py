@@ -124,6 +124,7 @@ def assert_same_fleet(got: FleetRender | str, expected: FleetRender | str) -> No
         assert (mine.digest, mine.restart_digest) == (request.digest, request.restart_digest)
         assert mine.model() == request.model()
     assert got.scenario_of == expected.scenario_of
+    assert got.needed_by == expected.needed_by
     assert got.labels == expected.labels
     assert got.suspended == expected.suspended
     assert (got.allow_empty, got.rollout) == (expected.allow_empty, expected.rollout)
@@ -549,3 +550,24 @@ def test_a_number_written_another_way_renders_the_bytes_a_full_build_does(built:
     checked, rendered = incremental_build(cache_, one, "3" * 40)
     assert checked.ok and isinstance(rendered, FleetRender)
     assert_same_fleet(rendered, full_build(one, "3" * 40)[1])
+
+
+def test_which_logics_need_a_mapping_follows_an_action_changed_under_a_kept_capability(
+    built: Any,
+) -> None:
+    """The build keeps `logics_needing` of a capability while its models are the same objects:
+    an action whose logic needs one mapping less must be worked out again, even where the
+    capability's requests (and so its objects) stay as they were."""
+    cache_, files, first = built
+    text = files["configs/capabilities/capability-000.yaml"].decode()
+    action, logic = re.findall(r"^  (Action\d+): (\S+)$", text, re.MULTILINE)[0]
+    path = f"models/actions/{action}.yaml"
+    found = re.search(rf"  {logic}:\n.*\n    mappings: \[(\w+), ", files[path].decode())
+    assert found is not None, files[path].decode()
+    dropped = found.group(1)
+    changed = _edit(files, path, f"mappings: [{dropped}, ".encode(), b"mappings: [")
+    checked, rendered = incremental_build(cache_, changed, "2" * 40)
+    assert checked.ok and isinstance(rendered, FleetRender), checked.errors[:3]
+    assert logic in first.needed_by["capability-000"][dropped]
+    assert logic not in rendered.needed_by["capability-000"].get(dropped, ())
+    assert_same_fleet(rendered, full_build(changed, "2" * 40)[1])
