@@ -1,18 +1,14 @@
 """Every MQTT topic of the project, declared once: pattern, direction, payload, who reads and writes
 it, retained or not. Topic names, the Mosquitto ACL, subscriptions, the checks of `up`'s broker and
-docs/reference/topics.md (`python -m contract.topics docs/reference/topics.md`) derive from it.
+docs/reference/topics.md (written by `python -m workstation.docs`) derive from it.
 """
 
 from __future__ import annotations
 
 import re
-import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import Enum
-from pathlib import Path
-
-from contract.errors import ExitCode
 
 
 class Role(str, Enum):
@@ -241,66 +237,3 @@ def _grant(access: str, name: str, read: list[str], write: list[str]) -> None:
         read.append(name)
     if access in ("write", "readwrite"):
         write.append(name)
-
-
-# ---------------------------------------------------------------- the docs' page
-
-PAGE_HEAD = """# MQTT topics
-
-Every topic the project uses, under the prefix (`robotconf` unless agent.yaml and the
-reconciler's `--prefix` say otherwise). `<id>` is a robot's id: a robot may use only its own;
-`<client>` is a client's id. Generated from `contract/topics.py`, the one declaration the
-broker ACL (`robotconf broker-config`), the agent's and the reconciler's subscriptions and the
-checks of `robotconf up`'s embedded broker are derived from: rewrite this page with
-`python -m contract.topics docs/reference/topics.md`.
-
-"""
-TABLE_HEAD = (
-    "| topic | from → to | payload | read by | written by | retained | QoS | what |\n"
-    "| --- | --- | --- | --- | --- | --- | --- | --- |\n"
-)
-PAGE_TAIL = """
-Roles: **robot** is a robot's agent, logged in with its robot id (own topics only);
-**reconciler**, **viewer** (`robotconf status`) and **operator** (`robotconf logs`,
-`robotconf restart`, the desk) are the service users. Whatever no role is given is denied, by
-Mosquitto (the generated ACL) and by `robotconf up`'s broker alike.
-"""
-
-
-def _who(roles: frozenset[Role], topic: Topic) -> str:
-    if topic.per_client:
-        return "every client (own client id)" if roles == EVERYONE else "-"
-    return ", ".join(
-        role.value + (" (own id)" if role is Role.ROBOT else "") for role in Role if role in roles
-    )
-
-
-def _row(topic: Topic) -> str:
-    name = "<prefix>/" + topic.pattern.replace(ROBOT, "<id>").replace(CLIENT, "<client>")
-    qos = "-" if topic.qos is None else str(topic.qos)
-    cells = [
-        f"`{name}`",
-        topic.direction,
-        topic.payload,
-        _who(topic.read, topic),
-        _who(topic.write, topic),
-    ]
-    cells += ["yes" if topic.retained else "no", qos, topic.about]
-    return "| " + " | ".join(cells) + " |\n"
-
-
-def page() -> str:
-    """docs/reference/topics.md, generated from TOPICS."""
-    return PAGE_HEAD + TABLE_HEAD + "".join(_row(t) for t in TOPICS) + PAGE_TAIL
-
-
-def main(argv: list[str]) -> int:
-    if len(argv) != 1:
-        print("usage: python -m contract.topics docs/reference/topics.md", file=sys.stderr)
-        return ExitCode.TOOL
-    Path(argv[0]).write_text(page(), encoding="utf-8")
-    return ExitCode.OK
-
-
-if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))

@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from contract.diagnostics import Diagnostic
 from contract.models import ROBOT_ID_PATTERN
-from contract.topics import BY_KEY, ROBOT
+from contract.topics import BY_KEY
 
 DEFAULT_PREFIX = "robotconf"
 BROKER_ENV = "ROBOTCONF_BROKER"
@@ -28,10 +28,9 @@ DEFAULT_BROKER = "mqtt://127.0.0.1:1883"
 def _one(key: str) -> Callable[[Topics, str], str]:
     """A method of `Topics` giving the name of table row `key` for one robot."""
     topic = BY_KEY[key]
-    head, _, tail = topic.pattern.partition(ROBOT)
 
     def name(self: Topics, robot_id: str) -> str:
-        return f"{self.prefix}/{head}{robot_id}{tail}"
+        return topic.name(self.prefix, robot_id)
 
     name.__doc__ = f"{topic.about} ({topic.direction})."
     return name

@@ -23,7 +23,7 @@ from pydantic import BaseModel
 
 from contract.codes import with_readme_table
 from contract.errors import ExitCode
-from contract.topics import page as topics_page
+from contract.topics import CLIENT, EVERYONE, ROBOT, TOPICS, Role, Topic
 
 ROOT = Path(__file__).resolve().parents[1]
 # Help is laid out for an 80-column terminal whatever the terminal generating it is.
@@ -359,6 +359,57 @@ def file_formats_page(current: str) -> str:
     table = "| format | where |\n| --- | --- |\n"
     table += "".join(f"| [{f.title}](#{f.anchor}) | {f.place} |\n" for f in every)
     return splice(current, {"formats": table} | {f.anchor: format_fields(f) for f in every})
+
+
+# ---- topics.md ---------------------------------------------------------------------------
+
+TOPICS_HEAD = """# MQTT topics
+
+Every topic the project uses, under the prefix (`robotconf` unless agent.yaml and the
+reconciler's `--prefix` say otherwise). `<id>` is a robot's id: a robot may use only its own;
+`<client>` is a client's id. Generated from `contract/topics.py`, the one declaration the
+broker ACL (`robotconf broker-config`), the agent's and the reconciler's subscriptions and the
+checks of `robotconf up`'s embedded broker are derived from: rewrite this page with
+`python -m workstation.docs`.
+
+"""
+TOPICS_TABLE_HEAD = (
+    "| topic | from → to | payload | read by | written by | retained | QoS | what |\n"
+    "| --- | --- | --- | --- | --- | --- | --- | --- |\n"
+)
+TOPICS_TAIL = """
+Roles: **robot** is a robot's agent, logged in with its robot id (own topics only);
+**reconciler**, **viewer** (`robotconf status`) and **operator** (`robotconf logs`,
+`robotconf restart`, the desk) are the service users. Whatever no role is given is denied, by
+Mosquitto (the generated ACL) and by `robotconf up`'s broker alike.
+"""
+
+
+def _topic_who(roles: frozenset[Role], topic: Topic) -> str:
+    if topic.per_client:
+        return "every client (own client id)" if roles == EVERYONE else "-"
+    return ", ".join(
+        role.value + (" (own id)" if role is Role.ROBOT else "") for role in Role if role in roles
+    )
+
+
+def _topic_row(topic: Topic) -> str:
+    name = "<prefix>/" + topic.pattern.replace(ROBOT, "<id>").replace(CLIENT, "<client>")
+    qos = "-" if topic.qos is None else str(topic.qos)
+    cells = [
+        f"`{name}`",
+        topic.direction,
+        topic.payload,
+        _topic_who(topic.read, topic),
+        _topic_who(topic.write, topic),
+    ]
+    cells += ["yes" if topic.retained else "no", qos, topic.about]
+    return "| " + " | ".join(cells) + " |\n"
+
+
+def topics_page() -> str:
+    """docs/reference/topics.md, generated from TOPICS."""
+    return TOPICS_HEAD + TOPICS_TABLE_HEAD + "".join(_topic_row(t) for t in TOPICS) + TOPICS_TAIL
 
 
 # ---- the pages ---------------------------------------------------------------------------
