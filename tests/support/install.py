@@ -36,17 +36,21 @@ def run(argv: list[str], cwd: Path | None = None) -> str:
     return done.stdout
 
 
-def build_wheel(dest: Path) -> Path:
-    """robotconf's wheel, built with this venv's setuptools from a copy of the project (so that
-    the build's egg-info stays out of the checkout)."""
-    project = dest / "project"
-    project.mkdir(parents=True)
+def copy_project(dest: Path) -> Path:
+    """The files a build reads, copied so that the build's egg-info stays out of the checkout."""
+    dest.mkdir(parents=True)
     for name in ("pyproject.toml", "README.md", "LICENSE"):
-        shutil.copy2(ROOT / name, project / name)
+        shutil.copy2(ROOT / name, dest / name)
     for package in PACKAGES:
         shutil.copytree(
-            ROOT / package, project / package, ignore=shutil.ignore_patterns("__pycache__")
+            ROOT / package, dest / package, ignore=shutil.ignore_patterns("__pycache__")
         )
+    return dest
+
+
+def build_wheel(dest: Path) -> Path:
+    """robotconf's wheel, built with this venv's setuptools from a copy of the project."""
+    project = copy_project(dest / "project")
     wheels = dest / "wheels"
     pip = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation"]
     run([*pip, "-w", str(wheels), str(project)])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import subprocess
 import sys
 import zipfile
@@ -12,6 +11,8 @@ from importlib.metadata import version
 from pathlib import Path
 
 import pytest
+
+from tests.support.install import copy_project
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -38,24 +39,12 @@ def _required_setuptools() -> int:
     return int(found.group(1))
 
 
-def _copy_project(dest: Path) -> Path:
-    """The files a build reads, copied so that the build's egg-info stays out of the checkout."""
-    dest.mkdir()
-    for name in ("pyproject.toml", "README.md", "LICENSE"):
-        shutil.copy2(ROOT / name, dest / name)
-    for package in ("contract", "configurator", "reconciler", "workstation", "agent"):
-        shutil.copytree(
-            ROOT / package, dest / package, ignore=shutil.ignore_patterns("__pycache__")
-        )
-    return dest
-
-
 def test_editable_build_prints_no_deprecation(tmp_path: Path) -> None:
     needed = _required_setuptools()
     have = version("setuptools")
     if int(have.split(".")[0]) < needed:
         pytest.skip(f"this venv's setuptools {have} predates {needed} (./dev setup installs it)")
-    project = _copy_project(tmp_path / "project")
+    project = copy_project(tmp_path / "project")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
     for hook, *folders in _HOOKS:
         outputs = [tmp_path / folder for folder in folders]
