@@ -52,7 +52,8 @@ def test_example_agent_yaml_is_valid(tmp_path: Path) -> None:
 
 UNIT = EXAMPLE / "robotconf-agent.service"
 INSTALLED_CONFIG = "/etc/robotconf/agent.yaml"  # where agent.yaml's header says it goes
-INSTALLED_TOOL = "/opt/robotconf/bin/robotconf"  # the venv of docs/how-to/robot-agent.md's install
+# The robot-only install's command (docs/how-to/robot-agent.md).
+INSTALLED_TOOL = "/opt/robotconf/bin/robotconf-agent"
 
 
 def unit_settings(text: str) -> dict[str, str]:
@@ -69,7 +70,7 @@ def test_the_unit_runs_the_example_agent_yaml_as_the_robotconf_user() -> None:
     unit = unit_settings(UNIT.read_text(encoding="utf-8"))
     agent = yaml.safe_load((EXAMPLE / "agent.yaml").read_text(encoding="utf-8"))
     assert INSTALLED_CONFIG in (EXAMPLE / "agent.yaml").read_text(encoding="utf-8")
-    assert unit["ExecStart"] == f"{INSTALLED_TOOL} agent --config {INSTALLED_CONFIG}"
+    assert unit["ExecStart"] == f"{INSTALLED_TOOL} --config {INSTALLED_CONFIG}"
     assert unit["User"] == "robotconf" and unit["Type"] == "simple"
     assert unit["Restart"] == "on-failure"
     # SIGTERM to the agent alone, which stops its brain; systemd must wait for that.
@@ -89,8 +90,9 @@ def test_the_unit_runs_the_example_agent_yaml_as_the_robotconf_user() -> None:
 )
 def test_systemd_accepts_the_unit_and_finds_it_hardened(tmp_path: Path) -> None:
     # verify checks that ExecStart's program exists: the robot's venv stands in as this one's.
-    text = UNIT.read_text(encoding="utf-8").replace(INSTALLED_TOOL, str(ROBOTCONF))
-    assert str(ROBOTCONF) in text
+    beside = Path(ROBOTCONF).with_name("robotconf-agent")
+    text = UNIT.read_text(encoding="utf-8").replace(INSTALLED_TOOL, str(beside))
+    assert str(beside) in text
     unit = tmp_path / UNIT.name
     unit.write_text(text, encoding="utf-8")
     done = subprocess.run(
