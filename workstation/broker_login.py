@@ -56,6 +56,18 @@ def broker_login(folder: Path, username: str = USERNAME) -> BrokerLogin:
     return BrokerLogin(username, path)
 
 
+def prune_logins(folder: Path, keep: set[str]) -> list[str]:
+    """Removes the password files of users not in `keep` (robots that left the fleet since an
+    earlier `up`), so that a robot no longer in fleet.yaml cannot log in; the removed users."""
+    gone = []
+    for path in sorted(folder.glob("*.password")):
+        user = path.name.removesuffix(".password")
+        if user not in keep and is_robot_id(user):
+            path.unlink(missing_ok=True)
+            gone.append(user)
+    return gone
+
+
 def accepts(folder: Path, username: str | None, password: str | bytes | None) -> bool:
     """True when `username` has a login in `folder` and `password` is its password."""
     if username is None or not is_robot_id(username):

@@ -444,9 +444,13 @@ def _start_broker(
         say(f"broker: {redact_url(given_broker)} (given by {setup.broker_origin})")
         return None, None, given_broker
     from workstation.broker import BrokerStartError, EmbeddedBroker
-    from workstation.broker_login import broker_login
+    from workstation.broker_login import RECONCILER, USERNAME, broker_login, prune_logins
 
-    login = broker_login(setup.workdir / "broker")
+    folder = setup.workdir / "broker"
+    login = broker_login(folder)
+    gone = prune_logins(folder, {USERNAME, RECONCILER, *setup.fleet.requests})
+    if gone:
+        say(f"broker: logins removed of robots no longer in the fleet: {', '.join(gone)}")
     broker = EmbeddedBroker(login, preferred=setup.port, prefix=prefix)
     try:
         broker.start()

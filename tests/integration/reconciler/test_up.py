@@ -86,6 +86,10 @@ def none_left(folder: str) -> None:
 
 def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -> None:
     lab.replace("configs/scenarios/guide-gazebo.yaml", "goal_tolerance: 0.2", "goal_tolerance: 0.3")
+    # The login an earlier `up` made for a robot that has left fleet.yaml since.
+    stale = Path(up_folder(lab)) / "broker" / "tb3-99.password"
+    stale.parent.mkdir(parents=True)
+    stale.write_text("left-over\n")
     with port_1883_taken() as held:
         up = start_up(lab, tmp_path)
         try:
@@ -102,6 +106,8 @@ def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -
             login = ["--username", "operator", "--password-file", str(password)]
             assert "another terminal: robotconf status    robotconf logs ROBOT" in out
             assert oct(password.stat().st_mode & 0o777) == "0o600"
+            assert not stale.exists()
+            assert "logins removed of robots no longer in the fleet: tb3-99" in out
 
             def run(*argv: str) -> subprocess.CompletedProcess[str]:
                 return subprocess.run(
