@@ -1,0 +1,242 @@
+"""The fleet in a real browser: headless Chromium on `robotconf ui` of a real fleet (Mosquitto,
+reconciler, agents with stand-in brains). A commit turns a row from Progressing to InSync
+without a reload, a refused commit's diagnostic shows, the label filter narrows the rows, an
+operator restarts a robot and a viewer cannot; keyboard, phone width, verdicts as text. The
+docs' screenshots come from here (ROBOTCONF_SCREENSHOTS=docs/images).
+
+Relies only on the DOM contract of issue 24: `tr[data-robot][data-verdict]`,
+`[data-reconciler-state]`, `[data-diagnostics] li`, `form[data-filter]`, `[data-robot-page]`,
+`a[data-action="restart"]`, `form[data-confirm-restart]`, `[data-restart-outcome]`,
+`form[data-login]`.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pytest
+
+from contract.wire import AgentState
+from tests.integration.ui.conftest import HELD, TOKEN, UiFleet
+from tests.support.browser import screenshot_folders
+from tests.support.fleet import pid_alive
+
+if TYPE_CHECKING:
+    from playwright.sync_api import Browser, Page
+
+WAIT_MS = 60_000  # generous: CI machines are slow and shared; nothing asserts timing
+ROW = "tr[data-robot]"
+
+
+def expect_ms() -> dict[str, float]:
+    return {"timeout": WAIT_MS}
+
+
+def open_page(browser: Browser, width: int = 1280, height: int = 900) -> Page:
+    """A page in a new browser context: no cookie of another test's login."""
+    return browser.new_context(viewport={"width": width, "height": height}).new_page()
+
+
+def rows(page: Page) -> dict[str, str]:
+    """Robot id -> data-verdict of every row on the page."""
+    found: dict[str, str] = page.eval_on_selector_all(
+        ROW,
+        "rows => Object.fromEntries(rows.map(r => [r.dataset.robot, r.dataset.verdict]))",
+    )
+    return found
+
+
+def login(page: Page, url: str) -> None:
+    """As an operator: the login form with the token of --operator-token-file."""
+    from playwright.sync_api import expect
+
+    page.goto(f"{url}/login")
+    form = page.locator("form[data-login]")
+    form.locator("input[name=token]").fill(TOKEN)
+    form.locator("input[name=token]").press("Enter")
+    expect(page).not_to_have_url(re.compile(r"/login\b"), **expect_ms())
+
+
+def test_a_commit_turns_a_row_from_progressing_to_in_sync_live(
+    ui_fleet: UiFleet, browser: Browser
+) -> None:
+    from playwright.sync_api import expect
+
+    page = open_page(browser)
+    page.goto(ui_fleet.url + "/")
+    row = page.locator(f'tr[data-robot="{HELD}"]')
+    expect(row).to_have_attribute("data-verdict", "InSync", **expect_ms())
+    page.evaluate("window.notReloaded = true")  # gone if the page were loaded again
+
+    # HELD's brain holds its agent off: the new request waits (deferred), the row Progressing.
+    lab = ui_fleet.lab
+    lab.replace("configs/scenarios/delivery-gazebo.yaml", "move_speed: 0.1", "move_speed: 0.12")
+    head = lab.commit("slower delivery")
+    ui_fleet.watch.wait_state(HELD, AgentState.DEFERRED)
+    expect(row).to_have_attribute("data-verdict", "Progressing", **expect_ms())
+    expect(row).to_contain_text("Progressing")
+
+    ui_fleet.marker.unlink()  # the brain's task is done: the agent starts the new request
+    expect(row).to_have_attribute("data-verdict", "InSync", **expect_ms())
+    expect(row).to_contain_text("InSync")
+    assert page.evaluate("window.notReloaded") is True
+    ui_fleet.converged = ui_fleet.watch.wait_running(ui_fleet.requests(head))
+
+
+def test_a_refused_commit_shows_its_diagnostic_then_clears(
+    ui_fleet: UiFleet, browser: Browser, tmp_path: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    page = open_page(browser)
+    page.goto(ui_fleet.url + "/")
+    box = page.locator("[data-reconciler-state]")
+    expect(box).to_have_attribute("data-reconciler-state", "Ready", **expect_ms())
+    lab = ui_fleet.lab
+    scenario = "configs/scenarios/delivery-gazebo.yaml"
+    lab.replace(scenario, "capability: turtlebot3-camera", "capability: nope")
+    lab.commit("typo")
+    expect(box).to_have_attribute("data-reconciler-state", "Stalled", **expect_ms())
+    diagnostic = page.locator("[data-diagnostics] li").filter(has_text="nope")
+    expect(diagnostic).to_have_count(1, **expect_ms())
+    # file:line:col CODE message, as `robotconf validate` points at it.
+    expect(diagnostic).to_have_text(
+        re.compile(rf"{re.escape(scenario)}:3:13\b.*\bRC206\b.*unknown capability .*'nope'")
+    )
+    for folder in screenshot_folders(tmp_path):  # the docs' fleet picture: a refused commit
+        page.screenshot(path=str(folder / "ui-fleet.png"), full_page=True)
+
+    lab.replace(scenario, "capability: nope", "capability: turtlebot3-camera")
+    lab.commit("fix the typo")
+    expect(box).to_have_attribute("data-reconciler-state", "Ready", **expect_ms())
+    expect(page.locator("[data-diagnostics] li")).to_have_count(0, **expect_ms())
+
+
+def test_the_label_filter_narrows_the_rows(ui_fleet: UiFleet, browser: Browser) -> None:
+    from playwright.sync_api import expect
+
+    page = open_page(browser)
+    page.goto(ui_fleet.url + "/")
+    expect(page.locator(ROW)).to_have_count(len(ui_fleet.lab.robots()), **expect_ms())
+    form = page.locator("form[data-filter]")
+    form.locator("input[name=selector]").fill("site=robotics-lab")
+    form.locator("input[name=selector]").press("Enter")
+    expect(page).to_have_url(re.compile(r"[?&]selector=site%3Drobotics-lab\b"), **expect_ms())
+    expect(page.locator(ROW)).to_have_count(2, **expect_ms())
+    assert set(rows(page)) == {"tb3-04", "tb3-07"}
+
+    page.goto(ui_fleet.url + "/?q=tb3-0&selector=ring%3Dcanary")  # the same query as a link
+    expect(page.locator(ROW)).to_have_count(2, **expect_ms())
+    assert set(rows(page)) == {"tb3-01", "tb3-03"}
+
+
+def test_an_operator_restarts_a_robot(ui_fleet: UiFleet, browser: Browser, tmp_path: Path) -> None:
+    from playwright.sync_api import expect
+
+    robot = "tb3-04"
+    before = ui_fleet.watch.status(robot)
+    assert before is not None and before.state is AgentState.RUNNING and before.pid
+    page = open_page(browser)
+    login(page, ui_fleet.url)
+    page.goto(f"{ui_fleet.url}/robots/{robot}")
+    expect(page.locator(f'[data-robot-page="{robot}"]')).to_be_visible(**expect_ms())
+    asked = time.time()
+    page.locator('a[data-action="restart"]').click()
+    confirm = page.locator("form[data-confirm-restart]")
+    expect(confirm).to_be_visible(**expect_ms())
+    expect(confirm.locator("input[name=csrf]")).to_have_count(1)
+    confirm.locator("button, input[type=submit]").first.click()
+    expect(page).to_have_url(re.compile(rf"/robots/{robot}$"), **expect_ms())
+    expect(page.locator("[data-restart-outcome]")).to_be_visible(**expect_ms())
+
+    # The agent really started its brain again, recording the request from the desk.
+    after = ui_fleet.watch.wait_for(
+        robot,
+        lambda s: (
+            s.state is AgentState.RUNNING
+            and s.pid != before.pid
+            and s.restart_requested_at is not None
+            and s.restart_requested_at >= asked - 1
+        ),
+        "a new brain for the UI's restart",
+    )
+    assert after.restart_requested_by and after.digest == before.digest
+    assert not pid_alive(before.pid)
+    ui_fleet.converged[robot] = after
+
+    for folder in screenshot_folders(tmp_path):  # the docs' robot picture, after the restart
+        page.screenshot(path=str(folder / "ui-robot.png"), full_page=True)
+
+    # The same cookie without the form's CSRF token is refused.
+    answer = page.request.post(f"{ui_fleet.url}/robots/{robot}/restart", form={"csrf": "x"})
+    assert answer.status == 403
+
+
+def test_a_viewer_sees_no_restart_and_cannot_post_one(ui_fleet: UiFleet, browser: Browser) -> None:
+    from playwright.sync_api import expect
+
+    robot = "tb3-04"
+    before = ui_fleet.watch.status(robot)
+    assert before is not None
+    page = open_page(browser)
+    page.goto(f"{ui_fleet.url}/robots/{robot}")
+    expect(page.locator(f'[data-robot-page="{robot}"]')).to_be_visible(**expect_ms())
+    expect(page.locator('a[data-action="restart"]')).to_have_count(0)
+    answer = page.request.post(f"{ui_fleet.url}/robots/{robot}/restart", form={"csrf": "x"})
+    assert answer.status == 401
+    wrong = page.request.post(
+        f"{ui_fleet.url}/robots/{robot}/restart",
+        headers={"Authorization": "Bearer not-the-operator-token"},
+    )
+    assert wrong.status in (401, 403)
+    now = ui_fleet.watch.status(robot)
+    assert now is not None and now.restart_requested_at == before.restart_requested_at
+
+
+def test_keyboard_reaches_the_filter_and_every_row_link(
+    ui_fleet: UiFleet, browser: Browser
+) -> None:
+    from playwright.sync_api import expect
+
+    page = open_page(browser)
+    page.goto(ui_fleet.url + "/")
+    expect(page.locator(ROW)).to_have_count(len(ui_fleet.lab.robots()), **expect_ms())
+    focusable = page.locator("a[href], button, input, select, textarea, [tabindex]").count()
+    reached: set[str] = set()
+    for _ in range(focusable + 2):
+        page.keyboard.press("Tab")
+        reached.add(
+            page.evaluate(
+                """() => {
+                    const el = document.activeElement;
+                    if (!el) return "";
+                    if (el.closest("form[data-filter]") && el.name) return "filter:" + el.name;
+                    const row = el.closest("tr[data-robot]");
+                    if (row && el.tagName === "A") return "row:" + row.dataset.robot;
+                    return "";
+                }"""
+            )
+        )
+    wanted = {"filter:selector"} | {f"row:{r}" for r in ui_fleet.lab.robots()}
+    assert wanted <= reached, f"Tab never reached {sorted(wanted - reached)}"
+
+
+@pytest.mark.parametrize("width", [390])
+def test_a_phone_width_needs_no_horizontal_scroll(
+    ui_fleet: UiFleet, browser: Browser, width: int
+) -> None:
+    from playwright.sync_api import expect
+
+    page = open_page(browser, width=width, height=844)
+    page.goto(ui_fleet.url + "/")
+    expect(page.locator(ROW)).to_have_count(len(ui_fleet.lab.robots()), **expect_ms())
+    scroll, inner = page.evaluate(
+        "[document.documentElement.scrollWidth, document.documentElement.clientWidth]"
+    )
+    assert scroll <= inner, f"the fleet page is {scroll} px wide in a {inner} px window"
+    for robot, verdict in rows(page).items():  # not by colour alone: the verdict is text
+        text = page.locator(f'tr[data-robot="{robot}"]').inner_text()
+        assert verdict in text, (robot, verdict, text)
