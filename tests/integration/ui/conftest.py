@@ -1,5 +1,5 @@
-"""Fixtures of the browser tests: one headless Chromium for the session, a page in a browser
-context of its own (its own cookies) per test, and a real fleet with `robotconf ui` beside it."""
+"""Fixtures of the browser tests: one headless Chromium per module, a page in a browser context
+of its own (its own cookies) per test, and a real fleet with `robotconf ui` beside it."""
 
 from __future__ import annotations
 
@@ -23,8 +23,9 @@ if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
+    """Per module: no browser runs beside the rest of the suite (two cores, shared)."""
     why = support.missing()
     if why is not None:
         if support.required():
