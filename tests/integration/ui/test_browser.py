@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -25,7 +26,7 @@ from tests.support.browser import screenshot_folders
 from tests.support.fleet import pid_alive
 
 if TYPE_CHECKING:
-    from playwright.sync_api import Browser, Page
+    from playwright.sync_api import Browser, ConsoleMessage, Page, Response
 
 WAIT_MS = 60_000  # generous: CI machines are slow and shared; nothing asserts timing
 ROW = "tr[data-robot]"
@@ -35,9 +36,44 @@ def expect_ms() -> dict[str, float]:
     return {"timeout": WAIT_MS}
 
 
+# Every page a test opened, with what its console said in red: a script error or something
+# the CSP refused (an inline script or style) fails the test.
+OPENED: list[tuple[Page, list[str]]] = []
+
+
+@pytest.fixture(autouse=True)
+def pages_without_errors() -> Iterator[None]:
+    OPENED.clear()
+    yield
+    try:
+        said = {page.url: errors for page, errors in OPENED if errors}
+        assert not said, f"the browser reported errors: {said}"
+    finally:
+        for page, _ in OPENED:
+            page.context.close()
+        OPENED.clear()
+
+
 def open_page(browser: Browser, width: int = 1280, height: int = 900) -> Page:
     """A page in a new browser context: no cookie of another test's login."""
-    return browser.new_context(viewport={"width": width, "height": height}).new_page()
+    page = browser.new_context(viewport={"width": width, "height": height}).new_page()
+    errors: list[str] = []
+
+    def said(message: ConsoleMessage) -> None:
+        # A failed load is told with its address by the response below.
+        if message.type == "error" and not message.text.startswith("Failed to load resource"):
+            errors.append(message.text)
+
+    def answered(response: Response) -> None:
+        # Chromium asks for /favicon.ico by itself; the UI has none to give (no page names it).
+        if response.status >= 400 and not response.url.endswith("/favicon.ico"):
+            errors.append(f"{response.status} for {response.request.method} {response.url}")
+
+    page.on("console", said)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("response", answered)
+    OPENED.append((page, errors))
+    return page
 
 
 def rows(page: Page) -> dict[str, str]:
