@@ -260,6 +260,14 @@ def test_keyboard_reaches_the_filter_and_every_row_link(
     assert wanted <= reached, f"Tab never reached {sorted(wanted - reached)}"
 
 
+def page_width(page: Page) -> tuple[int, int]:
+    """How wide the page is, and how wide its window: more is a horizontal scroll."""
+    found: tuple[int, int] = page.evaluate(
+        "[document.documentElement.scrollWidth, document.documentElement.clientWidth]"
+    )
+    return found
+
+
 @pytest.mark.parametrize("width", [390])
 def test_a_phone_width_needs_no_horizontal_scroll(
     ui_fleet: UiFleet, browser: Browser, width: int
@@ -269,10 +277,25 @@ def test_a_phone_width_needs_no_horizontal_scroll(
     page = open_page(browser, width=width, height=844)
     page.goto(ui_fleet.url + "/")
     expect(page.locator(ROW)).to_have_count(len(ui_fleet.lab.robots()), **expect_ms())
-    scroll, inner = page.evaluate(
-        "[document.documentElement.scrollWidth, document.documentElement.clientWidth]"
-    )
+    scroll, inner = page_width(page)
     assert scroll <= inner, f"the fleet page is {scroll} px wide in a {inner} px window"
     for robot, verdict in rows(page).items():  # not by colour alone: the verdict is text
         text = page.locator(f'tr[data-robot="{robot}"]').inner_text()
         assert verdict in text, (robot, verdict, text)
+    # The table may scroll in its own box, but each robot's id and verdict are in sight.
+    hidden = page.eval_on_selector_all(
+        ROW,
+        """rows => rows.filter(row => {
+            const verdict = [...row.querySelectorAll("*")].find(
+                e => e.children.length === 0 && e.textContent.trim() === row.dataset.verdict);
+            const link = row.querySelector("a");
+            return ![verdict, link].every(
+                e => e && e.getBoundingClientRect().right <= window.innerWidth);
+        }).map(row => row.dataset.robot)""",
+    )
+    assert hidden == [], f"id or verdict out of sight at {width} px: {hidden}"
+
+    page.goto(ui_fleet.url + "/robots/tb3-04")
+    expect(page.locator('[data-robot-page="tb3-04"]')).to_be_visible(**expect_ms())
+    scroll, inner = page_width(page)
+    assert scroll <= inner, f"a robot's page is {scroll} px wide in a {inner} px window"
