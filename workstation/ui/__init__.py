@@ -1,0 +1,1 @@
+"""The fleet in a browser: `robotconf ui`'s pages, live updates and operator actions."""
