@@ -185,6 +185,8 @@ class Actions:
 
     def logs(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         robot_id = self._operator(request, match, who)
+        if request.method == "HEAD":
+            return Response(200, b"", "text/event-stream; charset=utf-8", headers=PAGE_HEADERS)
         tails = self.tails
         if tails is None:
             raise Refused(503, "this UI has no broker to read a robot's log through")
