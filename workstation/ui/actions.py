@@ -5,24 +5,21 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
-from urllib.parse import parse_qsl
+from urllib.parse import parse_qsl, urlencode
 
 from configurator.types import is_robot_id
 from reconciler.http_edge import FedStream, Request, Response, client_key
 from workstation.ui import forms
 from workstation.ui.auth import MAX_TOKEN, Identity, OperatorAuth, refusal_text
 from workstation.ui.logtail import LogTails
+from workstation.ui.pages import page
 from workstation.ui.restarts import Restarts
+from workstation.ui.server import CSP, Handler, Route
 
 MAX_FORM = 4096  # bytes of a form body: a token, a CSRF token and a path fit
 MAX_FIELDS = 8
 FORM_TYPE = "application/x-www-form-urlencoded"
 LOG_BACKLOG = 64  # log events waiting for a slow page; beyond, its stream ends (it reconnects)
-CSP = (
-    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; "
-    "connect-src 'self'; form-action 'self'; frame-ancestors 'none'; base-uri 'none'"
-)
 PAGE_HEADERS = (
     ("Content-Security-Policy", CSP),
     ("X-Content-Type-Options", "nosniff"),
@@ -30,36 +27,29 @@ PAGE_HEADERS = (
     ("Cache-Control", "no-store"),
 )
 
-Handler = Callable[[Request, "re.Match[str]", Identity], Response]
 # title, body (HTML), who: the whole page, in the UI's frame.
 Layout = Callable[[str, str, Identity], bytes]
 
 
-@dataclass(frozen=True)
-class Route:
-    method: str
-    pattern: re.Pattern[str]
-    handler: Handler
-
-
-def plain_layout(title: str, body: str, who: Identity) -> bytes:
-    """A page in the plainest frame (the UI's pages module has the real one)."""
-    return (
-        '<!doctype html><html lang="en"><head><meta charset="utf-8">'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f'<title>{forms.esc(title)}</title><link rel="stylesheet" href="/static/ui.css">'
-        f'</head><body><main>{body}</main><script src="/static/ui.js"></script></body></html>'
-    ).encode()
+def framed(title: str, body: str, who: Identity) -> bytes:
+    return page(title, body, who).encode("utf-8")
 
 
 class Refused(Exception):
     """A request refused before its action: the code, and the page's words."""
 
-    def __init__(self, code: int, message: str, *headers: tuple[str, str]) -> None:
+    def __init__(
+        self,
+        code: int,
+        message: str,
+        *headers: tuple[str, str],
+        link: tuple[str, str] | None = None,
+    ) -> None:
         super().__init__(message)
         self.code = code
         self.message = message
         self.headers = headers
+        self.link = link  # where to go from here: (path, words)
 
 
 class Actions:
@@ -71,7 +61,7 @@ class Actions:
         auth: OperatorAuth,
         restarts: Restarts | None,
         tails: LogTails | None,
-        layout: Layout = plain_layout,
+        layout: Layout = framed,
     ) -> None:
         self.auth = auth
         self.restarts = restarts
@@ -96,13 +86,8 @@ class Actions:
             try:
                 return handler(request, match, who)
             except Refused as refused:
-                return self.page(
-                    refused.code,
-                    "Refused",
-                    forms.refusal("Refused", refused.message),
-                    who,
-                    *refused.headers,
-                )
+                body = forms.refusal(f"{refused.code}", refused.message, refused.link)
+                return self.page(refused.code, "Refused", body, who, *refused.headers)
 
         return guarded
 
@@ -120,7 +105,7 @@ class Actions:
 
     def login_page(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         if who.operator and who.via == "cookie":
-            return self.page(200, "Log in", forms.logged_in(who), who)
+            return self.page(200, "Log in", forms.logged_in(), who)
         next_path = _query_field(request.target, "next")
         body = forms.login_form(next_path, enabled=self.auth.enabled)
         return self.page(200, "Log in", body, who)
@@ -181,6 +166,10 @@ class Actions:
         body = forms.outcome_html(outcome).encode()
         return Response(200, body, "text/html; charset=utf-8", headers=PAGE_HEADERS)
 
+    def outcome_html(self, robot_id: str) -> str:
+        """The robot page's outcome of the latest restart asked of `robot_id`, if any."""
+        return forms.outcome_html(self.restarts.outcome(robot_id) if self.restarts else None)
+
     # ------------------------------------------------------------------ logs
 
     def logs(self, request: Request, match: re.Match[str], who: Identity) -> Response:
@@ -217,10 +206,12 @@ class Actions:
                 429, "too many wrong tokens from this address", ("Retry-After", str(wait))
             )
         if who.via == "anonymous":
+            back = forms.local_path(request.target)
             raise Refused(
                 401,
-                "operators only: log in (viewers may look, not act)",
+                "operators only (viewers may look, not act):",
                 ("WWW-Authenticate", 'Bearer realm="robotconf"'),
+                link=("/login?" + urlencode({"next": back}), "log in"),
             )
         if not who.operator:
             raise Refused(403, "that is not the operator token")

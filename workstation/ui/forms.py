@@ -1,24 +1,20 @@
 """The operator's page parts, pure: the login form, the restart confirmation, a restart's
-outcome, the logout button. Every string that came from outside goes through `esc`."""
+outcome. Every string that came from outside goes through the pages' `esc`."""
 
 from __future__ import annotations
 
-import html
 import re
 import time
 from urllib.parse import quote
 
 from workstation.ui.auth import Identity
+from workstation.ui.pages import esc
 from workstation.ui.restarts import Outcome
 
 MAX_NEXT = 512
 # A path on this site, with a query perhaps: no scheme, no host (`//evil`), no backslash that
 # a browser would read as a slash, nothing outside visible ASCII.
 _LOCAL_PATH = re.compile(r"/(?![/\\])[A-Za-z0-9._~!$&'()*+,;=:@%/?-]*")
-
-
-def esc(text: str) -> str:
-    return html.escape(text, quote=True)
 
 
 def local_path(candidate: str | None) -> str:
@@ -50,19 +46,8 @@ def login_form(next_path: str, message: str = "", *, enabled: bool = True) -> st
     )
 
 
-def logged_in(who: Identity) -> str:
-    return "<h1>Log in</h1><p>You are logged in as an operator.</p>" + logout_form(who)
-
-
-def logout_form(who: Identity) -> str:
-    """The logout button of an operator's session (nothing for a viewer or a script)."""
-    if who.via != "cookie":
-        return ""
-    return (
-        '<form method="post" action="/logout" data-logout>'
-        f'<input type="hidden" name="csrf" value="{esc(who.csrf)}">'
-        '<button type="submit">Log out</button></form>'
-    )
+def logged_in() -> str:
+    return "<h1>Log in</h1><p>You are logged in as an operator (log out at the top).</p>"
 
 
 def robot_path(robot_id: str) -> str:
@@ -112,13 +97,3 @@ def refusal(title: str, message: str, link: tuple[str, str] | None = None) -> st
     if link is not None:
         more = f' <a href="{esc(link[0])}">{esc(link[1])}</a>'
     return f'<h1>{esc(title)}</h1><p role="alert">{esc(message)}{more}</p>'
-
-
-def log_tail(robot_id: str) -> str:
-    """The live log tail of an operator's robot page (`pre[data-log-tail]`): the script
-    fills it from the page's `/robots/<id>/logs` stream."""
-    src = f"{robot_path(robot_id)}/logs"
-    return (
-        f'<section aria-label="Brain log"><h2>Brain log</h2>'
-        f'<pre data-log-tail data-src="{esc(src)}" tabindex="0" aria-live="off"></pre></section>'
-    )

@@ -32,20 +32,26 @@ class Feed(Protocol):
     def end(self) -> None: ...
 
 
-def event(kind: str, lines: list[str]) -> bytes:
-    """One server-sent event: each line one `data:` field. Lines arrive made printable (no
-    line break or control character left), so none can end the event or forge another."""
+def event(lines: list[str]) -> bytes:
+    """One server-sent event (a `message`: the page appends its data, a line each): each line
+    one `data:` field. Lines arrive made printable (no line break or control character left),
+    so none can end the event or forge another."""
     data = "".join(f"data: {line}\n" for line in lines) or "data:\n"
-    return f"event: {kind}\n{data}\n".encode()
+    return f"{data}\n".encode()
+
+
+def note(text: str) -> bytes:
+    """A line of the UI's own among the log's, marked as such."""
+    return event([f"[robotconf ui] {text}"])
 
 
 def chunk_event(chunk: LogsChunk) -> bytes:
     """A chunk of the log as one `lines` event; lines left out are said first."""
     lines = [_cut(shown(line)) for line in chunk.lines]
-    said = event("lines", lines) if lines else b""
+    said = event(lines) if lines else b""
     if chunk.dropped:
-        note = f"{chunk.dropped} line(s) left out: the robot sends about 100 lines a second"
-        said = event("note", [note]) + said
+        left_out = f"{chunk.dropped} line(s) left out: the robot sends about 100 lines a second"
+        said = note(left_out) + said
     return said
 
 
@@ -107,13 +113,12 @@ class LogTails:
                         if said:
                             feed.put(said)
                     else:
-                        note = f"{robot_id} went offline; its log goes on when it is back"
-                        feed.put(event("note", [note]))
+                        feed.put(note(f"{robot_id} went offline; its log goes on when it is back"))
         except CliError as exc:
-            feed.put(event("note", [shown(exc.message)]))
+            feed.put(note(shown(exc.message)))
         except Exception as exc:  # one page's stream ends, never the UI
             log.error("ui: the log stream of %s failed: %s", robot_id, shown(repr(exc))[:300])
-            feed.put(event("note", ["the log stream failed (see the UI's log)"]))
+            feed.put(note("the log stream failed (see the UI's log)"))
         finally:
             feed.end()
             self.release()

@@ -11,9 +11,10 @@ import pytest
 
 from reconciler.http_edge import Request, Response
 from workstation.ui import forms
-from workstation.ui.actions import Actions, Route
+from workstation.ui.actions import Actions
 from workstation.ui.auth import COOKIE, Identity, OperatorAuth, Policy
 from workstation.ui.restarts import Outcome
+from workstation.ui.server import Route
 
 TOKEN = "operator-token-" + "q9" * 10
 FORM = "application/x-www-form-urlencoded"
@@ -241,7 +242,8 @@ def test_no_page_shows_a_secret() -> None:
         assert TOKEN not in shown and TOKEN[:-1] not in shown
         assert session_id not in answer.body.decode()
     bearer_page = answers[3].body.decode()
-    assert who.csrf not in bearer_page and 'name="csrf"' not in bearer_page
+    assert who.csrf not in bearer_page
+    assert re.findall(r'name="csrf" value="([^"]*)"', bearer_page) in ([], [""])
 
 
 def test_robot_text_in_an_outcome_is_escaped() -> None:
