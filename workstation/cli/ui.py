@@ -13,6 +13,7 @@ from contract.errors import CliError, ExitCode
 from reconciler.lifecycle import log_to_stderr, on_stop_signals
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.options import F, repo_option
+from workstation.cli.restart import signing_key_option
 from workstation.ui import DEFAULT_LISTEN
 
 if TYPE_CHECKING:
@@ -81,6 +82,7 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     is_flag=True,
     help="a reverse proxy in front terminates TLS (for a non-loopback --listen without --tls-cert)",
 )
+@signing_key_option
 def ui(
     repo: Path,
     mqtt: BrokerOptions,
@@ -89,12 +91,28 @@ def ui(
     tls_cert: Path | None,
     tls_key: Path | None,
     behind_tls_proxy: bool,
+    signing_key: Path | None,
 ) -> ExitCode:
     """Serve the fleet as a live web page: the reconciler and a refused commit's diagnostics,
-    the rollout, every robot worst first, each robot's page; runs until signalled."""
+    the rollout, every robot worst first, each robot's page; runs until signalled.
+
+    Viewers look; operators act. With --operator-token-file, an operator logs in at /login
+    with the file's token (a session cookie follows, not the token) or sends it as
+    `Authorization: Bearer TOKEN` from a script; they restart a robot (its page's Restart,
+    confirmed, or POST /robots/ROBOT/restart) through the same signed request as robotconf
+    restart (signed with --signing-key when given; the status says `ui.cookie` or
+    `ui.bearer` asked) and follow its brain's log on its page. Without a token or with a
+    wrong one a restart is refused (401/403); wrong tokens from one address are throttled."""
     from workstation.ui.run import RunningUi, ui_options
 
-    options = ui_options(listen, operator_token_file, tls_cert, tls_key, behind_tls_proxy)
+    options = ui_options(
+        listen,
+        operator_token_file,
+        tls_cert,
+        tls_key,
+        behind_tls_proxy,
+        signing_key=signing_key or mqtt.signing_key,  # up's own, found with its broker
+    )
     connection = mqtt.connection()
     log_to_stderr("ui")
     stop = threading.Event()

@@ -19,8 +19,10 @@ def robot_page(
     who: Identity,
     launch: LaunchRequest | None,
     interfaces: RobotInterfaces | None,
-    outcome: str | None = None,
+    outcome: str = "",
 ) -> str:
+    """`outcome`: the latest restart the UI asked of it, as forms.outcome_html renders it
+    (escaped there), for operators."""
     rid = esc(robot_id)
     path = f"/robots/{quote(robot_id, safe='')}"
     action = (
@@ -28,14 +30,13 @@ def robot_page(
         if who.operator
         else ""
     )
-    said = f'<p data-restart-outcome role="status">{esc(outcome)}</p>' if outcome else ""
     log = (
         f'<pre data-log-tail data-log-src="{path}/logs" aria-live="polite"></pre>'
         if who.operator
         else "<pre data-log-tail>Operators only: log in to follow its brain's log.</pre>"
     )
     body = (
-        f'<div data-robot-page="{rid}"><h1>Robot {rid}</h1>{said}{action}'
+        f'<div data-robot-page="{rid}"><h1>Robot {rid}</h1>{outcome}{action}'
         + banner_box(snap)
         + robot_box(snap, robot_id)
         + launch_section(launch)

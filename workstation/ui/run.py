@@ -7,15 +7,23 @@ import ipaddress
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from contract.errors import CliError
 from contract.mqtt import Connection
 from reconciler.http_edge import BoundedHTTPServer
 from reconciler.lifecycle import parse_address
+from workstation.cli.restart import private_key
 from workstation.ui import DEFAULT_LISTEN
+from workstation.ui.actions import Actions
 from workstation.ui.auth import OperatorAuth
-from workstation.ui.server import UiService, action_routes, serve
+from workstation.ui.logtail import LogTails
+from workstation.ui.restarts import Restarts
+from workstation.ui.server import UiService, serve
 from workstation.ui.state import LiveFleet
+
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 
 @dataclass(frozen=True)
@@ -24,6 +32,7 @@ class UiOptions:
     port: int
     auth: OperatorAuth
     tls: ssl.SSLContext | None = None
+    key: Ed25519PrivateKey | None = None  # operators' restarts are signed with it
 
     @property
     def url(self) -> str:
@@ -47,6 +56,7 @@ def ui_options(
     tls_key: Path | None = None,
     behind_tls_proxy: bool = False,
     option: str = "--listen",
+    signing_key: Path | None = None,
 ) -> UiOptions:
     """The checked options, before anything starts; CliError (exit 2) with what to do. A
     non-loopback address needs operator authentication and TLS (or a proxy that does it)."""
@@ -71,8 +81,10 @@ def ui_options(
                 "(--tls-cert F --tls-key F), or say that a reverse proxy terminates TLS "
                 "(--behind-tls-proxy)"
             )
-    auth = OperatorAuth.from_file(token_file)
-    return UiOptions(host, port, auth, _tls(tls_cert, tls_key) if tls_cert and tls_key else None)
+    # Over TLS, here or at a proxy, the browser sends the session cookie over TLS only.
+    auth = OperatorAuth.from_file(token_file, secure=tls_cert is not None or behind_tls_proxy)
+    tls = _tls(tls_cert, tls_key) if tls_cert and tls_key else None
+    return UiOptions(host, port, auth, tls, private_key(signing_key))
 
 
 def _tls(cert: Path, key: Path) -> ssl.SSLContext:
@@ -90,7 +102,13 @@ class RunningUi:
     def __init__(self, connection: Connection, prefix: str, repo: Path, options: UiOptions) -> None:
         self.live = LiveFleet(connection, prefix, repo)
         self.service = UiService(self.live, options.auth)
-        self.service.routes += action_routes(self.service)
+        actions = Actions(
+            options.auth,
+            Restarts(connection, prefix, options.key),
+            LogTails(connection, prefix),
+        )
+        self.service.routes += actions.routes()
+        self.service.restart_outcome = actions.outcome_html
         self.options = options
         self.live.start()
         try:

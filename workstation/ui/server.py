@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 import re
 import ssl
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from typing import TypeVar
@@ -79,6 +79,8 @@ class UiService:
         self.live = live
         self.auth = auth
         self.static = {name: _static(name) for name in STATIC}
+        # The write side's: a robot's latest restart outcome (HTML) for an operator's page.
+        self.restart_outcome: Callable[[str], str] = lambda robot_id: ""
         self.routes: list[Route] = [
             Route("GET", r"/", self.fleet),
             Route("GET", r"/healthz", self.healthz),
@@ -153,7 +155,8 @@ class UiService:
         interfaces = _parsed(
             self.live.payload(topics.interfaces(robot_id)), RobotInterfaces, MAX_INTERFACES_BYTES
         )
-        return html(200, robot_page(snap, robot_id, who, launch, interfaces))
+        outcome = self.restart_outcome(robot_id) if who.operator else ""
+        return html(200, robot_page(snap, robot_id, who, launch, interfaces, outcome))
 
     def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         """The page's server-sent events: what changed, from the page's own state on."""
@@ -243,15 +246,3 @@ def serve(
     edge = BoundedHTTPServer("ui", service, LIMITS)
     edge.listen(host, port, tls)
     return edge
-
-
-def action_routes(service: UiService) -> list[Route]:
-    """The write side's routes (workstation/ui/actions.py), when it is there."""
-    try:
-        from workstation.ui import actions  # type: ignore[attr-defined,unused-ignore]
-    except ImportError:
-        return []
-    found: Iterable[Route] | Callable[[UiService], Iterable[Route]] = getattr(
-        actions, "ACTION_ROUTES", getattr(actions, "action_routes", [])
-    )
-    return list(found(service) if callable(found) else found)

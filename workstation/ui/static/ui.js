@@ -104,11 +104,35 @@
     var pre = document.querySelector("pre[data-log-tail][data-log-src]");
     if (!pre || !window.EventSource) return;
     var source = new EventSource(pre.getAttribute("data-log-src"));
+    // Each (re)connection starts with the log's tail: what was shown goes, not doubled.
+    source.addEventListener("open", function () { pre.textContent = ""; });
     source.addEventListener("message", function (event) {
       pre.appendChild(document.createTextNode(event.data + "\n"));
       while (pre.childNodes.length > MAX_LOG_LINES) pre.removeChild(pre.firstChild);
       pre.scrollTop = pre.scrollHeight;
     });
+  }
+
+  // A restart the page's operator asked for and the robot has not confirmed yet: its outcome
+  // is fetched again each second (for a minute and a half at most) until it is decided.
+  function restartOutcome() {
+    var shown = document.querySelector('[data-restart-outcome="pending"][data-outcome-src]');
+    if (!shown || !window.fetch) return;
+    var src = shown.getAttribute("data-outcome-src");
+    var tries = 0;
+    var timer = setInterval(function () {
+      if (++tries > 90) { clearInterval(timer); return; }
+      fetch(src, { credentials: "same-origin", cache: "no-store" })
+        .then(function (response) { return response.ok ? response.text() : ""; })
+        .then(function (html) {
+          var fresh = html && fragment(html);
+          if (!fresh || !shown.isConnected) return;
+          shown.replaceWith(fresh);
+          shown = fresh;
+          if (fresh.getAttribute("data-restart-outcome") !== "pending") clearInterval(timer);
+        })
+        .catch(function () { /* the next try */ });
+    }, 1000);
   }
 
   // "/" moves to the robot id search, as on many sites; Escape leaves it.
@@ -127,4 +151,5 @@
   setInterval(ages, 1000);
   follow();
   logTail();
+  restartOutcome();
 })();
