@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -21,6 +21,24 @@ from tests.support.watch import FleetWatch, wait_for
 
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
+
+
+_OUTCOME = pytest.StashKey[bool]()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item,
+) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    """Keeps whether a test's own body passed, for fixtures that check more at teardown."""
+    report = yield
+    if getattr(report, "when", None) == "call":
+        item.stash[_OUTCOME] = bool(report.passed)
+    return report
+
+
+def passed(item: pytest.Item) -> bool:
+    return item.stash.get(_OUTCOME, False)
 
 
 @pytest.fixture(scope="module")
