@@ -77,11 +77,19 @@ class UiFleet:
     url: str
     marker: Path
     agents: dict[str, Proc] = field(default_factory=dict)
-    procs: list[Proc] = field(default_factory=list)
+    procs: list[Proc] = field(default_factory=list)  # every reconciler and UI started
+    reconciler: Proc | None = None
     converged: dict[str, AgentStatus] = field(default_factory=dict)
+    folder: Path = Path()
 
     def requests(self, revision: str | None = None) -> dict[str, RenderedRequest]:
         return self.lab.requests(revision)
+
+    def start_reconciler(self) -> Proc:
+        log = self.folder / f"reconciler-{len(self.procs)}.log"
+        self.reconciler = start_reconciler(self.lab, self.broker.url, log)
+        self.procs.append(self.reconciler)
+        return self.reconciler
 
 
 def _healthy(url: str) -> bool:
@@ -111,11 +119,12 @@ def ui_fleet_on(folder: Path, broker: Mosquitto) -> Iterator[UiFleet]:
     marker.touch()
     port = free_port()
     state = UiFleet(lab, broker, FleetWatch(broker.url), f"http://127.0.0.1:{port}", marker)
+    state.folder = folder
     try:
         for robot_id in lab.robots():
             hold = ["--hold-while", str(marker)] if robot_id == HELD else []
             state.agents[robot_id] = start_agent(lab, robot_id, broker.url, folder, hold)
-        state.procs.append(start_reconciler(lab, broker.url, folder / "reconciler.log"))
+        state.start_reconciler()
         state.converged = state.watch.wait_running(state.requests())
         ui = start_ui(lab, broker, folder, port)
         state.procs.append(ui)

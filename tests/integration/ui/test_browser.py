@@ -1,7 +1,8 @@
 """The fleet in a real browser: headless Chromium on `robotconf ui` of a real fleet (Mosquitto,
 reconciler, agents with stand-in brains). A commit turns a row from Progressing to InSync
 without a reload, a refused commit's diagnostic shows, the label filter narrows the rows, an
-operator restarts a robot and a viewer cannot; keyboard, phone width, verdicts as text. The
+operator restarts a robot and a viewer cannot; keyboard, phone width, verdicts as text; a
+reconciler and a broker restart are shown, then recovered from, on the same open page. The
 docs' screenshots come from here (ROBOTCONF_SCREENSHOTS=docs/images).
 
 Relies only on the DOM contract of issue 24: `tr[data-robot][data-verdict]`,
@@ -315,3 +316,36 @@ def test_a_phone_width_needs_no_horizontal_scroll(
     expect(page.locator('[data-robot-page="tb3-04"]')).to_be_visible(**expect_ms())
     scroll, inner = page_width(page)
     assert scroll <= inner, f"a robot's page is {scroll} px wide in a {inner} px window"
+
+
+def test_the_page_shows_a_reconciler_and_a_broker_restart_then_recovers(
+    ui_fleet: UiFleet, browser: Browser
+) -> None:
+    """Last in the module: it takes the fleet's reconciler and broker away and back."""
+    from playwright.sync_api import expect
+
+    page = open_page(browser)
+    page.goto(ui_fleet.url + "/")
+    box = page.locator("[data-reconciler-state]")
+    expect(box).to_have_attribute("data-reconciler-state", "Ready", **expect_ms())
+    page.evaluate("window.notReloaded = true")
+    reconciler_banner = page.locator('[data-banner="reconciler"]')
+    broker_banner = page.locator('[data-banner="broker"]')
+    expect(reconciler_banner).to_have_count(0)
+
+    assert ui_fleet.reconciler is not None and ui_fleet.reconciler.stop() == 0
+    expect(reconciler_banner).to_be_visible(**expect_ms())
+    ui_fleet.start_reconciler()
+    expect(reconciler_banner).to_have_count(0, **expect_ms())
+    expect(box).to_have_attribute("data-reconciler-state", "Ready", **expect_ms())
+
+    ui_fleet.broker.stop()
+    expect(broker_banner).to_be_visible(**expect_ms())
+    ui_fleet.broker.start()
+    expect(broker_banner).to_have_count(0, **expect_ms())
+    ui_fleet.watch.wait_running(ui_fleet.requests())
+    for robot in ui_fleet.lab.robots():
+        row = page.locator(f'tr[data-robot="{robot}"]')
+        expect(row).to_have_attribute("data-verdict", "InSync", **expect_ms())
+    expect(box).to_have_attribute("data-reconciler-state", "Ready", **expect_ms())
+    assert page.evaluate("window.notReloaded") is True
