@@ -2,13 +2,14 @@
 reconciler, agents with stand-in brains). A commit turns a row from Progressing to InSync
 without a reload, a refused commit's diagnostic shows, the label filter narrows the rows, an
 operator restarts a robot and a viewer cannot; keyboard, phone width, verdicts as text; a
-reconciler and a broker restart are shown, then recovered from, on the same open page. The
-docs' screenshots come from here (ROBOTCONF_SCREENSHOTS=docs/images).
+robot's markup is text; a reconciler and a broker restart are shown, then recovered from, on
+the same open page. The docs' screenshots come from here (ROBOTCONF_SCREENSHOTS=docs/images).
 
-Relies only on the DOM contract of issue 24: `tr[data-robot][data-verdict]`,
+Relies on the DOM contract of issue 24 (`tr[data-robot][data-verdict]`,
 `[data-reconciler-state]`, `[data-diagnostics] li`, `form[data-filter]`, `[data-robot-page]`,
 `a[data-action="restart"]`, `form[data-confirm-restart]`, `[data-restart-outcome]`,
-`form[data-login]`.
+`form[data-login]`) and on two attributes of the UI's own: `[data-banner="broker"]`,
+`[data-banner="reconciler"]`, and the restart outcome's state as `data-restart-outcome`'s value.
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from contract.wire import AgentState
+from contract.wire import AgentState, AgentStatus, RobotDescription, Topics
 from tests.integration.ui.conftest import HELD, TOKEN, UiFleet, passed
+from tests.support.agents import publish
 from tests.support.browser import screenshot_folders
 from tests.support.fleet import pid_alive
 
@@ -31,6 +33,9 @@ if TYPE_CHECKING:
 
 WAIT_MS = 60_000  # generous: CI machines are slow and shared; nothing asserts timing
 ROW = "tr[data-robot]"
+# In fleet.yaml, with no agent: the test plays its robot (tests/integration/reconciler/conftest.py
+# runs the same line with an agent).
+EXTRA = "  tb3-08: {scenario: delivery-gazebo, name: Second delivery bot}\n"
 
 
 def expect_ms() -> dict[str, float]:
@@ -316,6 +321,50 @@ def test_a_phone_width_needs_no_horizontal_scroll(
     expect(page.locator('[data-robot-page="tb3-04"]')).to_be_visible(**expect_ms())
     scroll, inner = page_width(page)
     assert scroll <= inner, f"a robot's page is {scroll} px wide in a {inner} px window"
+
+
+HOSTILE = '<img src=x onerror="document.title=1"></td></tr><tr data-robot="evil"><td>'
+
+
+def test_a_robots_hostile_text_is_text_on_the_live_page(
+    ui_fleet: UiFleet, browser: Browser
+) -> None:
+    """A robot in fleet.yaml whose agent never came reports a status full of markup: its row
+    (patched in live) and its page show it as text, and nothing else changes."""
+    from playwright.sync_api import expect
+
+    lab, topics, robot = ui_fleet.lab, Topics(), "tb3-08"
+    lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA)
+    lab.commit("a robot whose agent is not there yet")
+    page = open_page(browser)
+    page.goto(ui_fleet.url + "/")
+    row = page.locator(f'tr[data-robot="{robot}"]')
+    expect(row).to_have_attribute("data-verdict", "Offline", **expect_ms())
+    title = page.title()
+    description = RobotDescription(id=robot, name="<script>document.title=2</script>")
+    status = AgentStatus(robot_id=robot, state=AgentState.FAILED, message=HOSTILE)
+    try:
+        publish(
+            ui_fleet.broker.url, topics.description(robot), description.model_dump_json().encode()
+        )
+        publish(ui_fleet.broker.url, topics.status(robot), status.model_dump_json().encode())
+        expect(row).to_have_attribute("data-verdict", "Degraded", **expect_ms())
+        expect(row).to_contain_text(HOSTILE)
+        assert row.locator("img, script").count() == 0
+        assert page.locator('tr[data-robot="evil"]').count() == 0
+        assert page.title() == title
+        # Nothing else changed: the other rows as they were.
+        assert rows(page) == {**dict.fromkeys(lab.robots(), "InSync"), robot: "Degraded"}
+        page.goto(f"{ui_fleet.url}/robots/{robot}")
+        expect(page.locator(f'[data-robot-page="{robot}"]')).to_contain_text(HOSTILE)
+        assert page.locator("main img, main script").count() == 0
+    finally:
+        lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml").replace(EXTRA, ""))
+        lab.commit("not that robot after all")
+        for topic in (topics.status(robot), topics.description(robot)):
+            publish(ui_fleet.broker.url, topic, b"")
+    page.goto(ui_fleet.url + "/")
+    expect(page.locator(ROW)).to_have_count(len(lab.robots()), **expect_ms())
 
 
 def test_the_page_shows_a_reconciler_and_a_broker_restart_then_recovers(
