@@ -122,6 +122,7 @@ class Actions:
             raise Refused(400, "the login form has no token field")
         result = self.auth.login(client_key(request.client), token[: MAX_TOKEN + 1])
         if result.cookie is not None:
+            self.auth.logout(request.headers)  # a session it had ends: one per login
             return _see_other(next_path, ("Set-Cookie", result.cookie))
         body = forms.login_form(next_path, refusal_text(result))
         if result.refusal == "throttled":

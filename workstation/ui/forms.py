@@ -60,7 +60,7 @@ def confirm_restart(robot_id: str, who: Identity, outcome: Outcome | None) -> st
     rid = esc(robot_id)
     csrf = f'<input type="hidden" name="csrf" value="{esc(who.csrf)}">' if who.csrf else ""
     return (
-        f'<h1>Restart {rid}?</h1><div data-robot-page="{rid}">'
+        f"<h1>Restart {rid}?</h1><div>"
         f"<p>{rid}'s agent stops its brain (SIGTERM, then SIGKILL after its stop timeout) "
         "and starts it again with the launch request it has; its restart count and backoff "
         "start over. A busy brain (its hold file) defers it. No commit is needed.</p>"
