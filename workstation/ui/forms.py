@@ -36,6 +36,8 @@ def login_form(next_path: str, message: str = "", *, enabled: bool = True) -> st
     return (
         f"<h1>Log in as an operator</h1>{said}"
         '<form method="post" action="/login" data-login>'
+        # For password managers and screen readers: a password field has its user name.
+        '<input type="text" name="username" value="operator" autocomplete="username" hidden>'
         '<label for="token">Operator token</label> '
         '<input type="password" id="token" name="token" autocomplete="current-password" '
         'required maxlength="1024" autofocus> '
