@@ -41,14 +41,19 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     """`--ui` of `reconcile` and `up`, checked before anything starts: read-only, loopback."""
     if ui_at is None:
         return None
+    from reconciler.lifecycle import parse_address
     from workstation.ui.run import is_loopback, ui_options
 
-    options = ui_options(ui_at, option="--ui")
-    if not is_loopback(options.host):
+    try:
+        host, _ = parse_address(ui_at, "--ui", DEFAULT_LISTEN)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if not is_loopback(host):
         raise CliError(
             f"--ui {ui_at}: serves loopback only; for other machines run robotconf ui with "
             "--operator-token-file and TLS"
         )
+    options = ui_options(ui_at, option="--ui")
     return options
 
 
