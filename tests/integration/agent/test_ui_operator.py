@@ -223,6 +223,13 @@ def test_an_operator_restarts_a_failed_brain_by_login_cookie_and_csrf(
     restarted(watch, agent, "ui.cookie")
     assert "restart requested by ui.cookie" in agent.brain_log()
     wait_for(lambda: "confirmed" in outcome_of(ui, cookie), "the outcome on the robot page")
+    # No page an operator sees holds the token or the session id (the CSRF token is the
+    # session's forms' own).
+    session_id = cookie.split("=", 1)[1]
+    for path in ["/", f"/robots/{ROBOT}", f"/robots/{ROBOT}/restart", "/login"]:
+        shown = ui.ask("GET", path, Cookie=cookie)
+        text = shown.body + repr(shown.headers)
+        assert shown.code == 200 and TOKEN not in text and session_id not in text, path
 
 
 def test_a_script_restarts_with_a_bearer_token_and_a_signed_request(
