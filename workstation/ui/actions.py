@@ -23,7 +23,6 @@ LOG_BACKLOG = 64  # log events waiting for a slow page; beyond, its stream ends 
 PAGE_HEADERS = (
     ("Content-Security-Policy", CSP),
     ("X-Content-Type-Options", "nosniff"),
-    ("Referrer-Policy", "no-referrer"),
     ("Cache-Control", "no-store"),
 )
 
@@ -122,6 +121,7 @@ class Actions:
             raise Refused(400, "the login form has no token field")
         result = self.auth.login(client_key(request.client), token[: MAX_TOKEN + 1])
         if result.cookie is not None:
+            self.auth.logout(request.headers)  # a session it had ends: one per login
             return _see_other(next_path, ("Set-Cookie", result.cookie))
         body = forms.login_form(next_path, refusal_text(result))
         if result.refusal == "throttled":
@@ -253,18 +253,20 @@ def _form(request: Request) -> dict[str, str]:
 
 
 def _same_origin(request: Request) -> None:
-    """Refused when the browser says the form came from another site (Origin,
-    Sec-Fetch-Site): SameSite cookies already stop that; this stops it again, and for the
-    login form, which has no session yet."""
+    """Refused when the browser says the form came from another site: SameSite cookies
+    already stop that; this stops it again, and for the login form, which has no session
+    yet. Sec-Fetch-Site where the browser sends it; else the Origin, when there is one
+    (a browser may send `Origin: null` for its own page's form: only Sec-Fetch-Site is
+    trusted to say same-origin then)."""
     headers = request.headers
-    if (headers.get("Sec-Fetch-Site") or "same-origin").strip() not in (
-        "same-origin",
-        "none",
-    ):
-        raise Refused(403, "a form from another site is refused")
+    site = headers.get("Sec-Fetch-Site")
+    if site is not None:
+        if site.strip() not in ("same-origin", "none"):
+            raise Refused(403, "a form from another site is refused")
+        return
     origin = headers.get("Origin")
     if origin is None:
-        return
+        return  # not a browser's cross-site form (those carry an Origin): a script
     host = (headers.get("Host") or "").strip()
     if not host or origin.strip() not in (f"http://{host}", f"https://{host}"):
         raise Refused(403, "a form from another site is refused")

@@ -36,6 +36,8 @@ def login_form(next_path: str, message: str = "", *, enabled: bool = True) -> st
     return (
         f"<h1>Log in as an operator</h1>{said}"
         '<form method="post" action="/login" data-login>'
+        # For password managers and screen readers: a password field has its user name.
+        '<input type="text" name="username" value="operator" autocomplete="username" hidden>'
         '<label for="token">Operator token</label> '
         '<input type="password" id="token" name="token" autocomplete="current-password" '
         'required maxlength="1024" autofocus> '
@@ -60,7 +62,7 @@ def confirm_restart(robot_id: str, who: Identity, outcome: Outcome | None) -> st
     rid = esc(robot_id)
     csrf = f'<input type="hidden" name="csrf" value="{esc(who.csrf)}">' if who.csrf else ""
     return (
-        f'<h1>Restart {rid}?</h1><div data-robot-page="{rid}">'
+        f"<h1>Restart {rid}?</h1><div>"
         f"<p>{rid}'s agent stops its brain (SIGTERM, then SIGKILL after its stop timeout) "
         "and starts it again with the launch request it has; its restart count and backoff "
         "start over. A busy brain (its hold file) defers it. No commit is needed.</p>"

@@ -8,6 +8,7 @@ from __future__ import annotations
 import http.client
 import re
 import socket
+import ssl
 import subprocess
 import sys
 import time
@@ -25,6 +26,7 @@ from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, TIMEOUT, make_request, publish
 from tests.support.lab import ROBOTCONF
 from tests.support.mosquitto import Mosquitto
+from tests.support.tlsutil import make_pki
 from tests.support.watch import FleetWatch, wait_for
 
 TOPICS = Topics()
@@ -72,9 +74,18 @@ def free_port() -> int:
 
 
 class UiProc:
-    """`robotconf ui` as a process on a free loopback port."""
+    """`robotconf ui` as a process on a free loopback port (over TLS with `tls`, the client's
+    context trusting the UI's certificate)."""
 
-    def __init__(self, tmp_path: Path, broker: Mosquitto, *extra: str, token: bool = True):
+    def __init__(
+        self,
+        tmp_path: Path,
+        broker: Mosquitto,
+        *extra: str,
+        token: bool = True,
+        tls: ssl.SSLContext | None = None,
+    ):
+        self.tls = tls
         self.port = free_port()
         self.stderr_path = tmp_path / "ui.stderr"
         args = [str(ROBOTCONF), "ui", "--broker", broker.url, "--repo", str(tmp_path)]
@@ -101,6 +112,10 @@ class UiProc:
         return self.stderr_path.read_text(encoding="utf-8", errors="replace")
 
     def connect(self) -> http.client.HTTPConnection:
+        if self.tls is not None:
+            return http.client.HTTPSConnection(
+                "127.0.0.1", self.port, timeout=TIMEOUT, context=self.tls
+            )
         return http.client.HTTPConnection("127.0.0.1", self.port, timeout=TIMEOUT)
 
     def ask(
@@ -139,8 +154,8 @@ class UiProc:
 def ui_factory(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Any]:
     made: list[UiProc] = []
 
-    def factory(*extra: str, token: bool = True) -> UiProc:
-        ui = UiProc(tmp_path, mosquitto, *extra, token=token)
+    def factory(*extra: str, token: bool = True, tls: ssl.SSLContext | None = None) -> UiProc:
+        ui = UiProc(tmp_path, mosquitto, *extra, token=token, tls=tls)
         made.append(ui)
         return ui
 
@@ -208,6 +223,13 @@ def test_an_operator_restarts_a_failed_brain_by_login_cookie_and_csrf(
     restarted(watch, agent, "ui.cookie")
     assert "restart requested by ui.cookie" in agent.brain_log()
     wait_for(lambda: "confirmed" in outcome_of(ui, cookie), "the outcome on the robot page")
+    # No page an operator sees holds the token or the session id (the CSRF token is the
+    # session's forms' own).
+    session_id = cookie.split("=", 1)[1]
+    for path in ["/", f"/robots/{ROBOT}", f"/robots/{ROBOT}/restart", "/login"]:
+        shown = ui.ask("GET", path, Cookie=cookie)
+        text = shown.body + repr(shown.headers)
+        assert shown.code == 200 and TOKEN not in text and session_id not in text, path
 
 
 def test_a_script_restarts_with_a_bearer_token_and_a_signed_request(
@@ -298,6 +320,51 @@ def test_attacks_on_the_write_side_are_refused_and_the_ui_stays_up(
     assert int(right.headers["Retry-After"]) > 0
     assert ui.ask("GET", "/healthz").code == 200
     assert TOKEN not in ui.stderr()
+
+
+def test_over_tls_the_session_cookie_is_sent_over_tls_only(
+    mosquitto: Mosquitto, ui_factory: Any, tmp_path: Path
+) -> None:
+    pki = make_pki(tmp_path / "pki")
+    trust = ssl.create_default_context(cafile=str(pki.ca_cert))
+    ui = ui_factory("--tls-cert", str(pki.server_cert), "--tls-key", str(pki.server_key), tls=trust)
+    answer = ui.ask("POST", "/login", urlencode({"token": TOKEN}), Content_Type=FORM)
+    assert answer.code == 303
+    flags = [flag.strip() for flag in answer.headers["Set-Cookie"].split(";")]
+    assert {"Secure", "HttpOnly", "SameSite=Strict", "Path=/"} <= set(flags)
+
+
+def run_ui(tmp_path: Path, broker: Mosquitto, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(ROBOTCONF), "ui", "--broker", broker.url, "--repo", str(tmp_path), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_a_ui_refuses_a_readable_token_file_and_an_unprotected_address(
+    mosquitto: Mosquitto, tmp_path: Path
+) -> None:
+    token_file = tmp_path / "token"
+    token_file.write_text(TOKEN + "\n", encoding="utf-8")
+    token_file.chmod(0o644)
+    loopback = f"127.0.0.1:{free_port()}"
+    readable = run_ui(
+        tmp_path, mosquitto, "--listen", loopback, "--operator-token-file", str(token_file)
+    )
+    assert readable.returncode == 2 and "chmod 600" in readable.stderr
+    assert TOKEN not in readable.stderr + readable.stdout
+    token_file.chmod(0o600)
+    anywhere = f"0.0.0.0:{free_port()}"
+    no_token = run_ui(tmp_path, mosquitto, "--listen", anywhere)
+    assert no_token.returncode == 2 and "--operator-token-file" in no_token.stderr
+    no_tls = run_ui(
+        tmp_path, mosquitto, "--listen", anywhere, "--operator-token-file", str(token_file)
+    )
+    assert no_tls.returncode == 2 and "--behind-tls-proxy" in no_tls.stderr
+    for done in (readable, no_token, no_tls):
+        assert "Traceback" not in done.stderr
 
 
 # ---------------------------------------------------------------- logs

@@ -143,6 +143,9 @@ def test_a_login_form_from_another_site_is_refused() -> None:
         assert ui.ask("POST", "/login", body, Content_Type=FORM, **headers).code == 403
     same = {"Origin": "http://127.0.0.1:8765", "Host": "127.0.0.1:8765"}
     assert ui.ask("POST", "/login", body, Content_Type=FORM, **same).code == 303
+    # Chromium's own form under a strict Referrer-Policy: Origin null, Sec-Fetch-Site says.
+    own = {"Origin": "null", "Sec_Fetch_Site": "same-origin", "Host": "127.0.0.1:8765"}
+    assert ui.ask("POST", "/login", body, Content_Type=FORM, **own).code == 303
 
 
 def test_a_viewer_gets_401_a_wrong_token_403_and_an_operator_the_confirmation() -> None:
