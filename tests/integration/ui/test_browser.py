@@ -179,15 +179,7 @@ def test_the_label_filter_narrows_the_rows(ui_fleet: UiFleet, browser: Browser) 
     assert set(rows(page)) == {"tb3-01", "tb3-03"}
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the write side refuses the browser's own forms: /login and the restart "
-    "confirmation are served with Referrer-Policy: no-referrer (workstation/ui/actions.py "
-    "PAGE_HEADERS), so Chromium posts them with Origin: null, which _same_origin takes for "
-    "another site (403 'a form from another site is refused'); with same-origin, as "
-    "workstation/ui/server.py sends, this test passes",
-)
-def test_an_operator_restarts_a_robot(ui_fleet: UiFleet, browser: Browser) -> None:
+def test_an_operator_restarts_a_robot(ui_fleet: UiFleet, browser: Browser, tmp_path: Path) -> None:
     from playwright.sync_api import expect
 
     robot = "tb3-04"
@@ -223,15 +215,20 @@ def test_an_operator_restarts_a_robot(ui_fleet: UiFleet, browser: Browser) -> No
     assert after.restart_requested_by and after.digest == before.digest
     assert not pid_alive(before.pid)
     ui_fleet.converged[robot] = after
+    # The brain's log, followed live through the desk channel, says so too.
+    tail = page.locator("pre[data-log-tail]")
+    expect(tail).to_contain_text(
+        f"restart requested by {after.restart_requested_by}", **expect_ms()
+    )
+    for folder in screenshot_folders(tmp_path):  # the docs' robot picture: an operator's
+        page.screenshot(path=str(folder / "ui-robot.png"), full_page=True)
 
     # The same cookie without the form's CSRF token is refused.
     answer = page.request.post(f"{ui_fleet.url}/robots/{robot}/restart", form={"csrf": "x"})
     assert answer.status == 403
 
 
-def test_a_viewer_sees_no_restart_and_cannot_post_one(
-    ui_fleet: UiFleet, browser: Browser, tmp_path: Path
-) -> None:
+def test_a_viewer_sees_no_restart_and_cannot_post_one(ui_fleet: UiFleet, browser: Browser) -> None:
     from playwright.sync_api import expect
 
     robot = "tb3-04"
@@ -241,8 +238,7 @@ def test_a_viewer_sees_no_restart_and_cannot_post_one(
     page.goto(f"{ui_fleet.url}/robots/{robot}")
     expect(page.locator(f'[data-robot-page="{robot}"]')).to_be_visible(**expect_ms())
     expect(page.locator('a[data-action="restart"]')).to_have_count(0)
-    for folder in screenshot_folders(tmp_path):  # the docs' robot picture, a viewer's
-        page.screenshot(path=str(folder / "ui-robot.png"), full_page=True)
+    assert page.request.get(f"{ui_fleet.url}/robots/{robot}/logs").status == 401
     answer = page.request.post(f"{ui_fleet.url}/robots/{robot}/restart", form={"csrf": "x"})
     assert answer.status == 401
     wrong = page.request.post(
