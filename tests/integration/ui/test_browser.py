@@ -179,6 +179,15 @@ def test_the_label_filter_narrows_the_rows(ui_fleet: UiFleet, browser: Browser) 
     assert set(rows(page)) == {"tb3-01", "tb3-03"}
 
 
+def tab_to(page: Page, selector: str, limit: int = 100) -> None:
+    """Presses Tab until the focus is on an element matching `selector`."""
+    for _ in range(limit):
+        page.keyboard.press("Tab")
+        if page.evaluate("s => !!document.activeElement?.matches(s)", selector):
+            return
+    raise AssertionError(f"Tab never reached {selector} in {limit} presses")
+
+
 def test_an_operator_restarts_a_robot(ui_fleet: UiFleet, browser: Browser, tmp_path: Path) -> None:
     from playwright.sync_api import expect
 
@@ -190,11 +199,14 @@ def test_an_operator_restarts_a_robot(ui_fleet: UiFleet, browser: Browser, tmp_p
     page.goto(f"{ui_fleet.url}/robots/{robot}")
     expect(page.locator(f'[data-robot-page="{robot}"]')).to_be_visible(**expect_ms())
     asked = time.time()
-    page.locator('a[data-action="restart"]').click()
+    # With the keyboard alone: Tab to the link, Enter; Tab to the confirmation's button, Enter.
+    tab_to(page, 'a[data-action="restart"]')
+    page.keyboard.press("Enter")
     confirm = page.locator("form[data-confirm-restart]")
     expect(confirm).to_be_visible(**expect_ms())
     expect(confirm.locator("input[name=csrf]")).to_have_count(1)
-    confirm.locator("button, input[type=submit]").first.click()
+    tab_to(page, "form[data-confirm-restart] :is(button, input[type=submit])")
+    page.keyboard.press("Enter")
     expect(page).to_have_url(re.compile(rf"/robots/{robot}$"), **expect_ms())
     outcome = page.locator("[data-restart-outcome]")
     expect(outcome).to_be_visible(**expect_ms())
