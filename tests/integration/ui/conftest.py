@@ -4,7 +4,6 @@ of its own (its own cookies) per test, and a real fleet with `robotconf ui` besi
 from __future__ import annotations
 
 import contextlib
-import urllib.request
 from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,9 +14,10 @@ import pytest
 from configurator.rendered import RenderedRequest
 from contract.wire import AgentStatus
 from tests.support import browser as support
-from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start_reconciler
-from tests.support.mosquitto import Mosquitto, find_mosquitto, free_port
-from tests.support.watch import FleetWatch, wait_for
+from tests.support.fleet import GitLab, Proc, start_agent, start_reconciler
+from tests.support.mosquitto import Mosquitto, find_mosquitto
+from tests.support.ui import UiProc
+from tests.support.watch import FleetWatch
 
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
@@ -68,48 +68,44 @@ TOKEN = "browser-test-operator-token-0123456789"
 
 @dataclass
 class UiFleet:
-    """The example lab's robots with real agents, a reconciler and `robotconf ui` on one
-    Mosquitto; `url` is the UI's address, `marker` the file that keeps HELD's brain busy."""
+    """The example lab's robots with real agents, a reconciler and `robotconf ui` (with an
+    operator token file) on one Mosquitto; `marker` is the file that keeps HELD's brain busy."""
 
     lab: GitLab
     broker: Mosquitto
     watch: FleetWatch
-    url: str
+    folder: Path
     marker: Path
     agents: dict[str, Proc] = field(default_factory=dict)
-    procs: list[Proc] = field(default_factory=list)  # every reconciler and UI started
-    reconciler: Proc | None = None
+    reconcilers: list[Proc] = field(default_factory=list)  # every one started, the last runs
+    ui: UiProc | None = None
     converged: dict[str, AgentStatus] = field(default_factory=dict)
-    folder: Path = Path()
+
+    @property
+    def url(self) -> str:
+        assert self.ui is not None
+        return f"http://127.0.0.1:{self.ui.port}"
+
+    @property
+    def reconciler(self) -> Proc:
+        return self.reconcilers[-1]
 
     def requests(self, revision: str | None = None) -> dict[str, RenderedRequest]:
         return self.lab.requests(revision)
 
     def start_reconciler(self) -> Proc:
-        log = self.folder / f"reconciler-{len(self.procs)}.log"
-        self.reconciler = start_reconciler(self.lab, self.broker.url, log)
-        self.procs.append(self.reconciler)
+        log = self.folder / f"reconciler-{len(self.reconcilers)}.log"
+        self.reconcilers.append(start_reconciler(self.lab, self.broker.url, log))
         return self.reconciler
 
-
-def _healthy(url: str) -> bool:
-    try:
-        with urllib.request.urlopen(url + "/healthz", timeout=5) as answer:
-            return bool(answer.status == 200)
-    except OSError:
-        return False
-
-
-def start_ui(lab: GitLab, broker: Mosquitto, folder: Path, port: int) -> Proc:
-    """`robotconf ui` with an operator token file, as the docs show it, on a free port."""
-    token_file = folder / "operator-token"
-    token_file.write_text(TOKEN + "\n", encoding="utf-8")
-    token_file.chmod(0o600)
-    argv = robotconf_argv(
-        "ui", "--broker", broker.url, "--prefix", "robotconf", "--repo", str(lab.root),
-        "--listen", f"127.0.0.1:{port}", "--operator-token-file", str(token_file),
-    )  # fmt: skip
-    return Proc(argv, folder / "ui.log")
+    def start_ui(self) -> UiProc:
+        """As the docs start it: with the prefix and an operator token file."""
+        token_file = self.folder / "operator-token"
+        token_file.write_text(TOKEN + "\n", encoding="utf-8")
+        token_file.chmod(0o600)
+        options = ["--prefix", "robotconf", "--operator-token-file", str(token_file)]
+        self.ui = UiProc(self.lab.root, self.broker.url, self.folder / "ui.log", *options)
+        return self.ui
 
 
 @contextlib.contextmanager
@@ -117,24 +113,21 @@ def ui_fleet_on(folder: Path, broker: Mosquitto) -> Iterator[UiFleet]:
     lab = GitLab(folder / "lab")
     marker = folder / "busy"
     marker.touch()
-    port = free_port()
-    state = UiFleet(lab, broker, FleetWatch(broker.url), f"http://127.0.0.1:{port}", marker)
-    state.folder = folder
+    state = UiFleet(lab, broker, FleetWatch(broker.url), folder, marker)
     try:
         for robot_id in lab.robots():
             hold = ["--hold-while", str(marker)] if robot_id == HELD else []
             state.agents[robot_id] = start_agent(lab, robot_id, broker.url, folder, hold)
         state.start_reconciler()
         state.converged = state.watch.wait_running(state.requests())
-        ui = start_ui(lab, broker, folder, port)
-        state.procs.append(ui)
-        wait_for(lambda: _healthy(state.url) or not ui.alive(), "the UI to answer /healthz")
-        assert ui.alive(), ui.output()
+        state.start_ui()
         yield state
     finally:
         state.watch.close()
-        for proc in [*state.procs, *state.agents.values()]:
+        for proc in [*state.reconcilers, *state.agents.values()]:
             proc.stop()
+        if state.ui is not None:
+            state.ui.stop()  # and no traceback in its log, whatever the browser did
 
 
 @pytest.fixture(scope="module")

@@ -390,7 +390,7 @@ def test_the_page_shows_a_reconciler_and_a_broker_restart_then_recovers(
     broker_banner = page.locator('[data-banner="broker"]')
     expect(reconciler_banner).to_have_count(0)
 
-    assert ui_fleet.reconciler is not None and ui_fleet.reconciler.stop() == 0
+    assert ui_fleet.reconciler.stop() == 0
     expect(reconciler_banner).to_be_visible(**expect_ms())
     ui_fleet.start_reconciler()
     expect(reconciler_banner).to_have_count(0, **expect_ms())
