@@ -5,8 +5,10 @@ only their own row, broker and reconciler restarts shown then recovered, and bad
 
 from __future__ import annotations
 
+import json
 import re
 import socket
+import urllib.request
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -16,7 +18,9 @@ import pytest
 from contract.safejson import MAX_PAYLOAD_BYTES
 from contract.wire import Topics
 from tests.integration.reconciler.conftest import Fleet
+from tests.support.mosquitto import free_port
 from tests.support.ui import UiProc, events
+from tests.support.watch import wait_for
 from workstation.ui.server import CSP
 
 
@@ -137,6 +141,10 @@ def test_a_commit_is_seen_progressing_then_in_sync_on_the_events(fleet: Fleet, u
             return "Progressing" in said and said[-1] == "InSync" and said.index("Progressing") > 0
 
         stream.wait(lambda _: progressed_then_synced("tb3-01"), "tb3-01 Progressing, then InSync")
+        # The rows the UI updated one robot at a time are those `status` reads whole.
+        page = ui.wait_page("/", all_in_sync(fleet), "every robot InSync again")
+        report = json.loads(fleet.status_cli("--json").stdout)
+        assert verdicts(page) == {r["robot_id"]: r["verdict"] for r in report["robots"]}
         # Only what changed: robots whose request is the same were sent once, in the reset.
         assert len(stream.rows("tb3-02")) == 1
         assert all(not m["reset"] for m in stream.seen()[1:])
@@ -237,9 +245,23 @@ def test_a_reconciler_restart_is_shown_then_recovered(fleet: Fleet, ui: UiProc) 
         "/", lambda p: 'data-reconciler-state="Offline"' in p, "the reconciler offline, said"
     )
     assert 'data-banner="reconciler"' in page
-    fleet.start_reconciler("--interval", "5")
+    # Back with a page of its own (`reconcile --ui`): both show it ready again.
+    port = free_port()
+    fleet.start_reconciler("--interval", "5", "--ui", f"127.0.0.1:{port}")
     ui.wait_page(
         "/",
         lambda p: 'data-reconciler-state="Ready"' in p and 'data-banner="reconciler"' not in p,
         "the reconciler ready again",
     )
+    synced = all_in_sync(fleet)
+    wait_for(lambda: _page(port, synced), "reconcile --ui serving the fleet, every robot InSync")
+
+
+def _page(port: int, wanted: Callable[[str], bool]) -> bool | None:
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as answer:
+            body: str = answer.read().decode()
+            csp = answer.headers["Content-Security-Policy"]
+    except OSError:
+        return None
+    return (csp == CSP and 'data-reconciler-state="Ready"' in body and wanted(body)) or None
