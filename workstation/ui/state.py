@@ -1,6 +1,5 @@
-"""The live fleet the UI serves: a broker client on the viewer's retained topics and the
-repository for desired state (workstation/fleet_status.py), one Snapshot per change, each robot's
-recent status history, and each open page's event stream fed with what changed for it."""
+"""The live fleet: the viewer's broker client and the repository, one Snapshot per change, each
+robot's recent history, and each open page's event stream fed with what changed for it."""
 
 from __future__ import annotations
 
