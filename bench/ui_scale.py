@@ -43,8 +43,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 import generate  # noqa: E402
 import paho.mqtt.client as paho  # noqa: E402
-from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
-from rollout import ROBOTCONF, Broker, start_reconciler  # noqa: E402
+from rollout import ROBOTCONF, Broker, client, connect, start_reconciler  # noqa: E402
 from scale import Launches, assignments  # noqa: E402
 
 from contract.wire import AgentState, AgentStatus  # noqa: E402
@@ -71,19 +70,17 @@ class Result:
     status_bytes: int = 0
 
 
-def publish_statuses(port: int, digests: dict[str, str], seq: int) -> paho.Client:
+def publish_statuses(port: int, digests: dict[str, str]) -> paho.Client:
     """Every robot's retained status, running its request, as its agent would publish it."""
-    client = paho.Client(CallbackAPIVersion.VERSION2, client_id=f"ui-bench-agents-{seq}")
-    client.max_inflight_messages_set(0)
-    client.connect("127.0.0.1", port)
-    client.loop_start()
+    agents = client("ui-agents")
+    connect(agents, port)
     infos = [
-        client.publish(f"robotconf/robots/{robot}/status", status(robot, digest), 1, True)
+        agents.publish(f"robotconf/robots/{robot}/status", status(robot, digest), 1, True)
         for robot, digest in digests.items()
     ]
     for info in infos:
         info.wait_for_publish(TIMEOUT)
-    return client
+    return agents
 
 
 def status(robot: str, digest: str, state: AgentState = AgentState.RUNNING) -> bytes:
@@ -184,7 +181,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
             for topic, (_, payload) in seen.items()
         }
         print(f"publishing {len(digests)} robots' statuses ...", flush=True)
-        agents = publish_statuses(broker.port, digests, 1)
+        agents = publish_statuses(broker.port, digests)
         result = Result(robots)
         port = free_port()
         started = time.perf_counter()

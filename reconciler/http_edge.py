@@ -88,6 +88,7 @@ class FedStream:
         self._queue: asyncio.Queue[bytes | None] = asyncio.Queue()
         self._backlog = backlog
         self._on_close = on_close
+        self._ended = False
         self.closed = False  # read from any thread: the feeder stops feeding
 
     def put(self, chunk: bytes) -> None:
@@ -96,13 +97,15 @@ class FedStream:
 
     def end(self) -> None:
         with contextlib.suppress(RuntimeError):
-            self._loop.call_soon_threadsafe(self._queue.put_nowait, None)
+            self._loop.call_soon_threadsafe(self._put, None)
 
-    def _put(self, chunk: bytes) -> None:
-        if self._queue.qsize() >= self._backlog:
-            self._queue.put_nowait(None)
-        else:
-            self._queue.put_nowait(chunk)
+    def _put(self, chunk: bytes | None) -> None:
+        if self._ended:
+            return  # nothing after the end: the queue stays within its backlog
+        if chunk is None or self._queue.qsize() >= self._backlog:
+            self._ended = True
+            chunk = None
+        self._queue.put_nowait(chunk)
 
     async def next(self) -> bytes | None:
         return await self._queue.get()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import socket
+import ssl
 import threading
 import urllib.error
 import urllib.request
@@ -29,8 +30,13 @@ class Answer:
 class UiProc:
     """`robotconf ui` on a free loopback port; `get` answers never raise for a 4xx or 5xx."""
 
-    def __init__(self, repo: Path, broker: str, log: Path, *extra: str) -> None:
+    def __init__(
+        self, repo: Path, broker: str, log: Path, *extra: str, tls: Path | None = None
+    ) -> None:
+        """`tls`: the CA of its certificate, when it serves HTTPS."""
         self.port = free_port()
+        self.scheme = "https" if tls else "http"
+        self.context = ssl.create_default_context(cafile=str(tls)) if tls else None
         self.proc = Proc(
             robotconf_argv(
                 "ui", "--repo", str(repo), "--broker", broker,
@@ -48,10 +54,10 @@ class UiProc:
 
     def get(self, path: str, method: str = "GET", headers: dict[str, str] | None = None) -> Answer:
         request = urllib.request.Request(
-            f"http://127.0.0.1:{self.port}{path}", method=method, headers=headers or {}
+            f"{self.scheme}://127.0.0.1:{self.port}{path}", method=method, headers=headers or {}
         )
         try:
-            with urllib.request.urlopen(request, timeout=30) as answer:
+            with urllib.request.urlopen(request, timeout=30, context=self.context) as answer:
                 return Answer(answer.status, answer.headers, answer.read().decode())
         except urllib.error.HTTPError as error:
             return Answer(error.code, error.headers, error.read().decode())

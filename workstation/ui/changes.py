@@ -1,6 +1,5 @@
-"""What changed between two states of the fleet, for one open page, as its server-sent event:
-pure. Only changed rows (server-rendered `<tr>`s with their rank), removed ids, and the boxes
-whose HTML changed are sent; a page the stream cannot bring up to date gets a reset."""
+"""What changed for one open page between two states, as its server-sent event, pure: changed
+rows with their rank, removed ids, boxes whose HTML changed; a reset when it cannot catch up."""
 
 from __future__ import annotations
 

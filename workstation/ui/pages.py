@@ -1,9 +1,5 @@
-"""The UI's HTML, pure: a Snapshot (and a query, a robot) in, a page or one of its live boxes out.
-
-Every robot- or commit-supplied string goes through `esc` (printable, cut, HTML-escaped); no page
-has an inline script or style (the CSP forbids them): behaviour is /static/ui.js, looks ui.css.
-The DOM contract the browser test relies on is in docs/architecture.md#the-fleet-in-a-browser.
-"""
+"""The fleet page and its live boxes as HTML, pure; `esc` is the one way text reaches a page, and no
+page has an inline script or style (the CSP forbids them). DOM contract: docs/architecture.md."""
 
 from __future__ import annotations
 

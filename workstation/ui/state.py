@@ -1,6 +1,5 @@
-"""The live fleet the UI serves: a broker client on the viewer's retained topics and the
-repository for desired state (workstation/fleet_status.py), one Snapshot per change, each robot's
-recent status history, and each open page's event stream fed with what changed for it."""
+"""The live fleet: the viewer's broker client and the repository, one Snapshot per change, each
+robot's recent history, and each open page's event stream fed with what changed for it."""
 
 from __future__ import annotations
 
@@ -14,15 +13,14 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
-from configurator.drift import DriftMemo
 from contract.mqtt import Connection
 from contract.textsafe import printable
 from contract.wire import Topics
-from reconciler.observed import ReadMemo
 from reconciler.verdicts import FleetStatus, reconciler_health
-from workstation.fleet_status import DesiredCache, fleet_status, open_view
+from workstation.fleet_status import DesiredCache, open_view
 from workstation.ui.changes import Shown, change, changed_rows, first
 from workstation.ui.model import HISTORY, HistoryEntry, Snapshot
+from workstation.ui.reading import FleetReader
 
 log = logging.getLogger("robotconf.ui")
 
@@ -58,17 +56,15 @@ class LiveFleet:
     ) -> None:
         self.topics = Topics(prefix)
         self.broker = connection.address.url
-        self._desired = DesiredCache(repo, rev)
         self._dirty = threading.Event()  # the broker's topics changed
         self._wake = threading.Event()  # ... or a stream wants its first event
-        self.view = open_view(connection, prefix, self._touched)
+        self.view = open_view(connection, prefix, self._touched, self._topic)
+        self._reader = FleetReader(self.view, self.topics, DesiredCache(repo, rev))
         self._snap = Snapshot(0, None, self.broker, False, "connecting", time.time())
         self._lock = threading.Lock()
         self._streams: dict[int, _Stream] = {}
         self._ids = itertools.count(1)
         self._history: dict[str, collections.deque[HistoryEntry]] = {}
-        self._memos: dict[bool, ReadMemo] = {}
-        self._drift = DriftMemo()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="ui-fleet", daemon=True)
         self.on_step: Callable[[Snapshot, float], None] | None = None  # for the bench
@@ -76,6 +72,9 @@ class LiveFleet:
     def _touched(self) -> None:
         self._dirty.set()
         self._wake.set()
+
+    def _topic(self, topic: str) -> None:
+        self._reader.touched(topic)
 
     def start(self) -> None:
         self.view.start()
@@ -138,19 +137,13 @@ class LiveFleet:
         now = time.time()
         fleet = before.fleet
         connected = self.view.synced
+        touched: set[str] | None = set()
         if connected and (self._dirty.is_set() or not before.connected or fleet is None):
             self._dirty.clear()
-            fleet = fleet_status(
-                self.view.snapshot(),
-                self.topics,
-                self._desired,
-                self._memos,
-                self._drift,
-                self.view.lost,
-            )
+            fleet, touched = self._reader.read(fleet, whole=not before.connected)
         error = None if connected else printable(self.view.last_error or "reconnecting")[:300]
         after = self._next(before, fleet, connected, error, now)
-        changed = changed_rows(before, after) if after.fleet is not before.fleet else set()
+        changed = _changed(before, after, touched)
         if changed:
             after = replace(after, history=self._remember(after, changed, now))
         self._snap = after
@@ -217,6 +210,15 @@ class LiveFleet:
                 continue
             if message is not None:
                 stream.sink.put(message)
+
+
+def _changed(before: Snapshot, after: Snapshot, touched: set[str] | None) -> set[str]:
+    """The robots whose rows differ: among those touched, when the reader knows them."""
+    if after.fleet is before.fleet:
+        return set()
+    if touched is None:
+        return changed_rows(before, after)
+    return {r for r in touched if before.by_id.get(r) != after.by_id.get(r)}
 
 
 def _looks(snap: Snapshot) -> tuple[object, ...]:

@@ -5,8 +5,11 @@ only their own row, broker and reconciler restarts shown then recovered, and bad
 
 from __future__ import annotations
 
+import json
 import re
 import socket
+import subprocess
+import urllib.request
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -16,7 +19,11 @@ import pytest
 from contract.safejson import MAX_PAYLOAD_BYTES
 from contract.wire import Topics
 from tests.integration.reconciler.conftest import Fleet
+from tests.support.fleet import GitLab, refused_reconcile, robotconf_argv
+from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.tlsutil import make_pki
 from tests.support.ui import UiProc, events
+from tests.support.watch import wait_for
 from workstation.ui.server import CSP
 
 
@@ -137,6 +144,10 @@ def test_a_commit_is_seen_progressing_then_in_sync_on_the_events(fleet: Fleet, u
             return "Progressing" in said and said[-1] == "InSync" and said.index("Progressing") > 0
 
         stream.wait(lambda _: progressed_then_synced("tb3-01"), "tb3-01 Progressing, then InSync")
+        # The rows the UI updated one robot at a time are those `status` reads whole.
+        page = ui.wait_page("/", all_in_sync(fleet), "every robot InSync again")
+        report = json.loads(fleet.status_cli("--json").stdout)
+        assert verdicts(page) == {r["robot_id"]: r["verdict"] for r in report["robots"]}
         # Only what changed: robots whose request is the same were sent once, in the reset.
         assert len(stream.rows("tb3-02")) == 1
         assert all(not m["reset"] for m in stream.seen()[1:])
@@ -237,9 +248,66 @@ def test_a_reconciler_restart_is_shown_then_recovered(fleet: Fleet, ui: UiProc) 
         "/", lambda p: 'data-reconciler-state="Offline"' in p, "the reconciler offline, said"
     )
     assert 'data-banner="reconciler"' in page
-    fleet.start_reconciler("--interval", "5")
+    # Back with a page of its own (`reconcile --ui`): both show it ready again.
+    port = free_port()
+    fleet.start_reconciler("--interval", "5", "--ui", f"127.0.0.1:{port}")
     ui.wait_page(
         "/",
         lambda p: 'data-reconciler-state="Ready"' in p and 'data-banner="reconciler"' not in p,
         "the reconciler ready again",
     )
+    synced = all_in_sync(fleet)
+    wait_for(lambda: _page(port, synced), "reconcile --ui serving the fleet, every robot InSync")
+
+
+def _page(port: int, wanted: Callable[[str], bool]) -> bool | None:
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as answer:
+            body: str = answer.read().decode()
+            csp = answer.headers["Content-Security-Policy"]
+    except OSError:
+        return None
+    return (csp == CSP and 'data-reconciler-state="Ready"' in body and wanted(body)) or None
+
+
+@pytest.mark.parametrize(
+    ("options", "said"),
+    [
+        (["--listen", "0.0.0.0:8765"], "--operator-token-file"),
+        (["--listen", "127.0.0.1"], "HOST:PORT"),
+        (["--listen", "127.0.0.1:8765", "--tls-cert", "c.pem"], "go together"),
+        (
+            ["--listen", "127.0.0.1:8765", "--tls-cert", "nowhere.pem", "--tls-key", "k"],
+            "cannot use",
+        ),
+    ],
+)
+def test_options_that_cannot_serve_are_refused_in_one_line(
+    tmp_path: Path, options: list[str], said: str
+) -> None:
+    done = subprocess.run(
+        robotconf_argv("ui", "--repo", str(tmp_path), *options),
+        capture_output=True, text=True, timeout=60, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert said in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_reconcile_refuses_a_ui_for_other_machines(lab: GitLab, mosquitto: Mosquitto) -> None:
+    said = refused_reconcile(lab, mosquitto.url, ["--ui", "0.0.0.0:8765"])
+    assert "loopback only" in said
+
+
+def test_the_ui_over_tls(lab: GitLab, mosquitto: Mosquitto, tmp_path: Path) -> None:
+    pki = make_pki(tmp_path / "pki")
+    ui = UiProc(
+        lab.root, mosquitto.url, tmp_path / "ui.log",
+        "--tls-cert", str(pki.server_cert), "--tls-key", str(pki.server_key), tls=pki.ca_cert,
+    )  # fmt: skip
+    try:
+        answer = ui.get("/")
+        assert answer.code == 200 and answer.headers["Content-Security-Policy"] == CSP
+        with pytest.raises(OSError):  # plain HTTP is not answered as a page
+            urllib.request.urlopen(f"http://127.0.0.1:{ui.port}/healthz", timeout=10).read()
+    finally:
+        ui.stop()
