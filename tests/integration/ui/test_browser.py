@@ -178,6 +178,14 @@ def test_the_label_filter_narrows_the_rows(ui_fleet: UiFleet, browser: Browser) 
     expect(page.locator(ROW)).to_have_count(2, **expect_ms())
     assert set(rows(page)) == {"tb3-01", "tb3-03"}
 
+    # The verdict and the id search from the form too: no robot is Degraded here.
+    form = page.locator("form[data-filter]")
+    form.locator("[name=verdict]").select_option("Degraded")
+    form.locator("input[name=q]").fill("tb3-0")
+    form.locator("input[name=q]").press("Enter")
+    expect(page).to_have_url(re.compile(r"[?&]verdict=Degraded\b"), **expect_ms())
+    expect(page.locator(ROW)).to_have_count(0, **expect_ms())
+
 
 def tab_to(page: Page, selector: str, limit: int = 100) -> None:
     """Presses Tab until the focus is on an element matching `selector`."""
