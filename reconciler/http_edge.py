@@ -1,5 +1,5 @@
-"""The bounded HTTP edge of the reconciler's listeners (`--webhook`, `--metrics`): one asyncio loop
-on one thread, so that an open connection costs a file descriptor, never a thread.
+"""The bounded HTTP edge of the reconciler's listeners (`--webhook`, `--metrics`, `--ui`): one
+asyncio loop on one thread, so that an open connection costs a file descriptor, never a thread.
 
 Written here because no maintained Python server has these bounds as configuration: uvicorn,
 hypercorn and aiohttp cap neither connections per client address nor the time a request head
@@ -18,6 +18,7 @@ import ipaddress
 import logging
 import re
 import socket
+import ssl
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -48,6 +49,12 @@ class Limits:
     max_body: int = 0  # bytes of body, for body_methods
     # The methods whose body is read (and required); other requests are answered unread.
     body_methods: frozenset[str] = field(default_factory=frozenset)
+    # A streamed answer (server-sent events): a client that does not take it is cut when this
+    # many bytes wait for it, or when a chunk waits longer than `stream_drain` seconds.
+    stream_buffer: int = 256 * 1024
+    stream_drain: float = 10.0
+    stream_idle: float = 15.0  # seconds without a chunk before the stream's keep-alive is sent
+    stream_max: float = 3600.0  # seconds a stream lasts at most (an EventSource reconnects)
 
 
 @dataclass(frozen=True)
@@ -59,12 +66,65 @@ class Request:
     body: bytes = b""
 
 
+class Stream(Protocol):
+    """A body that arrives over time, until the server ends it or the connection ends."""
+
+    async def next(self) -> bytes | None:
+        """The next chunk (awaited as long as it takes); None: the server ends the stream."""
+        ...
+
+    def close(self) -> None:
+        """The stream is over, whoever ended it: called once, on the edge's loop."""
+        ...
+
+
+class FedStream:
+    """A Stream fed from any thread (`put`, `end`); made on the edge's loop (in a service's
+    `answer`). At more than `backlog` chunks waiting, the stream ends: a client that far behind
+    gets a fresh start when it reconnects, rather than a queue that grows."""
+
+    def __init__(self, backlog: int = 64, on_close: Callable[[], None] | None = None) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._queue: asyncio.Queue[bytes | None] = asyncio.Queue()
+        self._backlog = backlog
+        self._on_close = on_close
+        self._ended = False
+        self.closed = False  # read from any thread: the feeder stops feeding
+
+    def put(self, chunk: bytes) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop is closed: nobody reads any more
+            self._loop.call_soon_threadsafe(self._put, chunk)
+
+    def end(self) -> None:
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(self._put, None)
+
+    def _put(self, chunk: bytes | None) -> None:
+        if self._ended:
+            return  # nothing after the end: the queue stays within its backlog
+        if chunk is None or self._queue.qsize() >= self._backlog:
+            self._ended = True
+            chunk = None
+        self._queue.put_nowait(chunk)
+
+    async def next(self) -> bytes | None:
+        return await self._queue.get()
+
+    def close(self) -> None:
+        self.closed = True
+        if self._on_close is not None:
+            self._on_close()
+
+
 @dataclass(frozen=True)
 class Response:
     code: int
     body: bytes = b""
     content_type: str = "text/plain; charset=utf-8"
     headers: tuple[tuple[str, str], ...] = ()
+    # Streamed after `body`, until it ends: no Content-Length, the connection closes after.
+    stream: Stream | None = None
+    keepalive: bytes = b""  # sent when the stream is idle for the limits' stream_idle
 
     @classmethod
     def text(cls, code: int, message: str, *headers: tuple[str, str]) -> Response:
@@ -133,11 +193,14 @@ class BoundedHTTPServer:
         self._sock: socket.socket | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
+        self._tls: ssl.SSLContext | None = None
 
     # ------------------------------------------------------------------ lifecycle (any thread)
 
-    def listen(self, host: str, port: int) -> None:
-        """Listens now (OSError when it cannot) and answers on a thread of its own."""
+    def listen(self, host: str, port: int, tls: ssl.SSLContext | None = None) -> None:
+        """Listens now (OSError when it cannot) and answers on a thread of its own; over TLS
+        with `tls` (its handshake bounded by the limits' `head`)."""
+        self._tls = tls
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.create_server((host, port), family=family, backlog=128)
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
@@ -179,8 +242,12 @@ class BoundedHTTPServer:
     async def _main(self) -> None:
         self._stopping = asyncio.Event()
         assert self._sock is not None
+        tls = {"ssl": self._tls, "ssl_handshake_timeout": self.limits.head} if self._tls else {}
         server = await asyncio.start_server(
-            self._serve, sock=self._sock, limit=self.limits.max_head
+            self._serve,
+            sock=self._sock,
+            limit=self.limits.max_head,
+            **tls,  # type: ignore[arg-type]
         )
         self._ready.set()
         await self._stopping.wait()
@@ -415,17 +482,26 @@ class BoundedHTTPServer:
         lines = [f"HTTP/1.1 {code} {reason}", "Server: robotconf", "Connection: close"]
         lines += [f"{name}: {value}" for name, value in response.headers]
         body = response.body
+        stream = response.stream
         if code == 204:
             body = b""
+        elif stream is not None:  # its length is where the connection ends
+            lines += [f"Content-Type: {response.content_type}", "Cache-Control: no-store"]
         else:
             lines += [f"Content-Type: {response.content_type}", f"Content-Length: {len(body)}"]
         if method == "HEAD":
             body = b""
         writer.write(("\r\n".join(lines) + "\r\n\r\n").encode("latin-1") + body)
         loop = asyncio.get_running_loop()
-        await asyncio.wait_for(
-            writer.drain(), max(self.limits.deadline - (loop.time() - start), LINGER)
-        )
+        try:
+            await asyncio.wait_for(
+                writer.drain(), max(self.limits.deadline - (loop.time() - start), LINGER)
+            )
+            if stream is not None and method != "HEAD" and code != 204:
+                await self._stream(reader, writer, response, stream)
+        finally:
+            if stream is not None:
+                stream.close()
         if writer.can_write_eof():
             writer.write_eof()
         until = loop.time() + LINGER
@@ -436,3 +512,62 @@ class BoundedHTTPServer:
                 if not chunk:
                     return
                 left -= len(chunk)
+
+    async def _stream(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        response: Response,
+        stream: Stream,
+    ) -> None:
+        """Writes the stream's chunks as they come, until it ends, the client leaves, or the
+        client is cut: it lets more than `stream_buffer` bytes wait, or does not take a chunk
+        within `stream_drain` seconds (a client that reads nothing holds no more than that)."""
+        limits = self.limits
+        loop = asyncio.get_running_loop()
+        until = loop.time() + limits.stream_max
+        gone = asyncio.ensure_future(_client_gone(reader))
+        chunk: asyncio.Future[bytes | None] | None = None
+        try:
+            while loop.time() < until:
+                if chunk is None:
+                    chunk = asyncio.ensure_future(stream.next())
+                wait = min(limits.stream_idle, max(until - loop.time(), 0.0))
+                either: set[asyncio.Future[object]] = {chunk, gone}  # type: ignore[arg-type]
+                await asyncio.wait(either, timeout=wait, return_when=asyncio.FIRST_COMPLETED)
+                if gone.done():
+                    return  # the client closed its end (or sent more than it may)
+                if chunk.done():
+                    data, chunk = chunk.result(), None
+                    if data is None:
+                        return  # the server ends the stream
+                else:
+                    data = response.keepalive
+                if not data:
+                    continue
+                writer.write(data)
+                waiting = writer.transport.get_write_buffer_size()
+                if waiting > limits.stream_buffer:
+                    raise _Cut(f"does not read its stream ({waiting:,} bytes wait): cut")
+                try:
+                    await asyncio.wait_for(writer.drain(), limits.stream_drain)
+                except asyncio.TimeoutError:
+                    raise _Cut(
+                        f"did not take a chunk of its stream within {limits.stream_drain:g} s: cut"
+                    ) from None
+        finally:
+            gone.cancel()
+            if chunk is not None:
+                chunk.cancel()
+
+
+async def _client_gone(reader: asyncio.StreamReader) -> None:
+    """Returns when the client closes its end of a stream, or has sent more than it may (it
+    has nothing to send once its request is read)."""
+    left = DRAIN_LIMIT
+    with contextlib.suppress(ConnectionError):
+        while left > 0:
+            data = await reader.read(65536)
+            if not data:
+                return
+            left -= len(data)

@@ -146,9 +146,13 @@ def confirm_loss(
 
 
 def open_view(
-    connection: Connection, prefix: str, on_change: Callable[[], None] | None = None
+    connection: Connection,
+    prefix: str,
+    on_change: Callable[[], None] | None = None,
+    on_topic: Callable[[str], None] | None = None,
 ) -> RetainedView:
-    """A (not yet started) view of every retained topic fleet status reads."""
+    """A (not yet started) view of every retained topic fleet status reads; `on_topic` is told
+    each topic a message arrives on."""
     topics = Topics(prefix)
     return RetainedView(
         connection,
@@ -157,6 +161,7 @@ def open_view(
         role="status",
         on_change=on_change,
         on_synced=on_change,
+        on_topic=on_topic,
     )
 
 

@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import yaml
 
@@ -60,6 +60,9 @@ from reconciler.verdicts import (
 from workstation.fleet_status import change_key, open_view
 from workstation.up_desk import UpDesk, remove_desk, write_desk
 
+if TYPE_CHECKING:
+    from workstation.ui.run import RunningUi, UiOptions
+
 log = logging.getLogger("robotconf.up")
 
 AGENT_STOP_TIMEOUT = 5.0  # the stand-in brain stops at once; this bounds a stubborn one
@@ -85,6 +88,7 @@ class UpSetup:
     builder: DesiredBuilder = field(default_factory=DesiredBuilder)
     port: int = DEFAULT_PORT  # the embedded broker's, when free
     broker_origin: str = "--broker"  # where a given broker came from, for messages
+    ui: UiOptions | None = None  # `up --ui`: the fleet's web page, served beside
 
 
 def _git_repo(root: Path) -> Any:
@@ -524,11 +528,14 @@ def _serve(
     thread.start()
     view.start()
     agents.start(sorted(setup.fleet.requests), setup.fleet)
+    ui = _start_ui(setup, connection, prefix, say)
     screen.begin(header)
     try:
         _loop(controller, agents, view, Topics(prefix), stop, changed, screen)
     finally:
         screen.end()
+        if ui is not None:
+            ui.close()
         say("stopping: agents and their brains ...")
         remove_desk(setup.root, os.getpid())
         agents.stop()
@@ -536,6 +543,19 @@ def _serve(
         controller.stop()
         thread.join(10)
     return ExitCode.OK
+
+
+def _start_ui(
+    setup: UpSetup, connection: Connection, prefix: str, say: Callable[[str], None]
+) -> RunningUi | None:
+    """`up --ui`: the fleet's web page, read with the operator's login; its address said."""
+    if setup.ui is None:
+        return None
+    from workstation.ui.run import RunningUi
+
+    ui = RunningUi(connection, prefix, setup.root, setup.ui)
+    say(f"ui: the fleet's web page is at {ui.url}")
+    return ui
 
 
 def up_desk(

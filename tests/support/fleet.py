@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -139,14 +140,23 @@ def kill_leftovers(since: int = 0) -> int:
     return len(alive)
 
 
-def start_agent(lab: GitLab, robot_id: str, url: str, folder: Path) -> Proc:
-    """A real agent whose brain is the stand-in brain service."""
+def start_agent(
+    lab: GitLab, robot_id: str, url: str, folder: Path, brain_options: Sequence[str] = ()
+) -> Proc:
+    """A real agent whose brain is the stand-in brain service (given `brain_options`, such as
+    `--hold-while MARKER`)."""
     work = folder / robot_id
     work.mkdir(parents=True, exist_ok=True)
     config = {
         "broker": url,
         "description": {"id": robot_id, "name": robot_id},
-        "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+        "command": [
+            sys.executable,
+            "-m",
+            "agent.standin_brain",
+            "{launch_request}",
+            *brain_options,
+        ],
         "workdir": str(work),
         "stop_timeout": 5,
         "startsecs": 0.2,

@@ -8,6 +8,7 @@ import secrets
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import click
@@ -15,7 +16,14 @@ import click
 from configurator.types import is_robot_id
 from contract.errors import CliError, ExitCode
 from contract.textsafe import printable
-from contract.wire import LOG_FOLLOW_TTL, MAX_TAIL_LINES, AgentState, LogsChunk, LogsRequest
+from contract.wire import (
+    LOG_FOLLOW_TTL,
+    MAX_TAIL_LINES,
+    AgentState,
+    AgentStatus,
+    LogsChunk,
+    LogsRequest,
+)
 from reconciler.lifecycle import on_stop_signals
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.desk import online_robot
@@ -57,17 +65,56 @@ def _print(chunk: LogsChunk) -> None:
         sys.stdout.flush()
 
 
-def _say_presence(desk: RobotDesk) -> None:
-    """While following: a robot that goes offline (or comes back) is said on stderr."""
+def _offline(desk: RobotDesk) -> Iterator[AgentStatus]:
+    """While following: the robot's statuses that say it went offline."""
     while True:
         try:
             status = desk.statuses.get_nowait()
         except queue.Empty:
             return
         if status.state is AgentState.OFFLINE:
-            sys.stderr.write(
-                f"robotconf: {desk.robot_id} went offline; its log goes on when it is back\n"
+            yield status
+
+
+def log_chunks(
+    desk: RobotDesk, lines: int, follow: bool, wait: float, stop: Callable[[], bool]
+) -> Iterator[LogsChunk | AgentStatus]:
+    """The robot's log as `robotconf logs` shows it, once the robot is found online: the tail
+    of `lines` lines, then with `follow` the stream (asked again while it is read) and the
+    statuses that say the robot went offline, until `stop()`. The one reader of the desk's log
+    channel, for the command and the UI's operators; CliError when the robot is not there or
+    does not answer within `wait` seconds."""
+    online_robot(desk, wait, "its agent cannot answer")
+    session = _ask(desk, lines, follow, wait)
+    tail_done = False
+    deadline = time.monotonic() + wait
+    next_ask = time.monotonic() + ASK_EVERY
+    while not stop():
+        now = time.monotonic()
+        if follow and now >= next_ask:
+            _ask(desk, 0, True, wait)  # keeps the stream alive; no tail again
+            next_ask = now + ASK_EVERY
+        if not tail_done and now >= deadline:
+            raise CliError(
+                f"{desk.robot_id} did not answer within {wait:g} s (its agent may predate "
+                "`robotconf logs`, or the ACL does not let this user ask: broker-config's "
+                "operator user may)",
+                ExitCode.FINDINGS,
             )
+        if follow:
+            yield from _offline(desk)
+        try:
+            chunk = desk.chunks.get(timeout=0.2)
+        except queue.Empty:
+            continue
+        if chunk.session == session:
+            yield chunk
+            if chunk.end:
+                tail_done = True
+                if not follow:
+                    return
+        elif chunk.session is None and follow and tail_done:
+            yield chunk
 
 
 @click.command("logs")
@@ -113,35 +160,11 @@ def logs(
     if follow:
         on_stop_signals(stop)
     with RobotDesk(connection, mqtt.prefix, robot_id, logs=True) as desk:
-        online_robot(desk, wait, "its agent cannot answer")
-        session = _ask(desk, lines, follow, wait)
-        tail_done = False
-        deadline = time.monotonic() + wait
-        next_ask = time.monotonic() + ASK_EVERY
-        while not stop.is_set():
-            now = time.monotonic()
-            if follow and now >= next_ask:
-                _ask(desk, 0, True, wait)  # keeps the stream alive; no tail again
-                next_ask = now + ASK_EVERY
-            if not tail_done and now >= deadline:
-                raise CliError(
-                    f"{robot_id} did not answer within {wait:g} s (its agent may predate "
-                    "`robotconf logs`, or the ACL does not let this user ask: broker-config's "
-                    "operator user may)",
-                    ExitCode.FINDINGS,
+        for item in log_chunks(desk, lines, follow, wait, stop.is_set):
+            if isinstance(item, LogsChunk):
+                _print(item)
+            else:
+                sys.stderr.write(
+                    f"robotconf: {robot_id} went offline; its log goes on when it is back\n"
                 )
-            if follow:
-                _say_presence(desk)
-            try:
-                chunk = desk.chunks.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            if chunk.session == session:
-                _print(chunk)
-                if chunk.end:
-                    tail_done = True
-                    if not follow:
-                        return ExitCode.OK
-            elif chunk.session is None and follow and tail_done:
-                _print(chunk)
     return ExitCode.OK

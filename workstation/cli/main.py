@@ -48,6 +48,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "workstation.cli.status:status",
         "show the fleet: desired vs reported, worst first",
     ),
+    "ui": (
+        "workstation.cli.ui:ui",
+        "serve the fleet as a live web page (the reconciler, rollouts, every robot)",
+    ),
     "logs": (
         "workstation.cli.logs:logs",
         "show a robot's brain log from the desk (--follow for new lines)",

@@ -17,6 +17,7 @@ from reconciler.signer import make_signer
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 from workstation.cli.broker_options import BrokerOptions, broker_options
 from workstation.cli.options import repo_option
+from workstation.cli.ui import ui_beside, ui_option
 
 if TYPE_CHECKING:
     from contract.mqtt import Connection
@@ -24,6 +25,7 @@ if TYPE_CHECKING:
     from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
     from reconciler.webhook_server import WebhookServer
+    from workstation.ui.run import RunningUi, UiOptions
 
 
 def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | None) -> BranchSource:
@@ -128,6 +130,19 @@ def start_webhook(
     return receiver
 
 
+def start_ui(
+    options: UiOptions | None, connection: Connection, prefix: str, repo: Path
+) -> RunningUi | None:
+    """`--ui`: the fleet's web page beside the loop, read with the reconciler's login."""
+    if options is None:
+        return None
+    from workstation.ui.run import RunningUi
+
+    ui = RunningUi(connection, prefix, repo, options)
+    logging.getLogger("robotconf.reconciler").info("ui: serving the fleet at %s", ui.url)
+    return ui
+
+
 @click.command("reconcile")
 @repo_option
 @broker_options
@@ -175,6 +190,7 @@ def start_webhook(
     help="the webhook's secret (GitHub, Gitea, Forgejo: HMAC-SHA256 key; GitLab: token); "
     "required with --webhook",
 )
+@ui_option
 def reconcile(
     repo: Path,
     mqtt: BrokerOptions,
@@ -187,6 +203,7 @@ def reconcile(
     metrics_at: str | None,
     webhook_at: str | None,
     webhook_secret_file: Path | None,
+    ui_at: str | None,
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds, and at once when --webhook receives a push; runs until signalled."""
@@ -202,6 +219,7 @@ def reconcile(
     except SigningKeyError as exc:
         raise CliError(str(exc)) from None
     webhook = webhook_options(webhook_at, webhook_secret_file)
+    ui_at_options = ui_beside(ui_at)  # checked before anything starts
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
@@ -220,6 +238,7 @@ def reconcile(
     if webhook is not None:
         metrics = telemetry.metrics if telemetry is not None else None
         receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
+    ui = start_ui(ui_at_options, connection, mqtt.prefix, repo)
     on_stop_signals(callback=controller.stop)
     logging.getLogger("robotconf.reconciler").info(
         "reconciling %s (branch %s) to %s, prefix %s (MQTT %s)",
@@ -229,12 +248,15 @@ def reconcile(
         mqtt.prefix,
         "5, No Local" if no_local else "3.1.1",
     )
-    _run(controller, telemetry, receiver)
+    _run(controller, telemetry, receiver, ui)
     return ExitCode.OK
 
 
 def _run(
-    controller: Controller, telemetry: Telemetry | None, receiver: WebhookServer | None
+    controller: Controller,
+    telemetry: Telemetry | None,
+    receiver: WebhookServer | None,
+    ui: RunningUi | None = None,
 ) -> None:
     """The control loop with its telemetry, until signalled; then what serves it stops."""
     if telemetry is not None:
@@ -244,5 +266,7 @@ def _run(
     finally:
         if receiver is not None:
             receiver.close()
+        if ui is not None:
+            ui.close()
         if telemetry is not None:
             telemetry.stop()

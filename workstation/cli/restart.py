@@ -14,11 +14,12 @@ import click
 from configurator.types import is_robot_id
 from contract.errors import CliError, ExitCode
 from contract.launch import REQUESTER_PATTERN, RestartRequest
+from contract.mqtt import Connection
 from contract.textsafe import printable
 from contract.wire import AgentState, AgentStatus
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.desk import online_robot
-from workstation.cli.options import repo_option
+from workstation.cli.options import F, repo_option
 from workstation.desk import RobotDesk
 
 if TYPE_CHECKING:
@@ -57,7 +58,7 @@ def _confirmed(desk: RobotDesk, issued_at: float, wait: float) -> AgentStatus | 
     return None
 
 
-def _private_key(path: Path | None) -> Ed25519PrivateKey | None:
+def private_key(path: Path | None) -> Ed25519PrivateKey | None:
     """The key restarts are signed with, if one is given; a key that cannot be read is a
     one-line error."""
     if path is None:
@@ -68,6 +69,17 @@ def _private_key(path: Path | None) -> Ed25519PrivateKey | None:
         return load_private_key(path)
     except SigningKeyError as exc:
         raise CliError(str(exc), ExitCode.TOOL) from None
+
+
+def signing_key_option(command: F) -> F:
+    """--signing-key, as `restart` and `ui` (whose operators restart robots) take it."""
+    return click.option(
+        "--signing-key",
+        type=click.Path(path_type=Path, dir_okay=False),
+        default=None,
+        help="the Launch Requests' private key: needed when the robots verify signatures "
+        "(default: a running robotconf up's, when no broker is given)",
+    )(command)
 
 
 def _send_restart(
@@ -89,17 +101,44 @@ def _send_restart(
     return request.issued_at
 
 
+def request_restart(
+    connection: Connection,
+    prefix: str,
+    robot_id: str,
+    by: str,
+    key: Ed25519PrivateKey | None,
+    wait: float,
+) -> AgentStatus:
+    """Asks `robot_id`'s agent to restart its brain (signed with `key` when given) and waits
+    up to `wait` seconds for the status that confirms it: the one way `robotconf restart` and
+    the UI's operators restart a robot. Blocks; raises CliError saying why it did not happen
+    (robot unknown, offline or idle, broker silent, no confirmation)."""
+    with RobotDesk(connection, prefix, robot_id, logs=False) as desk:
+        robot = online_robot(desk, min(wait, 10.0), "a restart would be lost")
+        status = robot.status
+        if status is None or status.state is AgentState.IDLE:
+            raise CliError(
+                f"nothing to restart: {robot_id} has no launch request (it is idle)",
+                ExitCode.FINDINGS,
+            )
+        issued_at = _send_restart(desk, robot_id, by, key, min(wait, 10.0))
+        confirmed = _confirmed(desk, issued_at, wait)
+    if confirmed is None:
+        raise CliError(
+            f"{robot_id} did not confirm the restart within {wait:g} s: its agent refused it "
+            "(unsigned or wrongly signed where it verifies, clocks more than 5 minutes apart) "
+            f"or never got it (the ACL lets only operators and the reconciler ask); "
+            f"robotconf logs {robot_id} shows why",
+            ExitCode.FINDINGS,
+        )
+    return confirmed
+
+
 @click.command("restart")
 @click.argument("robot_id", metavar="ROBOT")
 @repo_option
 @desk_broker_options
-@click.option(
-    "--signing-key",
-    type=click.Path(path_type=Path, dir_okay=False),
-    default=None,
-    help="the Launch Requests' private key: needed when the robots verify signatures "
-    "(default: a running robotconf up's, when no broker is given)",
-)
+@signing_key_option
 @click.option("--as", "as_name", default=None, help="who asks (default: --username, else $USER)")
 @click.option(
     "--wait",
@@ -133,26 +172,9 @@ def restart(
     if not is_robot_id(robot_id):
         raise CliError(f"{robot_id!r} is not a robot id", ExitCode.FINDINGS)
     by = requester(as_name, mqtt.username)
-    key = _private_key(signing_key or mqtt.signing_key)  # up's own, found with its broker
+    key = private_key(signing_key or mqtt.signing_key)  # up's own, found with its broker
     connection = mqtt.connection()
-    with RobotDesk(connection, mqtt.prefix, robot_id, logs=False) as desk:
-        robot = online_robot(desk, min(wait, 10.0), "a restart would be lost")
-        status = robot.status
-        if status is None or status.state is AgentState.IDLE:
-            raise CliError(
-                f"nothing to restart: {robot_id} has no launch request (it is idle)",
-                ExitCode.FINDINGS,
-            )
-        issued_at = _send_restart(desk, robot_id, by, key, min(wait, 10.0))
-        confirmed = _confirmed(desk, issued_at, wait)
-    if confirmed is None:
-        raise CliError(
-            f"{robot_id} did not confirm the restart within {wait:g} s: its agent refused it "
-            "(unsigned or wrongly signed where it verifies, clocks more than 5 minutes apart) "
-            f"or never got it (the ACL lets only operators and the reconciler ask); "
-            f"robotconf logs {robot_id} shows why",
-            ExitCode.FINDINGS,
-        )
+    confirmed = request_restart(connection, mqtt.prefix, robot_id, by, key, wait)
     # The status message is the robot's own text: escaped, it cannot drive the terminal.
     said = printable(confirmed.message)
     print(f"{robot_id}: restart requested by {by}: {confirmed.state.value} ({said})")

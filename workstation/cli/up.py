@@ -20,6 +20,7 @@ from workstation.cli.broker_options import BrokerOptions, broker_options
 from workstation.cli.fleet_view import fleet_status_view
 from workstation.cli.options import repo_option
 from workstation.cli.terminal import is_terminal, safe, terminal_console
+from workstation.cli.ui import ui_beside, ui_option
 
 
 class Screen:
@@ -112,6 +113,7 @@ class Screen:
     is_flag=True,
     help="do not sign requests (by default up signs them with a key kept in its workdir)",
 )
+@ui_option
 def up(
     repo: Path,
     mqtt: BrokerOptions,
@@ -119,6 +121,7 @@ def up(
     workdir: str | None,
     port: int,
     no_signing: bool,
+    ui_at: str | None,
 ) -> ExitCode:
     """The whole loop on this machine: broker, reconciler, one agent per robot, live status;
     Ctrl-C stops everything. In another terminal, within the repository, `robotconf status`,
@@ -128,7 +131,10 @@ def up(
 
     source = click.get_current_context().get_parameter_source("broker")
     origin = f"${BROKER_ENV}" if source is ParameterSource.ENVIRONMENT else "--broker"
-    setup = dataclasses.replace(prepare(repo, branch, workdir), port=port, broker_origin=origin)
+    ui = ui_beside(ui_at)
+    setup = dataclasses.replace(
+        prepare(repo, branch, workdir), port=port, broker_origin=origin, ui=ui
+    )
     mqtt.connection()  # the URL, prefix and credentials are checked before anything starts
     screen = Screen(live=is_terminal())
     return run_up(setup, mqtt.broker, mqtt.connection, mqtt.prefix, not no_signing, screen)

@@ -15,6 +15,7 @@ import socket
 import subprocess
 import termios
 import threading
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -545,3 +546,27 @@ def test_up_builds_its_head_once_and_hands_that_build_to_the_reconciler(lab: Git
     assert {r: q.payload() for r, q in again.fleet.requests.items()} == {
         r: q.payload() for r, q in setup.fleet.requests.items()
     }
+
+
+def test_up_serves_the_fleet_page_when_asked(lab: GitLab, tmp_path: Path) -> None:
+    port = free_port("127.0.0.1")
+    up = start_up(lab, tmp_path, "--ui", f"127.0.0.1:{port}")
+    try:
+        wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
+        assert f"ui: the fleet's web page is at http://127.0.0.1:{port}/" in up.output()
+
+        def page() -> str | None:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as answer:
+                    body: str = answer.read().decode()
+            except OSError:
+                return None
+            synced = re.findall(r'<tr data-robot="tb3-0\d" data-verdict="InSync"', body)
+            return body if len(synced) == 6 else None
+
+        body = wait_for(page, "the fleet page with every robot InSync")
+        assert 'data-reconciler-state="Ready"' in body
+    finally:
+        code = up.stop(signal.SIGINT, timeout=60)
+    assert code == 0, up.output()
+    assert "Traceback" not in up.output()

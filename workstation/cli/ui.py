@@ -1,0 +1,134 @@
+"""`robotconf ui`: the fleet in a browser, live, until the process is signalled."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from contract.errors import CliError, ExitCode
+from reconciler.lifecycle import log_to_stderr, on_stop_signals
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from workstation.cli.options import F, repo_option
+from workstation.cli.restart import signing_key_option
+from workstation.ui import DEFAULT_LISTEN
+
+if TYPE_CHECKING:
+    from workstation.ui.run import UiOptions
+
+_path = click.Path(path_type=Path)
+
+
+def ui_option(command: F) -> F:
+    """`--ui [HOST:PORT]` of `reconcile` and `up`: serve the UI beside them (loopback only:
+    `robotconf ui` is the one that takes a token and TLS for other machines)."""
+    return click.option(
+        "--ui",
+        "ui_at",
+        is_flag=False,
+        flag_value=DEFAULT_LISTEN,
+        default=None,
+        metavar="HOST:PORT",
+        help="also serve the fleet's web page (robotconf ui) at HOST:PORT (alone: "
+        f"{DEFAULT_LISTEN}); loopback only, robotconf ui serves other machines",
+    )(command)
+
+
+def ui_beside(ui_at: str | None) -> UiOptions | None:
+    """`--ui` of `reconcile` and `up`, checked before anything starts: read-only, loopback."""
+    if ui_at is None:
+        return None
+    from reconciler.lifecycle import parse_address
+    from workstation.ui.run import is_loopback, ui_options
+
+    try:
+        host, _ = parse_address(ui_at, "--ui", DEFAULT_LISTEN)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if not is_loopback(host):
+        raise CliError(
+            f"--ui {ui_at}: serves loopback only; for other machines run robotconf ui with "
+            "--operator-token-file and TLS"
+        )
+    options = ui_options(ui_at, option="--ui")
+    return options
+
+
+@click.command("ui")
+@repo_option
+@desk_broker_options
+@click.option(
+    "--listen",
+    default=DEFAULT_LISTEN,
+    show_default=True,
+    metavar="HOST:PORT",
+    help="where to serve; another address than loopback needs --operator-token-file and TLS",
+)
+@click.option(
+    "--operator-token-file",
+    type=_path,
+    default=None,
+    metavar="F",
+    help="a file (readable by you alone) whose one line is the operators' token: with it, "
+    "operators log in and restart robots; without, the UI is read-only",
+)
+@click.option("--tls-cert", type=_path, default=None, metavar="F", help="serve HTTPS: certificate")
+@click.option("--tls-key", type=_path, default=None, metavar="F", help="... and its private key")
+@click.option(
+    "--behind-tls-proxy",
+    is_flag=True,
+    help="a reverse proxy in front terminates TLS (for a non-loopback --listen without --tls-cert)",
+)
+@signing_key_option
+def ui(
+    repo: Path,
+    mqtt: BrokerOptions,
+    listen: str,
+    operator_token_file: Path | None,
+    tls_cert: Path | None,
+    tls_key: Path | None,
+    behind_tls_proxy: bool,
+    signing_key: Path | None,
+) -> ExitCode:
+    """Serve the fleet as a live web page: the reconciler and a refused commit's diagnostics,
+    the rollout, every robot worst first, each robot's page; runs until signalled.
+
+    Viewers look; operators act. With --operator-token-file, an operator logs in at /login
+    with the file's token (a session cookie follows, not the token) or sends it as
+    `Authorization: Bearer TOKEN` from a script; they restart a robot (its page's Restart,
+    confirmed, or POST /robots/ROBOT/restart) through the same signed request as robotconf
+    restart (signed with --signing-key when given; the status says `ui.cookie` or
+    `ui.bearer` asked) and follow its brain's log on its page. Without a token or with a
+    wrong one a restart is refused (401/403); wrong tokens from one address are throttled."""
+    from workstation.ui.run import RunningUi, ui_options
+
+    options = ui_options(
+        listen,
+        operator_token_file,
+        tls_cert,
+        tls_key,
+        behind_tls_proxy,
+        signing_key=signing_key or mqtt.signing_key,  # up's own, found with its broker
+    )
+    connection = mqtt.connection()
+    log_to_stderr("ui")
+    stop = threading.Event()
+    on_stop_signals(stop)
+    running = RunningUi(connection, mqtt.prefix, repo, options)
+    try:
+        logging.getLogger("robotconf.ui").info(
+            "serving the fleet of %s (prefix %s, repository %s) at %s",
+            connection.address.url,
+            mqtt.prefix,
+            repo,
+            running.url,
+        )
+        click.echo(f"robotconf ui: {running.url}", err=True)
+        while not stop.wait(1.0):
+            pass
+    finally:
+        running.close()
+    return ExitCode.OK

@@ -1,0 +1,322 @@
+"""Who a UI request comes from: an operator (the token of --operator-token-file, as a Bearer
+header or a login session's cookie) or a viewer; sessions, CSRF tokens and login throttling."""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import re
+import secrets
+import stat
+import threading
+import time
+from collections import OrderedDict, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal, Protocol
+
+from contract.errors import CliError
+
+COOKIE = "robotconf_ui"
+MIN_TOKEN = 16
+MAX_TOKEN = 1024
+# Visible ASCII: the token fits a header and a form field as it is.
+_TOKEN = re.compile(r"[\x21-\x7e]+")
+_SESSION_ID = re.compile(r"[A-Za-z0-9_-]{20,100}")
+MAX_COOKIE_HEADER = 8192
+
+
+class Headers(Protocol):
+    """What identify reads of a request's headers (http.client.HTTPMessage has it)."""
+
+    def get_all(self, name: str, failobj: None = None) -> list[str] | None: ...
+
+
+Via = Literal["anonymous", "cookie", "bearer"]
+
+
+@dataclass(frozen=True)
+class Identity:
+    """Who asks. `via` says how they came: with no credentials, a session cookie, or a Bearer
+    header. A bad Bearer token is `via="bearer"` without `operator` (refused, 403); an unknown
+    or expired cookie is anonymous (log in again, 401)."""
+
+    operator: bool
+    csrf: str = field(default="", repr=False)  # the session's; empty for a Bearer or a viewer
+    via: Via = "anonymous"
+
+    def csrf_matches(self, given: str) -> bool:
+        """True when `given` is this session's CSRF token (compared in constant time)."""
+        if not self.csrf:
+            return False
+        return hmac.compare_digest(self.csrf.encode("utf-8"), given.encode("utf-8", "replace"))
+
+
+ANONYMOUS = Identity(operator=False)
+
+
+@dataclass(frozen=True)
+class Policy:
+    """The bounds of the session table and of login guesses."""
+
+    max_sessions: int = 256  # beyond, the least recently used session ends
+    idle: float = 3600.0  # seconds a session lasts unused
+    lifetime: float = 12 * 3600.0  # seconds a session lasts at most
+    guesses: int = 5  # failed logins per client address within `window`...
+    window: float = 300.0  # ...after which that address may not try until the oldest ages out
+    max_clients: int = 4096  # addresses whose failures are remembered
+
+
+@dataclass
+class _Session:
+    csrf: str
+    created: float
+    used: float
+
+
+def read_token(path: Path) -> str:
+    """The token in `path` (its one line); CliError when the file is missing, not a regular
+    file, readable or writable by others than its owner, owned by someone else, or the token
+    is too short, too long or not one line of visible characters."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise CliError(f"cannot read --operator-token-file {path}: {exc.strerror}") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise CliError(f"--operator-token-file {path} is not a regular file")
+        if info.st_mode & 0o077:
+            raise CliError(
+                f"--operator-token-file {path} may be read or changed by others "
+                f"(mode {stat.S_IMODE(info.st_mode):04o}): chmod 600 it, as ssh asks of a key"
+            )
+        if hasattr(os, "geteuid") and info.st_uid != os.geteuid():
+            raise CliError(f"--operator-token-file {path} belongs to another user")
+        data = os.read(fd, MAX_TOKEN + 3)
+    finally:
+        os.close(fd)
+    return _token_in(data, path)
+
+
+def _token_in(data: bytes, path: Path) -> str:
+    text = data.decode("ascii", "replace")
+    line = text[:-2] if text.endswith("\r\n") else text[:-1] if text.endswith("\n") else text
+    where = f"--operator-token-file {path}"
+    if len(line) > MAX_TOKEN:
+        raise CliError(f"{where}: the token is longer than {MAX_TOKEN} characters")
+    if not _TOKEN.fullmatch(line):
+        raise CliError(
+            f"{where} must hold one line, the token: visible ASCII characters, no spaces "
+            "(e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))')"
+        )
+    if len(line) < MIN_TOKEN:
+        raise CliError(f"{where}: the token is shorter than {MIN_TOKEN} characters")
+    return line
+
+
+def _digest(session_id: str) -> str:
+    # Sessions are looked up by a hash of their id: the table's lookups time nothing secret.
+    return hashlib.sha256(session_id.encode("ascii")).hexdigest()
+
+
+@dataclass(frozen=True)
+class Login:
+    """How a login attempt ended: `cookie` (a Set-Cookie value) when it succeeded, else the
+    reason it did not ("disabled", "wrong", "throttled")."""
+
+    cookie: str | None
+    refusal: Literal["", "disabled", "wrong", "throttled"] = ""
+    retry_after: int = 0  # seconds, when throttled
+
+
+class OperatorAuth:
+    """The operator token (None: a read-only UI), the sessions of those who logged in with it,
+    and the failed logins of each client address. Thread-safe."""
+
+    def __init__(
+        self,
+        token: str | None,
+        *,
+        secure: bool = False,
+        policy: Policy | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        # Only a hash is kept: compared in constant time, and no repr or dump shows the token.
+        self._token = hashlib.sha256(token.encode("ascii")).digest() if token is not None else None
+        self.secure = secure  # cookies only over TLS
+        self.policy = policy or Policy()
+        self._clock = clock
+        self._sessions: OrderedDict[str, _Session] = OrderedDict()
+        self._failures: OrderedDict[str, deque[float]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    @classmethod
+    def from_file(cls, path: Path | None, *, secure: bool = False) -> OperatorAuth:
+        """The auth of `--operator-token-file` (None: nobody is an operator); CliError when
+        the file is refused (read_token)."""
+        return cls(read_token(path) if path is not None else None, secure=secure)
+
+    def __repr__(self) -> str:  # never the token
+        return f"OperatorAuth(enabled={self.enabled}, sessions={len(self._sessions)})"
+
+    @property
+    def enabled(self) -> bool:
+        """False for a read-only UI: no token, nobody logs in."""
+        return self._token is not None
+
+    def token_matches(self, given: str) -> bool:
+        if self._token is None:
+            return False
+        try:
+            candidate = given.encode("ascii")
+        except UnicodeEncodeError:
+            candidate = b""
+        # Compared in full whatever it is, so its time says nothing of the token.
+        return hmac.compare_digest(hashlib.sha256(candidate).digest(), self._token)
+
+    # ------------------------------------------------------------------ identify
+
+    def identify(self, headers: Headers) -> Identity:
+        """Who sends these headers: a Bearer header is judged alone (a script has no
+        cookie); else the session cookie; else anonymous."""
+        authorization = headers.get_all("Authorization") or []
+        if authorization:
+            return self._bearer(authorization)
+        session_id = session_cookie(headers.get_all("Cookie") or [])
+        if session_id is None:
+            return ANONYMOUS
+        return self._session(session_id)
+
+    def _bearer(self, values: list[str]) -> Identity:
+        scheme, _, token = values[0].strip().partition(" ")
+        good = len(values) == 1 and scheme.lower() == "bearer" and self.token_matches(token.strip())
+        return Identity(operator=good, via="bearer")
+
+    def _session(self, session_id: str) -> Identity:
+        key = _digest(session_id)
+        now = self._clock()
+        with self._lock:
+            session = self._sessions.get(key)
+            if session is None:
+                return ANONYMOUS
+            if self._expired(session, now):
+                del self._sessions[key]
+                return ANONYMOUS
+            session.used = now
+            self._sessions.move_to_end(key)
+            return Identity(operator=True, csrf=session.csrf, via="cookie")
+
+    def _expired(self, session: _Session, now: float) -> bool:
+        policy = self.policy
+        return now - session.used >= policy.idle or now - session.created >= policy.lifetime
+
+    # ------------------------------------------------------------------ login / logout
+
+    def login(self, client: str, token: str) -> Login:
+        """A login from `client` (its address, as http_edge.client_key groups it) with
+        `token`: a new session, or why not. While an address is throttled its guesses are not
+        even compared."""
+        if self._token is None:
+            return Login(None, "disabled")
+        now = self._clock()
+        with self._lock:
+            wait = self._throttled(client, now)
+            if wait:
+                return Login(None, "throttled", wait)
+            if not self.token_matches(token):
+                self._failed(client, now)
+                return Login(None, "wrong")
+            self._failures.pop(client, None)
+            session_id = secrets.token_urlsafe(32)
+            self._sessions[_digest(session_id)] = _Session(secrets.token_urlsafe(32), now, now)
+            self._prune(now)
+        return Login(self.cookie(session_id))
+
+    def blocked(self, client: str) -> int:
+        """Seconds `client` must wait before it may try a token again (0: it may now)."""
+        with self._lock:
+            return self._throttled(client, self._clock())
+
+    def failed(self, client: str) -> None:
+        """Counts a wrong token from `client` that came otherwise than by the login form (a
+        bad Bearer header), so that guesses are throttled whichever way they come."""
+        with self._lock:
+            self._failed(client, self._clock())
+
+    def _throttled(self, client: str, now: float) -> int:
+        times = self._failures.get(client)
+        if times is None:
+            return 0
+        while times and now - times[0] >= self.policy.window:
+            times.popleft()
+        if not times:
+            del self._failures[client]
+            return 0
+        if len(times) < self.policy.guesses:
+            return 0
+        return max(1, int(times[0] + self.policy.window - now + 0.999))
+
+    def _failed(self, client: str, now: float) -> None:
+        times = self._failures.setdefault(client, deque(maxlen=self.policy.guesses))
+        times.append(now)
+        self._failures.move_to_end(client)
+        while len(self._failures) > self.policy.max_clients:
+            self._failures.popitem(last=False)
+
+    def _prune(self, now: float) -> None:
+        """Expired sessions go, then the least recently used beyond the table's bound."""
+        for key in [k for k, s in self._sessions.items() if self._expired(s, now)]:
+            del self._sessions[key]
+        while len(self._sessions) > self.policy.max_sessions:
+            self._sessions.popitem(last=False)
+
+    def logout(self, headers: Headers) -> str:
+        """Ends the session of these headers' cookie, if any; the Set-Cookie value that
+        clears the cookie."""
+        session_id = session_cookie(headers.get_all("Cookie") or [])
+        if session_id is not None:
+            with self._lock:
+                self._sessions.pop(_digest(session_id), None)
+        return self.cookie("", max_age=0)
+
+    def cookie(self, value: str, *, max_age: int | None = None) -> str:
+        """A Set-Cookie value for the session cookie: script cannot read it, no other site's
+        request carries it, only TLS carries it when the UI is served over TLS."""
+        age = int(self.policy.lifetime) if max_age is None else max_age
+        secure = "; Secure" if self.secure else ""
+        return f"{COOKIE}={value}; Path=/; Max-Age={age}; HttpOnly; SameSite=Strict{secure}"
+
+    @property
+    def sessions(self) -> int:
+        return len(self._sessions)
+
+
+def session_cookie(values: list[str]) -> str | None:
+    """The session id in Cookie headers, when one is there and looks like one of ours."""
+    found: str | None = None
+    size = 0
+    for value in values:
+        size += len(value)
+        if size > MAX_COOKIE_HEADER:
+            return None
+        for part in value.split(";"):
+            name, eq, content = part.strip().partition("=")
+            if eq and name == COOKIE:
+                if found is not None:
+                    return None  # two of ours: one was planted, trust neither
+                found = content.strip()
+    if found is None or not _SESSION_ID.fullmatch(found):
+        return None
+    return found
+
+
+def refusal_text(login: Login) -> str:
+    """What the login page says of a refused login (never the token, never how close)."""
+    if login.refusal == "disabled":
+        return "This UI has no operator token (--operator-token-file): it is read-only."
+    if login.refusal == "throttled":
+        return f"Too many wrong tokens from your address: try again in {login.retry_after} s."
+    return "That is not the operator token."

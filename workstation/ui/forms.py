@@ -1,0 +1,101 @@
+"""The operator's page parts, pure: the login form, the restart confirmation, a restart's
+outcome. Every string that came from outside goes through the pages' `esc`."""
+
+from __future__ import annotations
+
+import re
+import time
+from urllib.parse import quote
+
+from workstation.ui.auth import Identity
+from workstation.ui.pages import esc
+from workstation.ui.restarts import Outcome
+
+MAX_NEXT = 512
+# A path on this site, with a query perhaps: no scheme, no host (`//evil`), no backslash that
+# a browser would read as a slash, nothing outside visible ASCII.
+_LOCAL_PATH = re.compile(r"/(?![/\\])[A-Za-z0-9._~!$&'()*+,;=:@%/?-]*")
+
+
+def local_path(candidate: str | None) -> str:
+    """`candidate` when it is a path on this site, else "/": a login never sends anyone
+    elsewhere."""
+    if candidate and len(candidate) <= MAX_NEXT and _LOCAL_PATH.fullmatch(candidate):
+        return candidate
+    return "/"
+
+
+def login_form(next_path: str, message: str = "", *, enabled: bool = True) -> str:
+    """The login form (`form[data-login]`, its field `token`)."""
+    if not enabled:
+        return (
+            "<h1>Log in</h1><p data-login-disabled>This UI was started without "
+            "<code>--operator-token-file</code>: it is read-only, nobody logs in.</p>"
+        )
+    said = f'<p class="refusal" role="alert">{esc(message)}</p>' if message else ""
+    return (
+        f"<h1>Log in as an operator</h1>{said}"
+        '<form method="post" action="/login" data-login>'
+        # For password managers and screen readers: a password field has its user name.
+        '<input type="text" name="username" value="operator" autocomplete="username" hidden>'
+        '<label for="token">Operator token</label> '
+        '<input type="password" id="token" name="token" autocomplete="current-password" '
+        'required maxlength="1024" autofocus> '
+        f'<input type="hidden" name="next" value="{esc(local_path(next_path))}">'
+        '<button type="submit">Log in</button></form>'
+        "<p>Operators may restart robots and read their brains' logs; "
+        "anyone who can open this page may look.</p>"
+    )
+
+
+def logged_in() -> str:
+    return "<h1>Log in</h1><p>You are logged in as an operator (log out at the top).</p>"
+
+
+def robot_path(robot_id: str) -> str:
+    return "/robots/" + quote(robot_id, safe="")
+
+
+def confirm_restart(robot_id: str, who: Identity, outcome: Outcome | None) -> str:
+    """The confirmation page's body: what a restart does, and the form that asks for it."""
+    path = robot_path(robot_id)
+    rid = esc(robot_id)
+    csrf = f'<input type="hidden" name="csrf" value="{esc(who.csrf)}">' if who.csrf else ""
+    return (
+        f"<h1>Restart {rid}?</h1><div>"
+        f"<p>{rid}'s agent stops its brain (SIGTERM, then SIGKILL after its stop timeout) "
+        "and starts it again with the launch request it has; its restart count and backoff "
+        "start over. A busy brain (its hold file) defers it. No commit is needed.</p>"
+        f"{outcome_html(outcome)}"
+        f'<form method="post" action="{path}/restart" data-confirm-restart>{csrf}'
+        f'<button type="submit">Restart {rid}</button> <a href="{path}">Cancel</a></form></div>'
+    )
+
+
+def outcome_html(outcome: Outcome | None) -> str:
+    """The latest restart the UI asked of a robot (`[data-restart-outcome]`, its state as the
+    attribute's value), or nothing."""
+    if outcome is None:
+        return ""
+    at = time.strftime("%H:%M:%S UTC", time.gmtime(outcome.at))
+    who = f"by {esc(outcome.by)} at {at}"
+    rid = esc(outcome.robot_id)
+    if outcome.state == "pending":
+        text = f"Restart asked {who}: waiting for {rid} to confirm (reload to see)."
+    elif outcome.state == "confirmed":
+        text = f"Restart asked {who}: {rid} confirmed it: {esc(outcome.text)}."
+    else:
+        text = f"Restart asked {who}: not done: {esc(outcome.text)}"
+    return (
+        f'<p class="outcome outcome-{outcome.state}" role="status" '
+        f'data-restart-outcome="{outcome.state}" '
+        f'data-outcome-src="{robot_path(outcome.robot_id)}/restart/outcome">{text}</p>'
+    )
+
+
+def refusal(title: str, message: str, link: tuple[str, str] | None = None) -> str:
+    """A refused request's page body (401, 403, 404, 429...)."""
+    more = ""
+    if link is not None:
+        more = f' <a href="{esc(link[0])}">{esc(link[1])}</a>'
+    return f'<h1>{esc(title)}</h1><p role="alert">{esc(message)}{more}</p>'

@@ -1,0 +1,335 @@
+"""The fleet page and its live boxes as HTML, pure; `esc` is the one way text reaches a page, and no
+page has an inline script or style (the CSP forbids them). DOM contract: docs/architecture.md."""
+
+from __future__ import annotations
+
+import html
+import time
+from collections.abc import Iterable
+from urllib.parse import quote, urlencode
+
+from contract.textsafe import printable
+from reconciler.verdicts import (
+    Health,
+    RobotRow,
+    Verdict,
+    reconciler_health,
+    short_digest,
+    short_rev,
+)
+from workstation.ui.auth import Identity
+from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
+
+MAX_TEXT = 500  # characters of one robot- or commit-supplied string shown
+MAX_LISTED = 300  # items of one list on a robot page (interfaces, mappings); the rest counted
+DIAGNOSTICS = 50  # diagnostics listed; the rest counted
+COLUMNS = (
+    "Robot",
+    "Verdict",
+    "State",
+    "Online",
+    "Labels",
+    "Wave",
+    "Scenario",
+    "Desired",
+    "Reported",
+    "Restarts",
+    "Reloads",
+    "Drift",
+    "Why",
+)
+
+
+def esc(text: object, limit: int = MAX_TEXT) -> str:
+    """The one way text from a robot, a commit or a request reaches a page: control characters
+    written as escapes, cut at `limit`, then HTML-escaped (quotes too: safe in attributes)."""
+    shown = printable(str(text))
+    if len(shown) > limit:
+        shown = shown[:limit] + "…"
+    return html.escape(shown, quote=True)
+
+
+def when(at: float | None) -> str:
+    """A unix time as UTC text; `-` for none or nonsense (a robot's clock may say anything)."""
+    if at is None or not 0 <= at < 1e11:
+        return "-"
+    return time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(at))
+
+
+def age(at: float | None) -> str:
+    """`<time data-since>`: the script shows its age and counts it on. Without script, the time
+    itself: the HTML of a box does not change as time passes, so only real changes are sent."""
+    if at is None or not 0 <= at < 1e11:
+        return "-"
+    return f'<time data-since="{at:.3f}">{esc(when(at))}</time>'
+
+
+def page(title: str, body: str, who: Identity, attrs: str = "") -> str:
+    """A whole document: the stylesheet and the script by URL, nothing inline."""
+    account = (
+        '<form method="post" action="/logout" class="inline">'
+        f'<input type="hidden" name="csrf" value="{esc(who.csrf)}">'
+        '<button type="submit">Log out</button></form>'
+        if who.operator
+        else '<a href="/login">Log in</a>'
+    )
+    return (
+        '<!doctype html>\n<html lang="en"><head><meta charset="utf-8">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>{esc(title)} · robotconf</title>"
+        '<link rel="stylesheet" href="/static/ui.css">'
+        '<script src="/static/ui.js" defer></script></head>'
+        f"<body{attrs}>"
+        '<a class="skip" href="#main">Skip to content</a>'
+        '<header><nav aria-label="site"><a href="/">Fleet</a> '
+        f'<span class="who">{"operator" if who.operator else "viewer (read-only)"}</span> '
+        f"{account}</nav></header>"
+        f'<main id="main" tabindex="-1">{body}</main></body></html>\n'
+    )
+
+
+def error_page(code: int, message: str, who: Identity) -> str:
+    body = f'<h1>{code}</h1><p data-error>{esc(message)}</p><p><a href="/">The fleet</a></p>'
+    return page(f"{code}", body, who)
+
+
+# ------------------------------------------------------------------ the fleet page
+
+
+def fleet_page(snap: Snapshot, query: FleetQuery, who: Identity) -> str:
+    shown = visible(snap.fleet, query) if snap.fleet is not None else None
+    events = "/events" + (f"?{urlencode(query.as_query())}" if query.as_query() else "")
+    body = (
+        "<h1>Fleet</h1>"
+        + banner_box(snap)
+        + reconciler_box(snap)
+        + rollout_box(snap)
+        + filter_form(query)
+        + summary_box(shown, query)
+        + '<div class="scroll" id="robots"><table data-fleet><caption>Robots, worst first'
+        + "</caption><thead><tr>"
+        + "".join(f'<th scope="col">{name}</th>' for name in COLUMNS)
+        + "</tr></thead><tbody data-rows>"
+        + "".join(row_html(row) for row in (shown.rows if shown else []))
+        + "</tbody></table></div>"
+    )
+    attrs = f' data-page="fleet" data-version="{snap.version}" data-events="{esc(events)}"'
+    return page("Fleet", body, who, attrs)
+
+
+def filter_form(query: FleetQuery) -> str:
+    selector = ",".join(f"{k}={v}" for k, v in query.selector)
+    options = ['<option value="">any</option>'] + [
+        f'<option value="{v.value}"{" selected" if query.verdict is v else ""}>{v.value}</option>'
+        for v in Verdict
+    ]
+    return (
+        '<form data-filter method="get" action="/" role="search">'
+        '<label>Labels <input name="selector" placeholder="ring=canary,site=sim" '
+        f'value="{esc(selector)}" autocomplete="off"></label> '
+        f'<label>Verdict <select name="verdict">{"".join(options)}</select></label> '
+        f'<label>Robot id <input name="q" type="search" value="{esc(query.search)}" '
+        'autocomplete="off"></label> <button type="submit">Filter</button> '
+        '<a href="/">Clear</a></form>'
+    )
+
+
+def summary_box(shown: Visible | None, query: FleetQuery) -> str:
+    if shown is None:
+        text = "<p>Reading the broker's retained topics…</p>"
+    else:
+        counts = ", ".join(
+            f'<a href="/?{esc(urlencode([*without_verdict(query), ("verdict", v)]))}">{n} {v}</a>'
+            for v, n in shown.counts.items()
+        )
+        text = f"<p>{shown.total} robots in the fleet; these: {counts or 'none'}.</p>"
+        if shown.selected > len(shown.rows):
+            more = shown.selected - len(shown.rows)
+            text += (
+                f"<p data-more>Showing the worst {len(shown.rows)} of {shown.selected}: "
+                f"{more} more, narrow the filter.</p>"
+            )
+    return f'<section data-box="summary" aria-live="polite">{text}</section>'
+
+
+def without_verdict(query: FleetQuery) -> list[tuple[str, str]]:
+    return [(k, v) for k, v in query.as_query() if k != "verdict"]
+
+
+def row_html(row: RobotRow) -> str:
+    """One robot's row: `data-robot`, `data-verdict` and `data-rank` (its place worst first,
+    for the script to insert it where it belongs); the verdict as text too."""
+    rid = esc(row.robot_id)
+    labels = ", ".join(f"{k}={v}" for k, v in sorted(row.labels.items())) or "-"
+    cells = [
+        f'<th scope="row"><a href="/robots/{quote(row.robot_id, safe="")}">{rid}</a></th>',
+        f'<td class="verdict"><span class="badge">{row.verdict.value}</span></td>',
+        f"<td>{esc(row.state, 40)}</td>",
+        f"<td>{'yes' if row.online else 'no'}</td>",
+        f"<td>{esc(labels)}</td>",
+        f"<td>{esc(row.wave or '-')}</td>",
+        f"<td>{esc(row.scenario or '-')}</td>",
+        f"<td><code>{esc(short_digest(row.desired))}</code></td>",
+        f"<td><code>{esc(short_digest(row.reported))}</code></td>",
+        f"<td>{row.restarts}</td>",
+        f"<td>{row.reloads}</td>",
+        f'<td class="drift">{esc(row.drift.summary())}</td>',
+        f"<td>{'' if row.verdict is Verdict.IN_SYNC else esc(row.reason, 200)}</td>",
+    ]
+    return (
+        f'<tr data-robot="{rid}" data-verdict="{row.verdict.value}" '
+        f'data-rank="{esc(rank(row))}">{"".join(cells)}</tr>'
+    )
+
+
+def banner_box(snap: Snapshot) -> str:
+    """What makes the page's view doubtful: the broker lost, the reconciler silent."""
+    lines = []
+    if not snap.connected:
+        why = f": {esc(snap.broker_error)}" if snap.broker_error else ""
+        lines.append(
+            f'<p data-banner="broker">Broker disconnected ({esc(snap.broker)}){why}. '
+            "Showing the last state read; it reconnects by itself.</p>"
+        )
+    fleet = snap.fleet
+    if fleet is not None:
+        health = reconciler_health(fleet.reconciler, snap.at)
+        said = {
+            Health.STALE: "Reconciler heartbeat stale: is the reconciler still running?",
+            Health.OFFLINE: "Reconciler offline: it stopped, or lost the broker.",
+            Health.MISSING: "No reconciler status on the broker: no reconciler runs here.",
+        }.get(health)
+        if said is not None:
+            lines.append(f'<p data-banner="reconciler">{said}</p>')
+        if fleet.lost:
+            lines.append(f'<p data-banner="lost">{esc(fleet.lost)}</p>')
+    hidden = "" if lines else " hidden"
+    return f'<div data-box="banner" role="status" aria-live="polite"{hidden}>{"".join(lines)}</div>'
+
+
+def reconciler_box(snap: Snapshot) -> str:
+    """The reconciler's state, revisions and heartbeat, and a refused commit's diagnostics."""
+    fleet = snap.fleet
+    status = fleet.reconciler if fleet is not None else None
+    if status is None:
+        state = "Missing" if fleet is not None else "Unknown"
+        inner = "<p>No reconciler status on the broker.</p>" if fleet is not None else ""
+        return (
+            f'<section data-box="reconciler" data-reconciler-state="{state}">'
+            f"<h2>Reconciler: {state}</h2>{inner}</section>"
+        )
+    health = reconciler_health(status, snap.at).value
+    facts = [
+        ("Reason", esc(status.reason or "-")),
+        ("Branch", esc(status.branch or "-")),
+        ("Applied", f"<code>{esc(short_rev(status.last_applied_revision))}</code>"),
+        ("Attempted", f"<code>{esc(short_rev(status.last_attempted_revision))}</code>"),
+        ("Failed", f"<code>{esc(short_rev(status.failed_revision))}</code>"),
+        ("Robots", str(status.robots)),
+        ("Heartbeat", age(status.heartbeat)),
+        ("Health", health),
+    ]
+    message = f"<p>{esc(status.message)}</p>" if status.message else ""
+    return (
+        f'<section data-box="reconciler" data-reconciler-state="{esc(status.state, 20)}" '
+        f'data-health="{health}"><h2>Reconciler: {esc(status.state, 20)}</h2>'
+        f"{definitions(facts)}{message}{diagnostics(status.diagnostics, status.more_diagnostics)}"
+        "</section>"
+    )
+
+
+def diagnostics(found: Iterable[object], more: int) -> str:
+    """One `<li>` per diagnostic, `file:line:col CODE message`."""
+    items = []
+    listed = list(found)
+    for d in listed[:DIAGNOSTICS]:
+        path = getattr(d, "path", None)
+        where = (
+            ":".join(
+                [
+                    str(path),
+                    *(
+                        str(n)
+                        for n in (getattr(d, "line", None), getattr(d, "column", None))
+                        if n is not None
+                    ),
+                ]
+            )
+            if path
+            else ""
+        )
+        code = getattr(d, "code", "")
+        items.append(
+            f'<li><code class="where">{esc(where)}</code> <strong>{esc(code, 60)}</strong> '
+            f"{esc(getattr(d, 'message', ''))}</li>"
+            if where
+            else f"<li><strong>{esc(code, 60)}</strong> {esc(getattr(d, 'message', ''))}</li>"
+        )
+    if not items:
+        return ""
+    left = len(listed) - min(len(listed), DIAGNOSTICS) + more
+    tail = f"<p>… {left} more (robotconf validate)</p>" if left > 0 else ""
+    return (
+        '<div class="diagnostics"><h3>Why the commit was refused</h3>'
+        f"<ul data-diagnostics>{''.join(items)}</ul>{tail}</div>"
+    )
+
+
+def definitions(facts: list[tuple[str, str]]) -> str:
+    """A `<dl>` of (name, already escaped HTML) pairs."""
+    return "<dl>" + "".join(f"<dt>{name}</dt><dd>{value}</dd>" for name, value in facts) + "</dl>"
+
+
+def rollout_box(snap: Snapshot) -> str:
+    """The rollout wave by wave: its robots by how they fare, and what a rollback restored."""
+    fleet = snap.fleet
+    rollout = fleet.reconciler.rollout if fleet and fleet.reconciler else None
+    if rollout is None:
+        return '<section data-box="rollout" hidden></section>'
+    deferred = [
+        r.robot_id
+        for r in (fleet.rows if fleet else [])
+        if r.wave == rollout.wave_name and r.state == "deferred"
+    ]
+    counts = rollout.counts
+    groups = [
+        ("Healthy", rollout.healthy, counts.get("healthy", len(rollout.healthy))),
+        ("Failed", rollout.failed, counts.get("failed", len(rollout.failed))),
+        ("Pending", rollout.pending, counts.get("pending", len(rollout.pending))),
+        ("Deferred", deferred, len(deferred)),
+        ("Offline", rollout.offline, counts.get("offline", len(rollout.offline))),
+    ]
+    facts = [
+        ("Revision", f"<code>{esc(short_rev(rollout.revision))}</code>"),
+        ("Wave", f"{rollout.wave + 1} of {rollout.waves} ({esc(rollout.wave_name, 80)})"),
+        ("Wave since", age(rollout.wave_started_at)),
+        ("Stable", f"<code>{esc(short_rev(rollout.stable_revision))}</code>"),
+    ]
+    restored = (
+        f"<p data-rolled-back>Rolled back: the moved robots run "
+        f"<code>{esc(short_rev(rollout.stable_revision))}</code> again, the last revision that "
+        "fully rolled out.</p>"
+        if rollout.state == "RolledBack"
+        else ""
+    )
+    lists = "".join(
+        f'<div class="group" data-group="{name.lower()}"><h3>{name}: {n}</h3>'
+        f"{id_list(ids, n)}</div>"
+        for name, ids, n in groups
+    )
+    message = f"<p>{esc(rollout.message)}</p>" if rollout.message else ""
+    return (
+        f'<section data-box="rollout" data-rollout-state="{esc(rollout.state, 20)}">'
+        f"<h2>Rollout: {esc(rollout.state, 20)}</h2>{definitions(facts)}{restored}{message}"
+        f'<div class="groups">{lists}</div></section>'
+    )
+
+
+def id_list(ids: list[str], count: int) -> str:
+    if not ids:
+        return ""
+    items = "".join(
+        f'<li><a href="/robots/{quote(i, safe="")}">{esc(i, 80)}</a></li>' for i in ids[:50]
+    )
+    more = f"<li>… {count - min(len(ids), 50)} more</li>" if count > min(len(ids), 50) else ""
+    return f"<ul>{items}{more}</ul>"

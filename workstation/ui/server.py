@@ -1,0 +1,248 @@
+"""The UI's HTTP service: a route table answered on the bounded edge (reconciler/http_edge.py),
+every page with the Content-Security-Policy, every bad request a 4xx page, never a traceback."""
+
+from __future__ import annotations
+
+import logging
+import re
+import ssl
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from typing import TypeVar
+from urllib.parse import unquote, urlsplit
+
+from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
+from contract.launch import LaunchRequest
+from contract.models import is_robot_id
+from contract.textsafe import printable
+from reconciler.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
+from reconciler.retained import read_object
+from workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
+from workstation.ui.changes import Shown
+from workstation.ui.model import QueryError, parse_query
+from workstation.ui.pages import error_page, fleet_page
+from workstation.ui.robot_page import robot_page
+from workstation.ui.state import LiveFleet
+
+log = logging.getLogger("robotconf.ui")
+
+CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; "
+    "connect-src 'self'; form-action 'self'; frame-ancestors 'none'; base-uri 'none'"
+)
+SECURITY_HEADERS = (
+    ("Content-Security-Policy", CSP),
+    ("X-Content-Type-Options", "nosniff"),
+    ("Referrer-Policy", "same-origin"),
+    ("X-Frame-Options", "DENY"),
+)
+HTML = "text/html; charset=utf-8"
+STATIC = {"ui.js": "text/javascript; charset=utf-8", "ui.css": "text/css; charset=utf-8"}
+# A browser opens a few connections per page and one event stream per open page: 32 per
+# address is a few tabs; 256 in all. A form's body is a token or a CSRF field: 16 KB is plenty.
+LIMITS = Limits(
+    connections=256,
+    per_client=32,
+    head=5.0,
+    silence=5.0,
+    deadline=10.0,
+    max_body=16 * 1024,
+    body_methods=frozenset({"POST"}),
+    stream_buffer=1024 * 1024,  # a reset event of 500 rows is about 300 KB
+    stream_drain=10.0,
+    stream_idle=15.0,
+)
+STREAM_BACKLOG = 32  # events waiting for one slow page before its stream ends (it reconnects)
+RETRY_MS = 2000  # how soon a browser reconnects a stream that ended
+
+Handler = Callable[[Request, "re.Match[str]", Identity], Response]
+
+
+@dataclass(frozen=True)
+class Route:
+    """`handler` answers `method` requests whose path (percent-decoded) matches `pattern` whole."""
+
+    method: str
+    pattern: re.Pattern[str] | str
+    handler: Handler
+
+
+def html(code: int, text: str, *headers: tuple[str, str]) -> Response:
+    return Response(code, text.encode("utf-8"), HTML, (("Cache-Control", "no-store"), *headers))
+
+
+class UiService:
+    """The edge's Service for `robotconf ui`: the read routes here, the write side's added."""
+
+    def __init__(self, live: LiveFleet, auth: OperatorAuth, extra: Sequence[Route] = ()) -> None:
+        self.live = live
+        self.auth = auth
+        self.static = {name: _static(name) for name in STATIC}
+        # The write side's: a robot's latest restart outcome (HTML) for an operator's page.
+        self.restart_outcome: Callable[[str], str] = lambda robot_id: ""
+        self.routes: list[Route] = [
+            Route("GET", r"/", self.fleet),
+            Route("GET", r"/healthz", self.healthz),
+            Route("GET", r"/events", self.events),
+            Route("GET", r"/static/(?P<name>[^/]{1,64})", self.file),
+            Route("GET", r"/robots/(?P<robot>[^/]{1,200})", self.robot),
+            *extra,
+        ]
+
+    # ------------------------------------------------------------------ the edge's Service
+
+    def answer(self, request: Request) -> Response:
+        return _secured(self._answer(request))
+
+    def refused(self, request: Request, code: int, message: str) -> Response:
+        return _secured(Response.text(code, message))
+
+    def _answer(self, request: Request) -> Response:
+        if not request.target.startswith("/"):
+            return self.error(400, "the request target is not a path")
+        parts = urlsplit(request.target)
+        try:
+            path = unquote(parts.path, errors="strict")
+        except UnicodeDecodeError:
+            return self.error(400, "the path is not UTF-8 once decoded")
+        try:
+            who = self.auth.identify(request.headers)
+        except Exception as exc:  # a bug in telling who it is: a viewer, never a traceback
+            log.error("ui: identifying a request failed: %s", printable(str(exc))[:200])
+            who = ANONYMOUS
+        allowed = []
+        for route in self.routes:
+            found = re.fullmatch(route.pattern, path)
+            if found is None:
+                continue
+            if route.method == request.method or (route.method, request.method) == ("GET", "HEAD"):
+                return route.handler(request, found, who)
+            allowed.append(route.method)
+        if allowed:
+            names = ", ".join(sorted(set(allowed)))
+            return self.error(
+                405, f"{printable(request.method)} is not {names}", who, ("Allow", names)
+            )
+        return self.error(404, "no such page", who)
+
+    def error(
+        self, code: int, message: str, who: Identity = ANONYMOUS, *headers: tuple[str, str]
+    ) -> Response:
+        return html(code, error_page(code, message, who), *headers)
+
+    # ------------------------------------------------------------------ read routes
+
+    def fleet(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        try:
+            query, _ = parse_query(urlsplit(request.target).query)
+        except QueryError as exc:
+            return self.error(_query_code(exc), str(exc), who)
+        return html(200, fleet_page(self.live.snapshot, query, who))
+
+    def healthz(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        return Response.text(200, "ok")
+
+    def robot(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        robot_id = match["robot"]
+        if not is_robot_id(robot_id):
+            return self.error(400, "that is not a robot id", who)
+        snap = self.live.snapshot
+        if snap.fleet is not None and snap.row(robot_id) is None:
+            return self.error(404, f"no robot {robot_id} in the fleet or on the broker", who)
+        topics = self.live.topics
+        launch = _parsed(self.live.payload(topics.launch(robot_id)), LaunchRequest)
+        interfaces = _parsed(
+            self.live.payload(topics.interfaces(robot_id)), RobotInterfaces, MAX_INTERFACES_BYTES
+        )
+        outcome = self.restart_outcome(robot_id) if who.operator else ""
+        return html(200, robot_page(snap, robot_id, who, launch, interfaces, outcome))
+
+    def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        """The page's server-sent events: what changed, from the page's own state on."""
+        try:
+            query, other = parse_query(urlsplit(request.target).query)
+        except QueryError as exc:
+            return self.error(_query_code(exc), str(exc), who)
+        robot = other.get("robot")
+        if robot is not None and not is_robot_id(robot):
+            return self.error(400, "that is not a robot id", who)
+        version = _version(request.headers.get("Last-Event-ID") or other.get("v"))
+        if request.method == "HEAD":
+            return Response(200, b"", "text/event-stream")
+        key: list[int] = []
+
+        def closed() -> None:
+            for k in key:
+                self.live.unsubscribe(k)
+
+        stream = FedStream(STREAM_BACKLOG, on_close=closed)
+        found = self.live.subscribe(Shown(query, robot), stream, version)
+        if found is None:
+            return self.error(503, "too many pages are open", who, ("Retry-After", "10"))
+        key.append(found)
+        return Response(
+            200,
+            f"retry: {RETRY_MS}\n\n".encode(),
+            "text/event-stream; charset=utf-8",
+            (("X-Accel-Buffering", "no"),),
+            stream=stream,
+            keepalive=b": keep-alive\n\n",
+        )
+
+    def file(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        name = match["name"]
+        if name not in self.static:
+            return self.error(404, "no such file", who)
+        return Response(200, self.static[name], STATIC[name], (("Cache-Control", "no-cache"),))
+
+
+def _secured(response: Response) -> Response:
+    """Every answer with the security headers (a page's CSP above all)."""
+    names = {name.lower() for name, _ in response.headers}
+    extra = tuple(h for h in SECURITY_HEADERS if h[0].lower() not in names)
+    return Response(
+        response.code,
+        response.body,
+        response.content_type,
+        (*response.headers, *extra),
+        response.stream,
+        response.keepalive,
+    )
+
+
+def _query_code(exc: QueryError) -> int:
+    return 414 if "characters, over the limit" in str(exc) else 400
+
+
+def _version(text: str | None) -> int | None:
+    if text is None or not text.isdigit() or len(text) > 18:
+        return None
+    return int(text)
+
+
+M = TypeVar("M", LaunchRequest, RobotInterfaces)
+
+
+def _parsed(payload: bytes | None, model: type[M], limit: int | None = None) -> M | None:
+    """What a retained payload holds, or None when it cannot be read as `model`."""
+    if not payload:
+        return None
+    try:
+        raw = read_object(payload) if limit is None else read_object(payload, limit)
+        return model.model_validate(raw)
+    except Exception:  # unreadable, oversized, another kind (a Stop): none to show
+        return None
+
+
+def _static(name: str) -> bytes:
+    return (resources.files("workstation.ui") / "static" / name).read_bytes()
+
+
+def serve(
+    service: UiService, host: str, port: int, tls: ssl.SSLContext | None = None
+) -> BoundedHTTPServer:
+    """Listens now (OSError when it cannot) and answers on a thread of its own."""
+    edge = BoundedHTTPServer("ui", service, LIMITS)
+    edge.listen(host, port, tls)
+    return edge
