@@ -78,6 +78,9 @@ class UiService:
     def __init__(self, live: LiveFleet, auth: OperatorAuth, extra: Sequence[Route] = ()) -> None:
         self.live = live
         self.auth = auth
+        # What a robot's page says of the last action on it (the write side's restart
+        # outcome, shown in `[data-restart-outcome]`): None, until the write side sets it.
+        self.outcome: Callable[[Request, str, Identity], str | None] = lambda *_: None
         self.static = {name: _static(name) for name in STATIC}
         self.routes: list[Route] = [
             Route("GET", r"/", self.fleet),
@@ -154,7 +157,8 @@ class UiService:
         interfaces = _parsed(
             self.live.payload(topics.interfaces(robot_id)), RobotInterfaces, MAX_INTERFACES_BYTES
         )
-        return html(200, robot_page(snap, robot_id, who, launch, interfaces))
+        said = self.outcome(request, robot_id, who)
+        return html(200, robot_page(snap, robot_id, who, launch, interfaces, said))
 
     def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         """The page's server-sent events: what changed, from the page's own state on."""
