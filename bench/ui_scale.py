@@ -148,10 +148,12 @@ def get(port: int, path: str) -> tuple[float, bytes]:
     return time.perf_counter() - started, body
 
 
-def wait_ready(port: int, synced: int, started: float) -> float:
+def wait_ready(ui: subprocess.Popen[bytes], port: int, synced: int, started: float) -> float:
     """Seconds from `started` until the fleet page counts `synced` robots InSync."""
     deadline = time.monotonic() + TIMEOUT
     while time.monotonic() < deadline:
+        if ui.poll() is not None:
+            raise RuntimeError(f"robotconf ui ended (exit {ui.returncode}): see ui.log")
         try:
             _, body = get(port, "/")
             found = re.search(r">(\d+) InSync</a>", body.decode())
@@ -191,7 +193,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
                  "--listen", f"127.0.0.1:{port}"],
                 stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
             ))  # fmt: skip
-        result.ready_s = wait_ready(port, len(digests), started)
+        result.ready_s = wait_ready(procs[-1], port, len(digests), started)
         print(f"ui ready in {result.ready_s:.2f} s", flush=True)
         for _ in range(rounds):
             took, body = get(port, "/")

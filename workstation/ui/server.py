@@ -86,6 +86,7 @@ class UiService:
             Route("GET", r"/healthz", self.healthz),
             Route("GET", r"/events", self.events),
             Route("GET", r"/static/(?P<name>[^/]{1,64})", self.file),
+            Route("GET", r"/favicon\.ico", self.no_icon),
             Route("GET", r"/robots/(?P<robot>[^/]{1,200})", self.robot),
             *extra,
         ]
@@ -189,6 +190,10 @@ class UiService:
             stream=stream,
             keepalive=b": keep-alive\n\n",
         )
+
+    def no_icon(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        """Browsers ask for it: nothing, rather than a 404 in their console."""
+        return Response(204)
 
     def file(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         name = match["name"]

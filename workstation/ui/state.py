@@ -59,7 +59,7 @@ class LiveFleet:
         self._dirty = threading.Event()  # the broker's topics changed
         self._wake = threading.Event()  # ... or a stream wants its first event
         self.view = open_view(connection, prefix, self._touched, self._topic)
-        self._reader = FleetReader(self.view, self.topics, DesiredCache(repo, rev))
+        self._reader = FleetReader(self.view, self.topics, DesiredCache(repo, rev), self._touched)
         self._snap = Snapshot(0, None, self.broker, False, "connecting", time.time())
         self._lock = threading.Lock()
         self._streams: dict[int, _Stream] = {}

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.install import copy_project
+from tests.support.install import build_wheel, copy_project
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -69,3 +69,10 @@ def test_editable_build_prints_no_deprecation(tmp_path: Path) -> None:
         licenses = [n for n in built.namelist() if n.endswith("licenses/LICENSE")]
     assert "License-Expression: MIT" in text
     assert licenses, "the wheel carries the license file"
+
+
+def test_the_wheel_carries_the_ui_script_and_stylesheet(tmp_path: Path) -> None:
+    """`robotconf ui` serves them from the package: no CDN, no build step."""
+    with zipfile.ZipFile(build_wheel(tmp_path)) as built:
+        names = set(built.namelist())
+    assert {"workstation/ui/static/ui.js", "workstation/ui/static/ui.css"} <= names

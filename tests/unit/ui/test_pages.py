@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from html.parser import HTMLParser
 
-from contract.wire import AgentState
+from contract.wire import AgentState, RolloutStatus
 from reconciler.verdicts import Verdict
 from tests.unit.ui.fleets import fleet, reconciler, refused, row, snapshot
 from workstation.ui.auth import ANONYMOUS, Identity
@@ -128,6 +128,9 @@ def test_a_robot_page_has_its_sections_and_operator_controls_only_for_operators(
     assert 'data-action="restart"' not in viewer
     assert '<a data-action="restart" href="/robots/tb3-01/restart">Restart tb3-01</a>' in operator
     assert "<table data-history>" in viewer and ">failed<" in viewer
+    said = robot_page(snap, "tb3-01", OPERATOR, None, None, "restarted <b>now</b>")
+    assert '<p data-restart-outcome role="status">restarted &lt;b&gt;now&lt;/b&gt;</p>' in said
+    assert "data-restart-outcome" not in operator
     assert_no_inline_code(viewer)
     assert_no_inline_code(operator)
 
@@ -136,3 +139,36 @@ def test_an_error_page_escapes_what_it_quotes() -> None:
     page = error_page(400, "bad <id>", ANONYMOUS)
     assert "bad &lt;id&gt;" in page
     assert_no_inline_code(page)
+
+
+def test_the_rollout_box_lists_the_wave_by_how_its_robots_fare_and_a_rollback() -> None:
+    rollout = RolloutStatus(
+        revision="c" * 40,
+        stable_revision="d" * 40,
+        state="RolledBack",
+        wave=1,
+        waves=3,
+        wave_name="half",
+        healthy=["r1"],
+        failed=["r2"],
+        pending=["<r3>"],
+        offline=["r4"],
+        counts={"healthy": 1, "failed": 1, "pending": 1, "offline": 1},
+        message="too many failed",
+    )
+    rows = [row("r1", wave="half"), row("r5", Verdict.PROGRESSING, wave="half", state="deferred")]
+    page = fleet_page(snapshot(fleet(rows, reconciler(rollout=rollout))), FleetQuery(), ANONYMOUS)
+    box = re.search(r'<section data-box="rollout".*?</section>', page)
+    assert box is not None
+    text = box.group()
+    assert 'data-rollout-state="RolledBack"' in text and "2 of 3 (half)" in text
+    for group, robot in (
+        ("healthy", "r1"),
+        ("failed", "r2"),
+        ("deferred", "r5"),
+        ("offline", "r4"),
+    ):
+        found = re.search(rf'data-group="{group}"><h3>\w+: 1</h3><ul>(.*?)</ul>', text)
+        assert found is not None and f">{robot}<" in found.group(1), group
+    assert "&lt;r3&gt;" in text and "<r3>" not in text
+    assert "data-rolled-back" in text and "d" * 12 in text
