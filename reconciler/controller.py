@@ -46,6 +46,7 @@ from reconciler.diff import Actions
 from reconciler.observed import (
     RECONCILER_STATUS,
     WAVE_RECORD,
+    LaunchDigests,
     ReadMemo,
     launch_summary,
     parse_retained,
@@ -170,9 +171,9 @@ class Controller:
         self._recheck_at: float | None = None  # unix time a rollout's health judgment changes
         self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
-        # What each retained payload was read as, while it stays the same: a step parses
-        # only the launch requests and statuses that changed since the step before.
-        self._launch_memo = ReadMemo()
+        # What the retained launch requests' digests are, while they stay the same: a step
+        # reads only the requests that changed since the step before.
+        self._launches = LaunchDigests(self.topics)
         self._sizes = RequestSizes()
         self._health_memo = ReadMemo()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
@@ -375,13 +376,6 @@ class Controller:
                 log.info("waiting for the robots' interfaces (drift: hold)")
                 self._waiting_logged = True
             return None
-        retained = parse_retained(
-            self.view.snapshot(),
-            self.topics,
-            requests=False,
-            ignored=self.ignored,
-            memo=self._launch_memo,
-        )
         now = time.time()
         rollout = build.fleet is not None and build.fleet.rollout is not None
         previous = self.writer.status
@@ -391,7 +385,7 @@ class Controller:
             build_crashed=head in self._crashed,
             fetch_error=self._fetch_error,
             serving=self.serving,
-            launches=retained.launch_digests(),
+            launches=self._launches.update(self.view.snapshot(), self.ignored),
             active=self._sample_active(fetch),
             previous_rollout=previous.rollout if previous is not None else None,
             statuses=self._follow_health(rollout, now),
