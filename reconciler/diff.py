@@ -50,12 +50,15 @@ def diff(
     actions: Actions[R] = Actions()
     # A fleet's requests are stamped with its revision as they are read: only the ones
     # published are (FleetRequests.digests).
-    digests = desired.digests() if isinstance(desired, FleetRequests) else None
-    for robot_id in sorted(desired):
-        digest = desired[robot_id].digest if digests is None else digests[robot_id]
-        if observed.get(robot_id) == digest:
-            actions.unchanged += 1
-        elif robot_id in suspended:
+    digests = (
+        desired.digests()
+        if isinstance(desired, FleetRequests)
+        else {robot_id: request.digest for robot_id, request in desired.items()}
+    )
+    differ = [robot_id for robot_id, digest in digests.items() if observed.get(robot_id) != digest]
+    actions.unchanged = len(digests) - len(differ)
+    for robot_id in sorted(differ):  # sorted: what differs, not the whole fleet
+        if robot_id in suspended:
             actions.held.append(robot_id)
         else:
             actions.publish[robot_id] = desired[robot_id]
