@@ -150,14 +150,6 @@ class _Window:
         self.size += size
 
 
-def no_delay(sock: Any) -> None:
-    """Nagle's algorithm off (paho leaves it on): a publish of a few small messages otherwise
-    sends its second packet only once the broker acknowledged the first, which a delayed ACK
-    holds back up to 40 ms. The broker's side: `robotconf broker-config` sets set_tcp_nodelay."""
-    with contextlib.suppress(OSError, AttributeError):  # not a TCP socket: left as it is
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-
 def client_id(role: str) -> str:
     """Unique per process and instance: two clients with one id would kick each other off."""
     host = socket.gethostname().split(".")[0][:20] or "host"
@@ -494,7 +486,6 @@ class RetainedView:
     @_guarded
     def _handle_socket_open(self, client: paho.Client, userdata: Any, sock: Any) -> None:
         self.reached = True
-        no_delay(sock)
 
     @_guarded
     def _handle_connect_fail(self, client: paho.Client, userdata: Any) -> None:
