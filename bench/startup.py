@@ -1,10 +1,16 @@
 """Start-up of whole `robotconf` processes against the floor, `python -c "import yaml, pydantic"`:
 starting Python and importing PyYAML and pydantic, what every run of a hook pays anyway.
 
-    python bench/startup.py [-n 15] [--repo PATH] [--before CHECKOUT]
+    python bench/startup.py [-n 15] [--repo PATH] [--before CHECKOUT] [--decompose]
 
 --before runs `--help` and `validate` of an older checkout too (PYTHONPATH=CHECKOUT), in the
 same rounds, so before and after meet the same machine.
+
+--decompose adds, in the same rounds, the steps from the floor to `validate`: importing
+pydantic's models (`pydantic.main`), then click, then everything `validate` imports (the
+collector paused, as robotconf imports a command); and, in a process of its own at each
+round, how much of that last import is building pydantic models (the time in pydantic's model
+class constructor) and how much is the rest (our modules, and what they import).
 
 Each round runs every command once, in turn (A B C D, A B C D, ...), so a machine that speeds
 up or slows down during the call moves them all alike; one warm-up round is not counted (it
@@ -45,9 +51,39 @@ def robotconf() -> str:
 
 
 Case = tuple[str, list[str], dict[str, str]]  # label, argv, environment variables set
+# What `robotconf validate` imports, as it imports it (the collector paused).
+VALIDATE_IMPORTS = (
+    "import gc\ngc.disable()\nimport yaml, pydantic.main, click\n"
+    "import workstation.cli.main, workstation.cli.validate"
+)
+# The same import in one process, timed inside: milliseconds in pydantic's model class
+# constructor (the outermost call: building every model) and in the whole import.
+MODEL_PROBE = """\
+import gc, time
+gc.disable()
+import yaml, pydantic.main, click
+from pydantic._internal import _model_construction as construction
+
+built, depth, new = [0.0], [0], construction.ModelMetaclass.__new__
+
+def timed(mcs, *args, **kwargs):
+    depth[0] += 1
+    start = time.perf_counter()
+    try:
+        return new(mcs, *args, **kwargs)
+    finally:
+        depth[0] -= 1
+        if not depth[0]:
+            built[0] += time.perf_counter() - start
+
+construction.ModelMetaclass.__new__ = timed
+start = time.perf_counter()
+import workstation.cli.main, workstation.cli.validate
+print(built[0], time.perf_counter() - start)
+"""
 
 
-def cases(repo: Path, before: Path | None) -> list[Case]:
+def cases(repo: Path, before: Path | None, decompose: bool = False) -> list[Case]:
     python, entry = sys.executable, robotconf()
     table: list[Case] = [
         ("python -c pass", [python, "-c", "pass"], {}),
@@ -56,6 +92,12 @@ def cases(repo: Path, before: Path | None) -> list[Case]:
         ("robotconf --help", [entry, "--help"], {}),
         ("robotconf validate", [entry, "validate", "--repo", str(repo)], {}),
     ]
+    if decompose:
+        table[2:2] = [
+            ("+ pydantic.main", [python, "-c", "import yaml, pydantic.main"], {}),
+            ("+ click", [python, "-c", "import yaml, pydantic.main, click"], {}),
+            ("+ validate's imports", [python, "-c", VALIDATE_IMPORTS], {}),
+        ]
     if before is not None:
         older = {"PYTHONPATH": str(before)}
         table.append(("  before: --help", [entry, "--help"], older))
@@ -87,6 +129,27 @@ def measure(table: list[Case], rounds: int) -> dict[str, list[tuple[float, float
     return times
 
 
+def probe_models(rounds: int) -> None:
+    """How much of validate's imports is building pydantic models: medians of `rounds`
+    processes (after the other rounds, on the same machine)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    found = []
+    for _ in range(rounds + 1):
+        done = subprocess.run(
+            [sys.executable, "-c", MODEL_PROBE], cwd=ROOT, capture_output=True, env=env, text=True
+        )
+        if done.returncode != 0:
+            raise SystemExit(f"the model probe failed: {done.stderr}")
+        found.append(tuple(map(float, done.stdout.split())))
+    models = statistics.median(m for m, _ in found[1:])
+    whole = statistics.median(w for _, w in found[1:])
+    print(
+        f"validate's imports, inside one process: {whole * 1000:.1f} ms, of which building "
+        f"pydantic models {models * 1000:.1f} ms and the rest {(whole - models) * 1000:.1f} ms "
+        f"(medians of {rounds})"
+    )
+
+
 def report(times: dict[str, list[tuple[float, float]]], rounds: int) -> bool:
     """Prints the table; True when `--help` and `validate` are within TARGET of the floor."""
     floor = times["floor: import yaml, pydantic"]
@@ -116,9 +179,15 @@ def main() -> None:
         "--repo", type=Path, default=ROOT, help="repository to validate (default: the example)"
     )
     parser.add_argument("--before", type=Path, help="an older checkout to compare with")
+    parser.add_argument(
+        "--decompose", action="store_true", help="also time the steps from the floor to validate"
+    )
     args = parser.parse_args()
     before = args.before.resolve() if args.before else None
-    report(measure(cases(args.repo.resolve(), before), args.runs), args.runs)
+    table = cases(args.repo.resolve(), before, args.decompose)
+    report(measure(table, args.runs), args.runs)
+    if args.decompose:
+        probe_models(args.runs)
 
 
 if __name__ == "__main__":

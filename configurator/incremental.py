@@ -9,7 +9,9 @@ A `BuildCache` keeps, from one build to the next:
 - the values units share (a scenario's ROS names) with what they read, worked out again when
   that changed, their dependents re-run only when the value itself differs (early cut-off);
 - each scenario's rendered content and each robot's request: a robot is rendered again only
-  when its assignment or its scenario's content changed (else only its revision is updated).
+  when its assignment or its scenario's content changed (else it keeps its request, stamped
+  with the new revision as it is read: FleetRequests); while fleet.yaml is unchanged, only the
+  robots of the scenarios whose content changed are visited at all.
 
 What a unit reads is recorded, not declared: the repository a unit gets records every lookup
 (an entry by name, the names of a kind, whether a name exists), so a rule that starts reading
@@ -23,20 +25,26 @@ Pure: the I/O happens in the source given to `check` (git or the work tree).
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterator, Mapping
+from collections.abc import Callable, Hashable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from configurator.drift import logics_needing
 from configurator.gcpause import collector_paused
 from configurator.loader import LoadedFile, load_repository
-from configurator.render import FleetRender, render_fleet, request_for, scenario_requests
-from configurator.rendered import RenderedRequest, ScenarioRequests
+from configurator.render import (
+    FleetRender,
+    needed_by,
+    render_fleet,
+    request_for,
+    scenario_requests,
+)
+from configurator.rendered import FleetRequests, RenderedRequest, ScenarioRequests
 from configurator.repository import Entry, Platform, Repository
 from configurator.rules import DERIVED, Unit, rule_units
 from configurator.rules.report import Reporter
 from configurator.source import Source
-from configurator.types import Action, RobotAssignment
+from configurator.types import Action, Fleet, RobotAssignment
 from configurator.workspace import Checked, judged
 from contract.diagnostics import Diagnostic
 from contract.launch import LaunchCapability, LaunchScenario, canonical_json
@@ -321,6 +329,7 @@ class BuildCache:
         self._rendered_snapshot: Snapshot = {}
         self._scenarios: dict[str, _Value] = {}
         self._robots: dict[str, _Rendered] = {}
+        self._last: _LastRender | None = None
         self._needs = _NeedsMemo()
         self._recorder = _Recorder()
         self.stats = BuildStats()
@@ -462,9 +471,24 @@ class BuildCache:
     def _render(self, repo: _TrackedRepository) -> FleetRender:
         changed = changes(self._rendered_snapshot, self._snapshot)
         self._rendered_snapshot = self._snapshot
+        self._needs.next_build()
         scenarios: dict[str, _Value] = {}
-        robots: dict[str, _Rendered] = {}
-        revision = repo.revision
+        scenario_of = self._scenario_of(repo, changed, scenarios)
+        fleet_model = None if repo.fleet is None else repo.fleet.model
+        last = self._last
+        if last is not None and fleet_model is not None and last.model is fleet_model:
+            fleet = self._render_changed(repo, last, scenario_of)
+        else:
+            fleet = self._render_all(repo, scenario_of)
+        self._scenarios = scenarios
+        return fleet
+
+    def _scenario_of(
+        self, repo: _TrackedRepository, changed: set[Dep], scenarios: dict[str, _Value]
+    ) -> Callable[[str], ScenarioRequests]:
+        """Each scenario's ScenarioRequests for this build (into `scenarios`): the one of the
+        build before while what it read is unchanged, or while its content comes out the
+        same (its robots then need nothing new)."""
 
         def scenario_of(name: str) -> ScenarioRequests:
             found = scenarios.get(name)
@@ -486,6 +510,15 @@ class BuildCache:
             rendered: ScenarioRequests = found.value
             return rendered
 
+        return scenario_of
+
+    def _render_all(
+        self, repo: _TrackedRepository, scenario_of: Callable[[str], ScenarioRequests]
+    ) -> FleetRender:
+        """Every robot through `render_fleet`: a robot is rendered again only when its
+        assignment or its scenario's content changed (else it keeps its request)."""
+        robots: dict[str, _Rendered] = {}
+
         def request_of(
             robot_id: str, assignment: RobotAssignment, scenario: ScenarioRequests
         ) -> RenderedRequest:
@@ -499,14 +532,76 @@ class BuildCache:
             ):
                 request = request_for(repo, robot_id, assignment, scenario)
                 self.stats.robots_rendered += 1
-            elif before.request.revision != revision:
-                request = before.request.with_revision(revision)
             else:
-                request = before.request
+                request = before.request  # stamped with this build's revision when read
             robots[robot_id] = _Rendered(assignment, request)
             return request
 
-        self._needs.next_build()
         fleet = render_fleet(repo, scenario_of, request_of, self._needs)
-        self._scenarios, self._robots = scenarios, robots
+        self._robots = robots
+        assert repo.fleet is not None
+        self._last = _LastRender(repo.fleet.model, fleet, _by_scenario(repo.fleet.model))
         return fleet
+
+    def _render_changed(
+        self,
+        repo: _TrackedRepository,
+        last: _LastRender,
+        scenario_of: Callable[[str], ScenarioRequests],
+    ) -> FleetRender:
+        """The same fleet.yaml as the build before (its very models): the robots of the
+        scenarios whose content changed are rendered again, every other robot keeps its
+        request, and the rest of the fleet is the last one's. What `_render_all` would give,
+        without a step per robot."""
+        before, model = last.fleet, last.model
+        fleet = FleetRender(
+            revision=repo.revision,
+            requests=FleetRequests(repo.revision, dict(before.requests.as_kept())),
+            suspended=set(before.suspended),
+            scenario_of=dict(before.scenario_of),
+            labels=dict(before.labels),
+            allow_empty=before.allow_empty,
+            rollout=before.rollout,
+            drift=before.drift,
+        )
+        used: dict[int, ScenarioRequests] = {}
+        again: list[str] = []  # robots of a scenario whose content changed
+        for name, robot_ids in last.robots_of.items():
+            scenario = scenario_of(name)
+            used.setdefault(id(scenario), scenario)
+            if self._robots[robot_ids[0]].request.scenario_requests is not scenario:
+                again.extend(robot_ids)
+        # In the fleet's order: the first robot that cannot be rendered is the one
+        # render_fleet names.
+        for robot_id in sorted(again, key=last.position.__getitem__):
+            assignment = model.robots[robot_id]
+            request = request_for(repo, robot_id, assignment, scenario_of(assignment.scenario))
+            self.stats.robots_rendered += 1
+            self._robots[robot_id] = _Rendered(assignment, request)
+            fleet.requests[robot_id] = request
+        fleet.needed_by = needed_by(repo, used.values(), self._needs)
+        self._last = _LastRender(model, fleet, last.robots_of, last.position)
+        return fleet
+
+
+@dataclass
+class _LastRender:
+    """The fleet the last render made, the fleet.yaml model it made it from, and that
+    model's robots by scenario (in the fleet's order) with each robot's place in it."""
+
+    model: Fleet
+    fleet: FleetRender
+    robots_of: dict[str, list[str]]
+    position: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.position:
+            self.position = {robot_id: i for i, robot_id in enumerate(self.model.robots)}
+
+
+def _by_scenario(model: Fleet) -> dict[str, list[str]]:
+    """The robots of each scenario, in the fleet's order (scenarios by their first robot)."""
+    found: dict[str, list[str]] = {}
+    for robot_id, assignment in model.robots.items():
+        found.setdefault(assignment.scenario, []).append(robot_id)
+    return found

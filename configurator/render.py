@@ -12,7 +12,7 @@ from typing import Any
 from configurator.composition import achievable_tasks, find_location
 from configurator.drift import logics_needing
 from configurator.gcpause import collector_paused
-from configurator.rendered import RenderedRequest, ScenarioRequests
+from configurator.rendered import FleetRequests, RenderedRequest, ScenarioRequests
 from configurator.repository import Repository
 from configurator.resolve import bound_mappings, resolve_capability
 from configurator.rosnames import UnresolvableName, absolute_namespace
@@ -38,7 +38,8 @@ class FleetRender:
     """Every assigned robot's request; suspended robots are rendered but flagged."""
 
     revision: str
-    requests: dict[str, RenderedRequest] = field(default_factory=dict)
+    # Each stamped with `revision` as it is read (FleetRequests).
+    requests: FleetRequests = field(default_factory=lambda: FleetRequests(""))
     suspended: set[str] = field(default_factory=set)
     scenario_of: dict[str, str] = field(default_factory=dict)
     labels: dict[str, dict[str, str]] = field(default_factory=dict)  # every robot's, maybe {}
@@ -47,6 +48,10 @@ class FleetRender:
     drift: str = "warn"  # fleet.yaml's drift policy: warn or hold
     # capability -> mapping -> the selected logics that need it (drift messages name them)
     needed_by: dict[str, dict[str, tuple[str, ...]]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.requests, FleetRequests) and not self.requests:
+            self.requests.revision = self.revision
 
 
 def deep_merge(base: JsonObject, over: JsonObject) -> JsonObject:
@@ -191,6 +196,7 @@ def _render_fleet(
     fleet = repo.fleet.model
     result = FleetRender(
         revision=repo.revision,
+        requests=FleetRequests(repo.revision),
         allow_empty=fleet.allow_empty,
         rollout=fleet.rollout,
         drift=fleet.drift,
@@ -205,8 +211,10 @@ def _render_fleet(
 
     scenario_for = scenario_of or each_once
     requests, scenario_names, labels = result.requests, result.scenario_of, result.labels
+    used: dict[int, ScenarioRequests] = {}  # the scenarios robots use, in the fleet's order
     for robot_id, assignment in fleet.robots.items():
         scenario = scenario_for(assignment.scenario)
+        used.setdefault(id(scenario), scenario)
         requests[robot_id] = (
             request_for(repo, robot_id, assignment, scenario)
             if request_of is None
@@ -216,19 +224,19 @@ def _render_fleet(
         labels[robot_id] = dict(assignment.labels)
         if assignment.suspended:
             result.suspended.add(robot_id)
-    result.needed_by = _needed_by(repo, requests.values(), needs_of)
+    result.needed_by = needed_by(repo, used.values(), needs_of)
     return result
 
 
-def _needed_by(
-    repo: Repository, requests: Iterable[RenderedRequest], needs_of: NeedsOf
+def needed_by(
+    repo: Repository, scenarios: Iterable[ScenarioRequests], needs_of: NeedsOf
 ) -> dict[str, dict[str, tuple[str, ...]]]:
-    """Per capability the fleet uses, which of its logics need each mapping: what drift
-    messages name (a request says which logics, not which needs what)."""
+    """Per capability the fleet uses (that of the scenarios its robots use), which of its
+    logics need each mapping: what drift messages name (a request says which logics, not
+    which needs what)."""
     actions = {name: entry.model for name, entry in repo.actions.items()}
-    scenarios = {id(r.scenario_requests): r.scenario_requests for r in requests}
     found: dict[str, dict[str, tuple[str, ...]]] = {}
-    for scenario in scenarios.values():
+    for scenario in scenarios:
         capability = scenario.scenario.capability
         if capability.name not in found:
             found[capability.name] = needs_of(capability, actions)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import secrets
+from collections.abc import ItemsView, Iterator, Mapping, MutableMapping
 from json.encoder import encode_basestring
 from typing import Any
 
@@ -329,6 +330,58 @@ class RenderedRequest:
 
     def __repr__(self) -> str:
         return f"RenderedRequest({self.robot_id!r}, {self.scenario_name!r}, {self.digest[:15]}…)"
+
+
+class FleetRequests(MutableMapping[str, RenderedRequest]):
+    """Every robot's request of one build, each stamped with the build's revision as it is
+    read. A robot whose request did not change keeps the one an earlier build rendered, with
+    that build's revision, until it is read here: a commit then costs what it changes, not a
+    new request for each of 10,000 robots (a revision is not covered by the digests, and an
+    unchanged request is never published again unless its robot lost it)."""
+
+    __slots__ = ("_digests", "_kept", "revision")
+
+    def __init__(self, revision: str, kept: Mapping[str, RenderedRequest] | None = None) -> None:
+        self.revision = revision
+        self._kept: dict[str, RenderedRequest] = dict(kept or {})
+        self._digests: dict[str, str] | None = None
+
+    def __getitem__(self, robot_id: str) -> RenderedRequest:
+        request = self._kept[robot_id]
+        if request.revision != self.revision:
+            request = self._kept[robot_id] = request.with_revision(self.revision)
+        return request
+
+    def __setitem__(self, robot_id: str, request: RenderedRequest) -> None:
+        self._kept[robot_id] = request
+        self._digests = None
+
+    def __delitem__(self, robot_id: str) -> None:
+        del self._kept[robot_id]
+        self._digests = None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._kept)
+
+    def __len__(self) -> int:
+        return len(self._kept)
+
+    def __contains__(self, robot_id: object) -> bool:
+        return robot_id in self._kept
+
+    def digests(self) -> Mapping[str, str]:
+        """robot -> its request's digest, without stamping any (worked out once)."""
+        if self._digests is None:
+            self._digests = {robot_id: r.digest for robot_id, r in self._kept.items()}
+        return self._digests
+
+    def as_kept(self) -> ItemsView[str, RenderedRequest]:
+        """The requests as kept, maybe of an earlier commit: for what a revision does not
+        change (digests, contents), never to publish."""
+        return self._kept.items()
+
+    def __repr__(self) -> str:
+        return f"FleetRequests({self.revision[:12]!r}, {len(self._kept)} robots)"
 
 
 def _values(

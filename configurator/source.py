@@ -243,23 +243,26 @@ class GitSource:
         self._root = root
         if not root.is_dir():
             raise SourceError(f"{root}: no such directory")
-        probe = _git(root, "rev-parse", "--show-prefix")
-        if probe.returncode != 0:
-            raise SourceError(f"{root}: not a git repository")
-        # The repository may live in a subfolder of the git work tree.
-        prefix = probe.stdout.decode("utf-8", "surrogateescape").strip().rstrip("/")
-        found = _git(root, "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}")
-        commit = found.stdout.decode("ascii", "replace").strip()
+        # One process for both: the folder of the git work tree the repository is in, and
+        # the commit (a process costs a few milliseconds; the reconciler reads every commit).
+        found = _git(root, "rev-parse", "--show-prefix", "--verify", "--quiet", f"{rev}^{{commit}}")
+        # The prefix's line, then the commit's (the prefix is a folder: it may hold a newline).
+        prefix, _, commit = found.stdout.decode("utf-8", "surrogateescape")[:-1].rpartition("\n")
         if found.returncode != 0 or not _OBJECT_ID.match(commit):
+            if _git(root, "rev-parse", "--show-prefix").returncode != 0:
+                raise SourceError(f"{root}: not a git repository")
             raise SourceError(f"{rev!r}: no such revision in {root}")
+        # The repository may live in a subfolder of the git work tree.
+        prefix = prefix.strip().rstrip("/")
         self._revision = commit
-        self._blobs: dict[str, tuple[str, int]] = {}  # path -> (blob id, size)
+        self._blobs: dict[str, str] = {}  # path -> blob id
         self._refused: dict[str, str] = {}
         tree = f"{commit}:{prefix}" if prefix else commit
-        # --full-tree: the paths given are in `tree`, whatever folder git runs in.
-        listing = _git(
-            root, "ls-tree", "-r", "-l", "-z", "--full-tree", tree, "--", *ROOTS, *_ROOT_FILES
-        )
+        # --full-tree: the paths given are in `tree`, whatever folder git runs in. No sizes
+        # (-l): git would open every blob for its size (loose objects: 70 ms for 1,500 files),
+        # while an incremental build reads only the blobs that changed; a blob's size comes
+        # with its content (`read_each`).
+        listing = _git(root, "ls-tree", "-r", "-z", "--full-tree", tree, "--", *ROOTS, *_ROOT_FILES)
         if listing.returncode != 0:
             if prefix:
                 raise SourceError(f"{rev!r} has no folder {prefix}")
@@ -272,7 +275,7 @@ class GitSource:
             if not record:
                 continue
             meta, _, raw_path = record.partition(b"\t")
-            mode, kind, object_id, size = meta.decode("ascii", "replace").split()
+            mode, kind, object_id = meta.decode("ascii", "replace").split()
             path = raw_path.decode("utf-8", "surrogateescape")
             parts = path.split("/")
             if any(part.startswith(".") for part in parts[1:]):
@@ -283,21 +286,16 @@ class GitSource:
             elif parts[0] in _ROOT_FILES and len(parts) > 1:
                 self._refused[parts[0]] = refusal("a folder")
             elif path in _ROOT_FILES and kind == "blob" and mode in _REGULAR_MODES:
-                self._add_blob(path, object_id, size)
+                self._blobs[path] = object_id
             elif path in _ROOT_FILES:
                 self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
             elif len(parts) == 1:  # configs or models itself is no folder
                 what = {_LINK_MODE: SYMLINK, _GITLINK_MODE: SUBMODULE}.get(mode, "a file")
                 self._refused[path] = refusal(what) + f" ({path}/ must be a folder)"
             elif kind == "blob" and mode in _REGULAR_MODES:
-                self._add_blob(path, object_id, size)
+                self._blobs[path] = object_id
             else:
                 self._refused[path] = refusal(SYMLINK if mode == _LINK_MODE else SUBMODULE)
-
-    def _add_blob(self, path: str, object_id: str, size: str) -> None:
-        if not size.isdigit():  # git lists a blob it does not have with size BAD
-            raise SourceError(_missing(self._revision, path, object_id))
-        self._blobs[path] = (object_id, int(size))
 
     def files(self) -> list[str]:
         return sorted(self._blobs)
@@ -306,7 +304,7 @@ class GitSource:
         return self._refused
 
     def blob_id(self, path: str) -> str | None:
-        return self._blobs[path][0]
+        return self._blobs[path]
 
     def read(self, path: str) -> bytes:
         for _, data in self.read_each([path]):
@@ -317,27 +315,35 @@ class GitSource:
 
     def read_each(self, paths: Sequence[str]) -> Iterator[tuple[str, bytes | OSError]]:
         """Each file's bytes (or why not) in the order given, from one `git cat-file --batch`
-        process. A file over the size limit is refused by the size in the listing, unread."""
-        wanted: list[tuple[str, str]] = []  # (path, blob id) that git is asked for
-        refused: dict[str, OSError] = {}
-        for path in paths:
-            object_id, size = self._blobs[path]
-            if size > MAX_FILE_BYTES:
-                refused[path] = FileTooLarge(size)
-            else:
-                wanted.append((path, object_id))
-        if not wanted:
-            yield from refused.items()
-            return
+        process. A file over the size limit is refused by the size git announces, unread: the
+        process is stopped there and another one answers for the files after it."""
+        done = 0
+        while done < len(paths):
+            proc = self._cat_file([self._blobs[path] for path in paths[done:]])
+            assert proc.stdout is not None
+            try:
+                while done < len(paths):
+                    path = paths[done]
+                    done += 1
+                    data = self._answer(proc.stdout, path, self._blobs[path])
+                    yield path, data
+                    if isinstance(data, FileTooLarge):
+                        break  # its content is next in the stream: never read
+            finally:
+                proc.stdout.close()
+                proc.kill()
+                proc.wait()
+
+    def _cat_file(self, object_ids: list[str]) -> subprocess.Popen[bytes]:
         with tempfile.TemporaryFile() as ids:
             # From a file, not a pipe: git answers as it reads, and a pipe both ways could fill
             # up in both directions at once.
-            ids.write("".join(f"{object_id}\n" for _, object_id in wanted).encode("ascii"))
+            ids.write("".join(f"{object_id}\n" for object_id in object_ids).encode("ascii"))
             ids.seek(0)
             import subprocess  # a commit's files only: the work tree starts no process
 
             try:
-                proc = subprocess.Popen(
+                return subprocess.Popen(
                     ["git", "cat-file", "--batch"],
                     cwd=self._root,
                     stdin=ids,
@@ -347,29 +353,16 @@ class GitSource:
                 )
             except OSError as exc:
                 raise SourceError(f"cannot run git: {exc.strerror or exc}") from None
-        assert proc.stdout is not None
-        try:
-            answers = iter(wanted)
-            for path in paths:
-                if path in refused:
-                    yield path, refused[path]
-                    continue
-                _, object_id = next(answers)
-                yield path, self._answer(proc.stdout, path, object_id, self._blobs[path][1])
-        finally:
-            proc.stdout.close()
-            proc.kill()
-            proc.wait()
 
-    def _answer(self, stream: IO[bytes], path: str, object_id: str, listed: int) -> bytes:
+    def _answer(self, stream: IO[bytes], path: str, object_id: str) -> bytes | FileTooLarge:
         header = stream.readline(_HEADER_LIMIT).decode("ascii", "replace").split()
         if header[:1] != [object_id] or len(header) < 2:
             raise SourceError(f"{self._revision}: git did not answer for {path}")
-        if header[1] != "blob" or len(header) != 3:
+        if header[1] != "blob" or len(header) != 3 or not header[2].isdigit():
             raise SourceError(_missing(self._revision, path, object_id))
-        size = int(header[2]) if header[2].isdigit() else -1
-        if size != listed:  # never more than the listing said, which is within the limit
-            raise SourceError(f"{self._revision}: git's answer for {path} is not its listing's")
+        size = int(header[2])
+        if size > MAX_FILE_BYTES:
+            return FileTooLarge(size)
         data = stream.read(size)
         if len(data) != size or stream.read(1) != b"\n":
             raise SourceError(f"{self._revision}: git's answer for {path} was cut short")

@@ -46,6 +46,7 @@ from reconciler.diff import Actions
 from reconciler.observed import (
     RECONCILER_STATUS,
     WAVE_RECORD,
+    LaunchDigests,
     ReadMemo,
     launch_summary,
     parse_retained,
@@ -170,9 +171,9 @@ class Controller:
         self._recheck_at: float | None = None  # unix time a rollout's health judgment changes
         self._sampled_connection = 0  # the view connection the last status sample was taken on
         self._built: OrderedDict[str, Desired] = OrderedDict()
-        # What each retained payload was read as, while it stays the same: a step parses
-        # only the launch requests and statuses that changed since the step before.
-        self._launch_memo = ReadMemo()
+        # What the retained launch requests' digests are, while they stay the same: a step
+        # reads only the requests that changed since the step before.
+        self._launches = LaunchDigests(self.topics)
         self._sizes = RequestSizes()
         self._health_memo = ReadMemo()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
@@ -375,13 +376,6 @@ class Controller:
                 log.info("waiting for the robots' interfaces (drift: hold)")
                 self._waiting_logged = True
             return None
-        retained = parse_retained(
-            self.view.snapshot(),
-            self.topics,
-            requests=False,
-            ignored=self.ignored,
-            memo=self._launch_memo,
-        )
         now = time.time()
         rollout = build.fleet is not None and build.fleet.rollout is not None
         previous = self.writer.status
@@ -391,7 +385,7 @@ class Controller:
             build_crashed=head in self._crashed,
             fetch_error=self._fetch_error,
             serving=self.serving,
-            launches=retained.launch_digests(),
+            launches=self._launches.update(self.view.snapshot(), self.ignored),
             active=self._sample_active(fetch),
             previous_rollout=previous.rollout if previous is not None else None,
             statuses=self._follow_health(rollout, now),
@@ -606,6 +600,14 @@ class Controller:
             return Desired(revision, None, [problem])
         if built.fleet is None:
             return built
+        # As kept: 10,000 requests are not stamped with the revision to be measured.
+        requests, revision = built.fleet.requests.as_kept(), built.fleet.requests.revision
+        measure = self._sizes.size
+        over = [
+            (robot_id, size)
+            for robot_id, request in requests
+            if (size := measure(request, revision)) > MAX_REQUEST_BYTES
+        ]
         problems = [
             StatusDiagnostic(
                 path=FLEET_FILE,
@@ -614,10 +616,9 @@ class Controller:
                 f"{MAX_REQUEST_BYTES:,} an agent accepts; make its settings or environment "
                 "knowledge smaller",
             )
-            for robot_id, request in sorted(built.fleet.requests.items())
-            if (size := self._sizes.size(request)) > MAX_REQUEST_BYTES
+            for robot_id, size in sorted(over)
         ]
-        self._sizes.keep_only(built.fleet.requests.values())
+        self._sizes.keep_only(request for _, request in requests)
         return Desired(revision, None, problems) if problems else built
 
     def _sample_active(self, resync: bool) -> set[str]:
@@ -737,16 +738,27 @@ class RequestSizes:
     def __init__(self) -> None:
         self._without_revision: dict[str, int] = {}
 
-    def size(self, request: RenderedRequest | LaunchRequest) -> int:
-        revision = request.revision
-        if not (revision.isascii() and revision.isalnum()):
-            return len(request.payload())  # escapes would make its length another
+    def size(self, request: RenderedRequest | LaunchRequest, revision: str | None = None) -> int:
+        """`revision`: the one the request is published with, when not its own (a request a
+        fleet kept from an earlier commit: FleetRequests)."""
+        own = request.revision
+        target = own if revision is None else revision
+        if not (_plain(own) and _plain(target)):  # escapes would make its length another
+            if target != own:
+                assert isinstance(request, RenderedRequest)
+                request = request.with_revision(target)
+            return len(request.payload())
         base = self._without_revision.get(request.digest)
         if base is None:
-            base = len(request.payload()) - len(revision)
+            base = len(request.payload()) - len(own)
             self._without_revision[request.digest] = base
-        return base + len(revision)
+        return base + len(target)
 
     def keep_only(self, requests: Iterable[RenderedRequest | LaunchRequest]) -> None:
         digests = {r.digest for r in requests}
         self._without_revision = {d: n for d, n in self._without_revision.items() if d in digests}
+
+
+def _plain(revision: str) -> bool:
+    """Written in JSON as it is (a commit id: letters and digits)."""
+    return revision.isascii() and revision.isalnum()

@@ -6,6 +6,8 @@ from collections.abc import Mapping, Set
 from dataclasses import dataclass, field
 from typing import Generic, Protocol, TypeVar
 
+from configurator.rendered import FleetRequests
+
 
 class HasDigest(Protocol):
     @property
@@ -46,14 +48,20 @@ def diff(
     never saw it.
     """
     actions: Actions[R] = Actions()
-    for robot_id in sorted(desired):
-        request = desired[robot_id]
-        if observed.get(robot_id) == request.digest:
-            actions.unchanged += 1
-        elif robot_id in suspended:
+    # A fleet's requests are stamped with its revision as they are read: only the ones
+    # published are (FleetRequests.digests).
+    digests = (
+        desired.digests()
+        if isinstance(desired, FleetRequests)
+        else {robot_id: request.digest for robot_id, request in desired.items()}
+    )
+    differ = [robot_id for robot_id, digest in digests.items() if observed.get(robot_id) != digest]
+    actions.unchanged = len(digests) - len(differ)
+    for robot_id in sorted(differ):  # sorted: what differs, not the whole fleet
+        if robot_id in suspended:
             actions.held.append(robot_id)
         else:
-            actions.publish[robot_id] = request
+            actions.publish[robot_id] = desired[robot_id]
     actions.clear = sorted(r for r in set(observed) | set(running) if r not in desired)
     if not desired and actions.clear and not allow_empty:
         return Actions(

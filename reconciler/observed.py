@@ -134,22 +134,26 @@ class _Reading:
     error: str | None = None
 
 
+_Found = tuple[str | None, str]  # (robot id or None, kind) of a topic: `_kind`
+
+
 class ReadMemo:
     """The reading of each topic's payload, kept while the payload stays the same: a step
     reads only what changed since the step before (10,000 unchanged requests cost one bytes
-    comparison each, not a JSON parse). One memo per caller, for one `requests` setting."""
+    comparison each, not a JSON parse, nor even working out whose topic it is). One memo per
+    caller, for one `requests` setting and one topic prefix."""
 
     def __init__(self) -> None:
-        self._readings: dict[str, tuple[bytes, _Reading]] = {}
+        self._readings: dict[str, tuple[bytes, _Found, _Reading]] = {}
 
-    def get(self, topic: str, payload: bytes) -> _Reading | None:
+    def get(self, topic: str, payload: bytes) -> tuple[_Found, _Reading] | None:
         kept = self._readings.get(topic)
         if kept is None or not (kept[0] is payload or kept[0] == payload):
             return None
-        return kept[1]
+        return kept[1], kept[2]
 
-    def put(self, topic: str, payload: bytes, reading: _Reading) -> None:
-        self._readings[topic] = (payload, reading)
+    def put(self, topic: str, payload: bytes, found: _Found, reading: _Reading) -> None:
+        self._readings[topic] = (payload, found, reading)
 
     def keep_only(self, topics: Mapping[str, bytes]) -> None:
         """Forget the topics that are gone: the memo is never larger than the broker's view."""
@@ -171,21 +175,28 @@ def parse_retained(
     needs no more, and a full validation of 10,000 requests would cost it at every step);
     `memo` keeps what was read of each payload for the next call."""
     out = Retained()
+    robots = out.robots
     for topic, payload in messages.items():
-        found = _kind(topic, topics)
-        if found is None or not payload:
+        if not payload:
             continue
-        robot_id, kind = found
-        # A robot is known to the broker even when what it published cannot be read.
-        robot = out.robots.setdefault(robot_id, RobotSeen()) if robot_id is not None else None
-        reading = memo.get(topic, payload) if memo is not None else None
-        if reading is None:
-            reading = _read(kind, robot_id, payload, requests)
+        kept = memo.get(topic, payload) if memo is not None else None
+        if kept is None:
+            found = _kind(topic, topics)
+            if found is None:
+                continue
+            reading = _read(found[1], found[0], payload, requests)
             if memo is not None:
-                memo.put(topic, payload, reading)
-        if robot is None:
+                memo.put(topic, payload, found, reading)
+        else:
+            found, reading = kept
+        robot_id, kind = found
+        if robot_id is None:
             out.reconciler = reading.reconciler
         else:
+            # A robot is known to the broker even when what it published cannot be read.
+            robot = robots.get(robot_id)
+            if robot is None:
+                robot = robots[robot_id] = RobotSeen()
             for name, value in reading.fields.items():
                 setattr(robot, name, value)
         if reading.error is not None:
@@ -195,6 +206,55 @@ def parse_retained(
     if memo is not None:
         memo.keep_only(messages)
     return out
+
+
+class LaunchDigests:
+    """What the reconciler reads of its launch view at each step, robot -> the digest of its
+    retained request (None: unreadable), as `parse_retained(requests=False).launch_digests()`
+    gives it; unreadable payloads noted in `ignored` at each step as it notes them. Kept from
+    one step to the next and updated by the payloads that differ: with 10,000 unchanged
+    requests, a step costs one set difference (in C), not 10,000 readings of the memo."""
+
+    def __init__(self, topics: Topics) -> None:
+        self._topics = topics
+        self._read: dict[str, bytes] = {}  # topic -> the payload last read there
+        self._digests: dict[str, str | None] = {}  # robot -> digest: what a step is given
+        self._robot_of: dict[str, str] = {}  # launch topic -> the robot it gives a digest
+        self._errors: dict[str, tuple[str, bytes, str]] = {}  # topic -> kind, payload, why
+
+    def update(
+        self, messages: Mapping[str, bytes], ignored: Ignored | None = None
+    ) -> dict[str, str | None]:
+        for topic in self._read.keys() - messages.keys():
+            self._forget(topic)
+            del self._read[topic]
+        for topic, payload in messages.items() - self._read.items():
+            self._forget(topic)
+            self._read[topic] = payload
+            if payload:
+                self._learn(topic, payload)
+        if ignored is not None:
+            for topic, (kind, payload, reason) in self._errors.items():
+                ignored.note(kind, topic, payload, reason)
+        return dict(self._digests)
+
+    def _forget(self, topic: str) -> None:
+        self._errors.pop(topic, None)
+        robot_id = self._robot_of.pop(topic, None)
+        if robot_id is not None:
+            del self._digests[robot_id]
+
+    def _learn(self, topic: str, payload: bytes) -> None:
+        found = _kind(topic, self._topics)
+        if found is None:
+            return
+        robot_id, kind = found
+        reading = _read(kind, robot_id, payload, False)
+        if reading.error is not None:
+            self._errors[topic] = (kind, payload, reading.error)
+        if robot_id is not None and reading.fields.get("launch_retained"):
+            self._digests[robot_id] = reading.fields.get("launch_digest")
+            self._robot_of[topic] = robot_id
 
 
 def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _Reading:

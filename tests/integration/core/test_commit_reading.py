@@ -1,6 +1,6 @@
-"""A commit is read in one pass (one `git ls-tree`, one `git cat-file --batch`, whatever the
-number of files), gives the work tree's verdict, and a damaged one is a clean SourceError
-(issue 14, item 2)."""
+"""A commit is read in one pass (one `git rev-parse`, one `git ls-tree`, one `git cat-file
+--batch`, whatever the number of files), gives the work tree's verdict, and a damaged one is a
+clean SourceError (issue 14, item 2)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from configurator.source import GitSource, SourceError, WorkTreeSource
+from configurator.source import FileTooLarge, GitSource, SourceError, WorkTreeSource
 from configurator.workspace import check
+from contract.yamlio import MAX_FILE_BYTES
 from reconciler.desired import load_desired
 from tests.support.lab import Lab
 
@@ -59,7 +60,7 @@ def test_a_commit_is_read_by_a_fixed_number_of_git_processes(lab: Lab, tmp_path:
     files, errors = map(int, done.stdout.split())
     assert files > 200 and errors == 0
     runs = log.read_text().splitlines()
-    assert [run.split()[0] for run in runs] == ["rev-parse", "rev-parse", "ls-tree", "cat-file"]
+    assert [run.split()[0] for run in runs] == ["rev-parse", "ls-tree", "cat-file"]
 
 
 def test_the_commit_and_the_work_tree_agree_on_every_file(lab: Lab) -> None:
@@ -127,3 +128,21 @@ def test_a_missing_object_is_a_clean_error(lab: Lab) -> None:
     done = lab.run("validate", "--rev", revision)
     assert done.returncode == 2 and done.stderr.count("\n") == 1
     assert "Traceback" not in done.stderr and "is missing" in done.stderr
+
+
+def test_a_file_over_the_limit_in_a_commit_is_refused_unread_and_the_rest_read(lab: Lab) -> None:
+    # git announces each blob's size before its content: the one over the limit is refused
+    # there, and the files after it still come, each with its own bytes.
+    big = "configs/scenarios/big.yaml"
+    lab.path(big).write_bytes(b"#" * (MAX_FILE_BYTES + 1))
+    revision = lab.commit("one file over the limit")
+    source, work_tree = GitSource(lab.root, revision), WorkTreeSource(lab.root)
+    paths = source.files()
+    assert big in paths and paths[-1] != big and paths[0] != big
+    read = dict(source.read_each(paths))
+    expected = dict(work_tree.read_each(paths))
+    refused = read.pop(big)
+    assert isinstance(refused, FileTooLarge) and refused.size == MAX_FILE_BYTES + 1
+    assert str(refused) == str(expected.pop(big))
+    assert read == expected
+    assert check(lab.root, revision).diagnostics == check(lab.root).diagnostics

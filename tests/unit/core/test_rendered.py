@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from configurator.render import FleetRender, RenderError, render_fleet, request_for
-from configurator.rendered import _SLOT_NAMES, ScenarioRequests, _prefix
+from configurator.rendered import _SLOT_NAMES, FleetRequests, ScenarioRequests, _prefix
 from configurator.rosnames import UnresolvableName, resolve_name
 from configurator.types import MappingBinding
 from configurator.workspace import check
@@ -227,6 +227,26 @@ def test_a_new_revision_keeps_the_digests_and_changes_only_the_revision() -> Non
     assert (moved.digest, moved.restart_digest) == (request.digest, request.restart_digest)
     assert json.loads(moved.payload()) == {**json.loads(request.payload()), "revision": "f" * 40}
     assert moved != request and request.with_revision(request.revision) == request
+
+
+def test_a_fleets_requests_are_stamped_with_its_revision_as_they_are_read() -> None:
+    # A request kept from an earlier commit is read with the fleet's revision, whichever way
+    # it is read; only digests (which do not cover it) are given without stamping.
+    fleet = _example_fleet()
+    old = "e" * 40
+    kept = {robot_id: request.with_revision(old) for robot_id, request in fleet.requests.items()}
+    requests = FleetRequests("f" * 40, kept)
+    assert all(request.revision == old for _, request in requests.as_kept())
+    assert requests.digests() == {r: q.digest for r, q in kept.items()}
+    assert all(request.revision == old for _, request in requests.as_kept())
+    robot_id = next(iter(kept))
+    assert requests[robot_id] == kept[robot_id].with_revision("f" * 40)
+    assert requests.get(robot_id) == requests[robot_id]
+    assert all(request.revision == "f" * 40 for request in requests.values())
+    assert requests == {r: q.with_revision("f" * 40) for r, q in kept.items()}
+    assert requests != kept and list(requests) == list(kept) and len(requests) == len(kept)
+    requests[robot_id] = kept[robot_id]
+    assert requests[robot_id].revision == "f" * 40 and robot_id in requests
 
 
 def test_a_field_added_to_the_request_must_be_taught_to_rendering() -> None:

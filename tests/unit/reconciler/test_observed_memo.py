@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from contract.launch import StopRequest
 from contract.wire import AgentState, AgentStatus, Topics
-from reconciler.observed import ReadMemo, parse_retained
+from reconciler.observed import LaunchDigests, ReadMemo, parse_retained
+from reconciler.retained import Ignored
 from tests.support.agents import make_request
 
 T = Topics()
@@ -45,3 +47,37 @@ def test_an_invalid_request_with_a_digest_keeps_its_digest_in_a_full_read() -> N
     robot = seen.robots["tb3-01"]
     assert robot.launch is None and robot.launch_digest is not None and robot.launch_retained
     assert seen.ignored == {"launch": 1}
+
+
+def test_launch_digests_follow_the_snapshots_as_a_fresh_read_does() -> None:
+    # Kept from one snapshot to the next, updated by what changed: at every step the digests
+    # and the unreadable payloads noted are those of reading the whole snapshot again.
+    garbage = b"{not json"
+    stop_for_another = StopRequest(robot_id="tb3-09", revision="r").model_dump_json().encode()
+    snapshots: list[dict[str, bytes]] = [
+        {
+            T.launch("tb3-01"): make_request("tb3-01").payload(),
+            T.launch("tb3-02"): garbage,
+            T.launch("tb3-03"): StopRequest(robot_id="tb3-03", revision="r")
+            .model_dump_json()
+            .encode(),
+            T.reconciler_status: b"[]",
+            f"{T.prefix}/elsewhere": b"x",
+        },
+        {},  # all gone
+    ]
+    again = dict(snapshots[0])
+    again[T.launch("tb3-01")] = make_request("tb3-01", variant=2).payload()
+    again[T.launch("tb3-02")] = make_request("tb3-02").payload()  # readable now
+    again[T.launch("tb3-03")] = b""  # cleared
+    again[T.launch("tb3-04")] = stop_for_another
+    again.pop(T.reconciler_status)
+    snapshots[1:1] = [dict(snapshots[0]), again, dict(again)]
+    kept, noted = LaunchDigests(T), Ignored()
+    for step, messages in enumerate(snapshots):
+        fresh, fresh_noted = parse_retained(messages, T, requests=False), Ignored()
+        parse_retained(messages, T, requests=False, ignored=fresh_noted)
+        assert kept.update(messages, noted) == fresh.launch_digests(), step
+        assert noted._seen == fresh_noted._seen, step
+        noted = Ignored()
+    assert kept.update({}) == {} and not kept._errors and not kept._robot_of
