@@ -75,9 +75,18 @@ def html(code: int, text: str, *headers: tuple[str, str]) -> Response:
 class UiService:
     """The edge's Service for `robotconf ui`: the read routes here, the write side's added."""
 
-    def __init__(self, live: LiveFleet, auth: OperatorAuth, extra: Sequence[Route] = ()) -> None:
+    def __init__(
+        self,
+        live: LiveFleet,
+        auth: OperatorAuth,
+        extra: Sequence[Route] = (),
+        hosts: frozenset[str] | None = None,
+    ) -> None:
         self.live = live
         self.auth = auth
+        # The Host headers answered (None: any): on loopback, only loopback names, so that a
+        # web page whose name an attacker points at 127.0.0.1 (DNS rebinding) reads nothing.
+        self.hosts = hosts
         # What a robot's page says of the last action on it (the write side's restart
         # outcome, shown in `[data-restart-outcome]`): None, until the write side sets it.
         self.outcome: Callable[[Request, str, Identity], str | None] = lambda *_: None
@@ -103,6 +112,9 @@ class UiService:
     def _answer(self, request: Request) -> Response:
         if not request.target.startswith("/"):
             return self.error(400, "the request target is not a path")
+        host = (request.headers.get("Host") or "").strip().lower()
+        if self.hosts is not None and host and host not in self.hosts:
+            return self.error(421, "this server answers to its loopback address only")
         parts = urlsplit(request.target)
         try:
             path = unquote(parts.path, errors="strict")
@@ -201,6 +213,12 @@ class UiService:
         if name not in self.static:
             return self.error(404, "no such file", who)
         return Response(200, self.static[name], STATIC[name], (("Cache-Control", "no-cache"),))
+
+
+def loopback_hosts(port: int) -> frozenset[str]:
+    """The Host headers a loopback listener on `port` answers."""
+    names = ("127.0.0.1", "localhost", "[::1]")
+    return frozenset({*names, *(f"{name}:{port}" for name in names)})
 
 
 def _secured(response: Response) -> Response:
