@@ -87,9 +87,6 @@ class UiService:
         # The Host headers answered (None: any): on loopback, only loopback names, so that a
         # web page whose name an attacker points at 127.0.0.1 (DNS rebinding) reads nothing.
         self.hosts = hosts
-        # What a robot's page says of the last action on it (the write side's restart
-        # outcome, shown in `[data-restart-outcome]`): None, until the write side sets it.
-        self.outcome: Callable[[Request, str, Identity], str | None] = lambda *_: None
         self.static = {name: _static(name) for name in STATIC}
         self.routes: list[Route] = [
             Route("GET", r"/", self.fleet),
@@ -169,8 +166,7 @@ class UiService:
         interfaces = _parsed(
             self.live.payload(topics.interfaces(robot_id)), RobotInterfaces, MAX_INTERFACES_BYTES
         )
-        said = self.outcome(request, robot_id, who)
-        return html(200, robot_page(snap, robot_id, who, launch, interfaces, said))
+        return html(200, robot_page(snap, robot_id, who, launch, interfaces))
 
     def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         """The page's server-sent events: what changed, from the page's own state on."""
