@@ -14,7 +14,7 @@ from reconciler.http_edge import BoundedHTTPServer
 from reconciler.lifecycle import parse_address
 from workstation.ui import DEFAULT_LISTEN
 from workstation.ui.auth import OperatorAuth
-from workstation.ui.server import UiService, action_routes, loopback_hosts, serve
+from workstation.ui.server import UiService, action_routes, serve
 from workstation.ui.state import LiveFleet
 
 
@@ -89,8 +89,7 @@ class RunningUi:
 
     def __init__(self, connection: Connection, prefix: str, repo: Path, options: UiOptions) -> None:
         self.live = LiveFleet(connection, prefix, repo)
-        hosts = loopback_hosts(options.port) if is_loopback(options.host) else None
-        self.service = UiService(self.live, options.auth, hosts=hosts)
+        self.service = UiService(self.live, options.auth)
         self.service.routes += action_routes(self.service)
         self.options = options
         self.live.start()

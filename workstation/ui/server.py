@@ -3,6 +3,7 @@ every page with the Content-Security-Policy, every bad request a 4xx page, never
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import re
 import ssl
@@ -217,6 +218,13 @@ def loopback_hosts(port: int) -> frozenset[str]:
     return frozenset({*names, *(f"{name}:{port}" for name in names)})
 
 
+def _loopback(host: str) -> bool:
+    try:
+        return host == "localhost" or ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 def _secured(response: Response) -> Response:
     """Every answer with the security headers (a page's CSP above all)."""
     names = {name.lower() for name, _ in response.headers}
@@ -262,7 +270,10 @@ def _static(name: str) -> bytes:
 def serve(
     service: UiService, host: str, port: int, tls: ssl.SSLContext | None = None
 ) -> BoundedHTTPServer:
-    """Listens now (OSError when it cannot) and answers on a thread of its own."""
+    """Listens now (OSError when it cannot) and answers on a thread of its own; on loopback,
+    to loopback names only."""
+    if _loopback(host):
+        service.hosts = loopback_hosts(port)
     edge = BoundedHTTPServer("ui", service, LIMITS)
     edge.listen(host, port, tls)
     return edge
