@@ -10,13 +10,14 @@ as its agent would (running its request), a real `robotconf ui` process is read 
             the page's size (the worst 500 rows, the others counted)
   change    one robot's status published (a running robot fails, then runs again) until the
             `/events` stream of an open page has the event carrying that robot's row (or its
-            removal): p50 and max over 2 x --rounds; the bytes of each such event
+            removal), with --pages pages open: p50 and max over 2 x --rounds; the bytes of each
+            such event
   status    `robotconf status --json` of the same fleet, timed, and its output's size
 
 Targets: page < 1 s (a first meaningful paint needs the HTML first), change p50 < 0.5 s, each
 change's event < 8 KB (only what changed). Exit 0 when they are met, 1 when one is missed.
 
-    python bench/ui_scale.py [--robots 10000] [--rounds 9] [--keep] [--json F]
+    python bench/ui_scale.py [--robots 10000] [--rounds 9] [--pages 20] [--keep] [--json F]
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ EVENT_BYTES_TARGET = 8 * 1024
 @dataclass
 class Result:
     robots: int
+    pages: int = 1
     ready_s: float = 0.0
     page_s: list[float] = field(default_factory=list)
     page_p50_s: float = 0.0
@@ -97,7 +99,7 @@ class Stream:
 
     def __init__(self, port: int) -> None:
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
-        self.sock.sendall(b"GET /events HTTP/1.1\r\nHost: bench\r\n\r\n")
+        self.sock.sendall(b"GET /events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
         self.events: list[tuple[float, int, dict[str, Any]]] = []
         self.lock = threading.Lock()
         self.thread = threading.Thread(target=self._read, daemon=True)
@@ -165,7 +167,7 @@ def wait_ready(ui: subprocess.Popen[bytes], port: int, synced: int, started: flo
     raise RuntimeError("the UI never showed the whole fleet in sync")
 
 
-def measure(robots: int, rounds: int, folder: Path) -> Result:
+def measure(robots: int, rounds: int, folder: Path, pages: int) -> Result:
     lab = folder / "lab"
     print(f"generating {robots} robots ...", flush=True)
     generate.generate(lab, generate.Sizes(robots=robots), use_git=True)
@@ -184,7 +186,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
         }
         print(f"publishing {len(digests)} robots' statuses ...", flush=True)
         agents = publish_statuses(broker.port, digests)
-        result = Result(robots)
+        result = Result(robots, pages)
         port = free_port()
         started = time.perf_counter()
         with (folder / "ui.log").open("wb") as log:
@@ -203,6 +205,7 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
         print(
             f"fleet page {result.page_p50_s * 1000:.0f} ms, {result.page_bytes:,} bytes", flush=True
         )
+        others = [Stream(port) for _ in range(pages - 1)]  # open pages: each is sent its events
         stream = Stream(port)
         time.sleep(1.0)
         chosen = sorted(digests)[:: max(1, len(digests) // rounds)][:rounds]
@@ -220,13 +223,14 @@ def measure(robots: int, rounds: int, folder: Path) -> Result:
                 result.change_s.append(arrived - sent)
                 result.event_bytes.append(size)
                 time.sleep(0.3)
-        stream.close()
+        for page in [stream, *others]:
+            page.close()
         result.change_p50_s = statistics.median(result.change_s)
         result.change_max_s = max(result.change_s)
         p50, worst = result.change_p50_s * 1000, result.change_max_s * 1000
         sizes = result.event_bytes
         print(
-            f"change p50 {p50:.0f} ms, max {worst:.0f} ms; event bytes p50 "
+            f"{pages} pages open: change p50 {p50:.0f} ms, max {worst:.0f} ms; event bytes p50 "
             f"{statistics.median(sizes):.0f}, max {max(sizes)}",
             flush=True,
         )
@@ -254,12 +258,13 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--robots", type=int, default=10_000)
     parser.add_argument("--rounds", type=int, default=9)
+    parser.add_argument("--pages", type=int, default=20, help="pages open on the fleet")
     parser.add_argument("--keep", action="store_true", help="keep the work folder")
     parser.add_argument("--json", type=Path, help="write the result here")
     args = parser.parse_args(argv)
     folder = Path(tempfile.mkdtemp(prefix="robotconf-ui-scale-"))
     try:
-        result = measure(args.robots, args.rounds, folder)
+        result = measure(args.robots, args.rounds, folder, args.pages)
     finally:
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)

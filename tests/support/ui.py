@@ -81,7 +81,7 @@ class Events:
 
     def __init__(self, port: int, query: str = "") -> None:
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=10)
-        self.sock.sendall(f"GET /events{query} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+        self.sock.sendall(f"GET /events{query} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
         self.head = b""
         self.messages: list[dict[str, Any]] = []
         self.ended = False

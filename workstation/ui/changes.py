@@ -7,6 +7,7 @@ import json
 from collections.abc import Set
 from dataclasses import dataclass, field
 
+from reconciler.verdicts import RobotRow
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
 from workstation.ui.pages import banner_box, reconciler_box, rollout_box, row_html, summary_box
 from workstation.ui.robot_page import robot_box
@@ -24,57 +25,87 @@ class Shown:
     boxes: dict[str, str] = field(default_factory=dict)
 
 
-def boxes(snap: Snapshot, shown: Shown, seen: Visible | None) -> dict[str, str]:
-    """The page's live boxes as HTML, by their `data-box` name."""
-    if shown.robot is not None:
-        return {"banner": banner_box(snap), "robot": robot_box(snap, shown.robot)}
-    return {
-        "banner": banner_box(snap),
-        "reconciler": reconciler_box(snap),
-        "rollout": rollout_box(snap),
-        "summary": summary_box(seen, shown.query),
-    }
+class Views:
+    """What the pages of one state show, worked out once per query and rows rendered once:
+    many open pages of the same query cost one scan of the fleet, not one each."""
+
+    def __init__(self, snap: Snapshot) -> None:
+        self.snap = snap
+        self._seen: dict[tuple[FleetQuery, str | None], Visible | None] = {}
+        self._boxes: dict[tuple[FleetQuery, str | None], dict[str, str]] = {}
+        self._rows: dict[str, str] = {}
+
+    def seen(self, shown: Shown) -> Visible | None:
+        key = (shown.query, shown.robot)
+        if key not in self._seen:
+            snap = self.snap
+            fleet = snap.fleet
+            self._seen[key] = (
+                None if shown.robot is not None or fleet is None else visible(fleet, shown.query)
+            )
+        return self._seen[key]
+
+    def boxes(self, shown: Shown) -> dict[str, str]:
+        """The page's live boxes as HTML, by their `data-box` name."""
+        key = (shown.query, shown.robot)
+        if key not in self._boxes:
+            snap = self.snap
+            if shown.robot is not None:
+                made = {"banner": banner_box(snap), "robot": robot_box(snap, shown.robot)}
+            else:
+                made = {
+                    "banner": banner_box(snap),
+                    "reconciler": reconciler_box(snap),
+                    "rollout": rollout_box(snap),
+                    "summary": summary_box(self.seen(shown), shown.query),
+                }
+            self._boxes[key] = made
+        return self._boxes[key]
+
+    def row(self, row: RobotRow) -> list[str]:
+        """[id, rank, html] of a row, as an event carries it."""
+        if row.robot_id not in self._rows:
+            self._rows[row.robot_id] = row_html(row)
+        return [row.robot_id, rank(row), self._rows[row.robot_id]]
 
 
-def _visible(snap: Snapshot, shown: Shown) -> Visible | None:
-    if shown.robot is not None or snap.fleet is None:
-        return None
-    return visible(snap.fleet, shown.query)
-
-
-def first(snap: Snapshot, shown: Shown, page_version: int | None) -> bytes | None:
+def first(
+    snap: Snapshot, shown: Shown, page_version: int | None, views: Views | None = None
+) -> bytes | None:
     """A stream's first event: none when its page was made from this very state; else a reset
     (the page's rows and boxes replaced). `shown` is updated to what the page then shows."""
-    seen = _visible(snap, shown)
+    views = views if views is not None else Views(snap)
+    seen = views.seen(shown)
     rows = seen.rows if seen is not None else []
     shown.rows = {row.robot_id for row in rows}
-    shown.boxes = boxes(snap, shown, seen)
+    shown.boxes = views.boxes(shown)
     if page_version == snap.version:
         return None
     message = {
         "v": snap.version,
         "reset": True,
-        "rows": [[row.robot_id, rank(row), row_html(row)] for row in rows],
+        "rows": [views.row(row) for row in rows],
         "removed": [],
         "boxes": shown.boxes,
     }
     return event(snap.version, message)
 
 
-def change(snap: Snapshot, shown: Shown, changed: Set[str]) -> bytes | None:
+def change(
+    snap: Snapshot, shown: Shown, changed: Set[str], views: Views | None = None
+) -> bytes | None:
     """The event that brings a page showing `shown` to `snap`, or None when nothing it shows
     changed; `changed`: the robots whose rows differ from the state before."""
-    seen = _visible(snap, shown)
+    views = views if views is not None else Views(snap)
+    seen = views.seen(shown)
     rows = seen.rows if seen is not None else []
     sent = [
-        [row.robot_id, rank(row), row_html(row)]
-        for row in rows
-        if row.robot_id in changed or row.robot_id not in shown.rows
+        views.row(row) for row in rows if row.robot_id in changed or row.robot_id not in shown.rows
     ]
     now = {row.robot_id for row in rows}
     removed = sorted(shown.rows - now)
     shown.rows = now
-    current = boxes(snap, shown, seen)
+    current = views.boxes(shown)
     moved = {name: text for name, text in current.items() if shown.boxes.get(name) != text}
     shown.boxes = current
     if not sent and not removed and not moved:

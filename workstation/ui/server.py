@@ -3,6 +3,7 @@ every page with the Content-Security-Policy, every bad request a 4xx page, never
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import re
 import ssl
@@ -75,9 +76,18 @@ def html(code: int, text: str, *headers: tuple[str, str]) -> Response:
 class UiService:
     """The edge's Service for `robotconf ui`: the read routes here, the write side's added."""
 
-    def __init__(self, live: LiveFleet, auth: OperatorAuth, extra: Sequence[Route] = ()) -> None:
+    def __init__(
+        self,
+        live: LiveFleet,
+        auth: OperatorAuth,
+        extra: Sequence[Route] = (),
+        hosts: frozenset[str] | None = None,
+    ) -> None:
         self.live = live
         self.auth = auth
+        # The Host headers answered (None: any): on loopback, only loopback names, so that a
+        # web page whose name an attacker points at 127.0.0.1 (DNS rebinding) reads nothing.
+        self.hosts = hosts
         self.static = {name: _static(name) for name in STATIC}
         # The write side's: a robot's latest restart outcome (HTML) for an operator's page.
         self.restart_outcome: Callable[[str], str] = lambda robot_id: ""
@@ -102,6 +112,9 @@ class UiService:
     def _answer(self, request: Request) -> Response:
         if not request.target.startswith("/"):
             return self.error(400, "the request target is not a path")
+        host = (request.headers.get("Host") or "").strip().lower()
+        if self.hosts is not None and host and host not in self.hosts:
+            return self.error(421, "this server answers to its loopback address only")
         parts = urlsplit(request.target)
         try:
             path = unquote(parts.path, errors="strict")
@@ -202,6 +215,19 @@ class UiService:
         return Response(200, self.static[name], STATIC[name], (("Cache-Control", "no-cache"),))
 
 
+def loopback_hosts(port: int) -> frozenset[str]:
+    """The Host headers a loopback listener on `port` answers."""
+    names = ("127.0.0.1", "localhost", "[::1]")
+    return frozenset({*names, *(f"{name}:{port}" for name in names)})
+
+
+def _loopback(host: str) -> bool:
+    try:
+        return host == "localhost" or ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 def _secured(response: Response) -> Response:
     """Every answer with the security headers (a page's CSP above all)."""
     names = {name.lower() for name, _ in response.headers}
@@ -247,7 +273,10 @@ def _static(name: str) -> bytes:
 def serve(
     service: UiService, host: str, port: int, tls: ssl.SSLContext | None = None
 ) -> BoundedHTTPServer:
-    """Listens now (OSError when it cannot) and answers on a thread of its own."""
+    """Listens now (OSError when it cannot) and answers on a thread of its own; on loopback,
+    to loopback names only."""
+    if _loopback(host):
+        service.hosts = loopback_hosts(port)
     edge = BoundedHTTPServer("ui", service, LIMITS)
     edge.listen(host, port, tls)
     return edge

@@ -18,7 +18,7 @@ from contract.textsafe import printable
 from contract.wire import Topics
 from reconciler.verdicts import FleetStatus, reconciler_health
 from workstation.fleet_status import DesiredCache, open_view
-from workstation.ui.changes import Shown, change, changed_rows, first
+from workstation.ui.changes import Shown, Views, change, changed_rows, first
 from workstation.ui.model import HISTORY, HistoryEntry, Snapshot
 from workstation.ui.reading import FleetReader
 
@@ -197,15 +197,16 @@ class LiveFleet:
         """Each stream's event: the first for a new one, else what changed for it."""
         with self._lock:
             streams = list(self._streams.items())
+        views = Views(after)  # pages of one query share their rows and boxes
         for key, stream in streams:
             if stream.sink.closed:
                 self.unsubscribe(key)
                 continue
             if not stream.started:
                 stream.started = True
-                message = first(after, stream.shown, stream.page_version)
+                message = first(after, stream.shown, stream.page_version, views)
             elif after.version != before.version:
-                message = change(after, stream.shown, changed)
+                message = change(after, stream.shown, changed, views)
             else:
                 continue
             if message is not None:

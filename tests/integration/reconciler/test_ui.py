@@ -113,6 +113,9 @@ def test_bad_requests_are_answered_4xx_with_the_csp(fleet: Fleet, ui: UiProc) ->
         assert answer.headers["Content-Security-Policy"] == CSP
         assert "Traceback" not in answer.body
     assert ui.get("/", method="DELETE").code == 405
+    # A name pointed at 127.0.0.1 by someone else (DNS rebinding) reads nothing.
+    assert ui.get("/", headers={"Host": "evil.example"}).code == 421
+    assert ui.get("/", headers={"Host": f"localhost:{ui.port}"}).code == 200
     assert raw(ui.port, b"\x00\xff garbage\r\n\r\n").startswith(b"HTTP/1.1 400")
     huge = b"GET / HTTP/1.1\r\nX: " + b"a" * 40_000 + b"\r\n\r\n"
     assert raw(ui.port, huge).startswith(b"HTTP/1.1 431")

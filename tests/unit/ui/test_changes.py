@@ -8,7 +8,7 @@ from dataclasses import replace
 
 from reconciler.verdicts import Verdict
 from tests.unit.ui.fleets import fleet, refused, row, snapshot
-from workstation.ui.changes import Shown, change, changed_rows, first
+from workstation.ui.changes import Shown, Views, change, changed_rows, first
 from workstation.ui.model import FleetQuery
 
 
@@ -84,3 +84,15 @@ def test_changed_rows_are_those_that_differ_or_left() -> None:
     after = snapshot(fleet([row("r1"), replace(row("r2"), restarts=1)]))
     assert changed_rows(before, after) == {"r2", "r3"}
     assert changed_rows(None, after) == {"r1", "r2"}
+
+
+def test_pages_of_one_query_share_one_scan_and_get_the_same_event() -> None:
+    before = snapshot(fleet([row(f"r{n}") for n in range(50)]), version=1)
+    pages = [Shown(FleetQuery()) for _ in range(3)] + [Shown(FleetQuery(search="r1"))]
+    for shown in pages:
+        first(before, shown, 1)
+    after = snapshot(fleet([row(f"r{n}", restarts=int(n == 10)) for n in range(50)]), version=2)
+    views = Views(after)
+    sent = [change(after, shown, {"r10"}, views) for shown in pages]
+    assert sent[0] == sent[1] == sent[2] == sent[3]  # r10 is on every page
+    assert views.seen(pages[0]) is views.seen(pages[1]) is not views.seen(pages[3])
