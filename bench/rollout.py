@@ -61,7 +61,7 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
-from configurator.brokerconf import latency_lines, queue_lines  # noqa: E402
+from configurator.brokerconf import queue_lines  # noqa: E402
 from configurator.render import render_fleet  # noqa: E402
 from configurator.workspace import check  # noqa: E402
 from contract.wire import AgentStatus  # noqa: E402
@@ -97,13 +97,10 @@ class Broker:
             raise SystemExit("mosquitto is not installed (./dev setup installs it)")
         self.port = free_port()
         conf = folder / "mosquitto.conf"
-        # The queue `robotconf broker-config` sets for a fleet of this size (the floor's single
-        # subscriber gets N QoS 1 messages at once, and every whole-fleet reader all of them),
-        # and Nagle's algorithm off as it sets it.
+        # The queue `robotconf broker-config` sets for a fleet of this size: the floor's single
+        # subscriber gets N QoS 1 messages at once, and every whole-fleet reader all of them.
         lines = [f"listener {self.port} 127.0.0.1", "allow_anonymous true", "persistence false"]
-        conf.write_text(
-            "\n".join([*lines, *queue_lines(robots), *latency_lines()]) + "\n", encoding="utf-8"
-        )
+        conf.write_text("\n".join([*lines, *queue_lines(robots)]) + "\n", encoding="utf-8")
         self.log = (folder / "mosquitto.log").open("wb")
         self.proc = subprocess.Popen(
             [binary, "-c", str(conf)], stdout=self.log, stderr=self.log, start_new_session=True

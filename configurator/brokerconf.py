@@ -132,15 +132,6 @@ def queue_lines(robots: int) -> list[str]:
     ]
 
 
-def latency_lines() -> list[str]:
-    return [
-        "# Nagle's algorithm off on client sockets: otherwise an acknowledgement or a small",
-        "# message may wait for the client's delayed ACK, up to 40 ms (a commit's few requests",
-        "# took 45 ms to be acknowledged instead of 5).",
-        "set_tcp_nodelay true",
-    ]
-
-
 def render_conf(listener: Listener, service_port: int, files: Path, robots: int = 0) -> str:
     """Two listeners with settings of their own: robots on `listener.port`, where a client's id
     is forced to its user name (its robot id), so that no robot can take another's session
@@ -154,7 +145,6 @@ def render_conf(listener: Listener, service_port: int, files: Path, robots: int 
         "per_listener_settings true",
         "",
         *queue_lines(robots),
-        *latency_lines(),
         "",
         "# Robots: each logs in with its robot id, which becomes its client id too.",
         *_listener_lines(listener, listener.port, files),
