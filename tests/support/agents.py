@@ -26,6 +26,18 @@ from contract.wire import AgentState, AgentStatus, Topics
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
 
+# Fails at its first start, runs at every later one: `failed` until someone restarts it.
+FAILS_ONCE = [
+    sys.executable,
+    "-c",
+    "import os, sys, time\n"
+    "first = not os.path.exists('ran-once')\n"
+    "open('ran-once', 'a').close()\n"
+    "print('brain up', os.getpid(), flush=True)\n"
+    "sys.exit(3) if first else time.sleep(600)\n",
+    "{launch_request}",
+]
+
 TIMEOUT = 20.0
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
 STANDIN = [sys.executable, "-m", "agent.standin_brain"]

@@ -27,7 +27,7 @@ from contract.wire import (
     Topics,
 )
 from tests.integration.agent.conftest import AgentFactory
-from tests.support.agents import ROBOT, TIMEOUT, make_request, publish
+from tests.support.agents import FAILS_ONCE, ROBOT, TIMEOUT, make_request, publish
 from tests.support.lab import ROBOTCONF
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
@@ -46,17 +46,6 @@ CHATTY = [
     "    print('tick', n)\n"
     "    n += 1\n"
     "    time.sleep(0.2)\n",
-    "{launch_request}",
-]
-# Fails at its first start, runs at every later one: `failed` until someone restarts it.
-FAILS_ONCE = [
-    sys.executable,
-    "-c",
-    "import os, sys, time\n"
-    "first = not os.path.exists('ran-once')\n"
-    "open('ran-once', 'a').close()\n"
-    "print('brain up', os.getpid(), flush=True)\n"
-    "sys.exit(3) if first else time.sleep(600)\n",
     "{launch_request}",
 ]
 # A long line, then a flood of lines at once, then quiet.

@@ -23,7 +23,7 @@ import pytest
 from contract.signing import generate_keys, load_private_key, sign
 from contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
-from tests.support.agents import ROBOT, TIMEOUT, make_request, publish
+from tests.support.agents import FAILS_ONCE, ROBOT, TIMEOUT, make_request, publish
 from tests.support.lab import ROBOTCONF
 from tests.support.mosquitto import Mosquitto
 from tests.support.tlsutil import make_pki
@@ -32,17 +32,6 @@ from tests.support.watch import FleetWatch, wait_for
 TOPICS = Topics()
 TOKEN = "ui-operator-token-" + "k3" * 12
 FORM = "application/x-www-form-urlencoded"
-# Fails at its first start, runs at every later one: `failed` until someone restarts it.
-FAILS_ONCE = [
-    sys.executable,
-    "-c",
-    "import os, sys, time\n"
-    "first = not os.path.exists('ran-once')\n"
-    "open('ran-once', 'a').close()\n"
-    "print('brain up', os.getpid(), flush=True)\n"
-    "sys.exit(3) if first else time.sleep(600)\n",
-    "{launch_request}",
-]
 # A hostile line (a carriage return that would start a forged event), then a numbered tick
 # five times a second.
 TICKS = [
