@@ -42,7 +42,8 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     if ui_at is None:
         return None
     from reconciler.lifecycle import parse_address
-    from workstation.ui.run import is_loopback, ui_options
+    from workstation.ui.run import ui_options
+    from workstation.ui.server import is_loopback
 
     try:
         host, _ = parse_address(ui_at, "--ui", DEFAULT_LISTEN)

@@ -20,7 +20,11 @@ HISTORY = 20  # status changes kept per robot
 
 
 class QueryError(ValueError):
-    """A query the pages cannot answer; its words are the 400 page's."""
+    """A query the pages cannot answer; its words are the error page's, `code` its status."""
+
+    def __init__(self, message: str, code: int = 400) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 @dataclass(frozen=True)
@@ -48,7 +52,9 @@ def parse_query(query: str) -> tuple[FleetQuery, dict[str, str]]:
     """The fleet query of a URL's query string, and its other single fields (`robot`, `v`);
     QueryError when it is too long or a field is malformed."""
     if len(query) > MAX_QUERY:
-        raise QueryError(f"the query is {len(query):,} characters, over the limit of {MAX_QUERY:,}")
+        raise QueryError(
+            f"the query is {len(query):,} characters, over the limit of {MAX_QUERY:,}", 414
+        )
     try:
         fields = parse_qsl(query, keep_blank_values=True, max_num_fields=MAX_FIELDS)
     except ValueError:

@@ -3,7 +3,6 @@ whether that is allowed), its TLS, the live fleet and the HTTP service, stopped 
 
 from __future__ import annotations
 
-import ipaddress
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from workstation.ui.actions import Actions
 from workstation.ui.auth import OperatorAuth
 from workstation.ui.logtail import LogTails
 from workstation.ui.restarts import Restarts
-from workstation.ui.server import UiService, serve
+from workstation.ui.server import UiService, is_loopback, serve
 from workstation.ui.state import LiveFleet
 
 if TYPE_CHECKING:
@@ -38,15 +37,6 @@ class UiOptions:
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"{'https' if self.tls else 'http'}://{host}:{self.port}/"
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def ui_options(

@@ -151,7 +151,7 @@ class UiService:
         try:
             query, _ = parse_query(urlsplit(request.target).query)
         except QueryError as exc:
-            return self.error(_query_code(exc), str(exc), who)
+            return self.error(exc.code, str(exc), who)
         return html(200, fleet_page(self.live.snapshot, query, who))
 
     def healthz(self, request: Request, match: re.Match[str], who: Identity) -> Response:
@@ -177,7 +177,7 @@ class UiService:
         try:
             query, other = parse_query(urlsplit(request.target).query)
         except QueryError as exc:
-            return self.error(_query_code(exc), str(exc), who)
+            return self.error(exc.code, str(exc), who)
         robot = other.get("robot")
         if robot is not None and not is_robot_id(robot):
             return self.error(400, "that is not a robot id", who)
@@ -221,7 +221,8 @@ def loopback_hosts(port: int) -> frozenset[str]:
     return frozenset({*names, *(f"{name}:{port}" for name in names)})
 
 
-def _loopback(host: str) -> bool:
+def is_loopback(host: str) -> bool:
+    """A host name or address only this machine reaches."""
     try:
         return host == "localhost" or ipaddress.ip_address(host).is_loopback
     except ValueError:
@@ -240,10 +241,6 @@ def _secured(response: Response) -> Response:
         response.stream,
         response.keepalive,
     )
-
-
-def _query_code(exc: QueryError) -> int:
-    return 414 if "characters, over the limit" in str(exc) else 400
 
 
 def _version(text: str | None) -> int | None:
@@ -275,7 +272,7 @@ def serve(
 ) -> BoundedHTTPServer:
     """Listens now (OSError when it cannot) and answers on a thread of its own; on loopback,
     to loopback names only."""
-    if _loopback(host):
+    if is_loopback(host):
         service.hosts = loopback_hosts(port)
     edge = BoundedHTTPServer("ui", service, LIMITS)
     edge.listen(host, port, tls)
