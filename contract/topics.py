@@ -41,6 +41,7 @@ class Topic:
     retained: bool
     qos: int | None  # fixed QoS of its publishes; None when the publisher chooses
     about: str
+    by_name: bool = False  # a stream: subscribed to only where asked for by its key
 
     def access(self, role: Role) -> str | None:
         """Mosquitto's word for what `role` may do here: read, write, readwrite, or None."""
@@ -90,6 +91,19 @@ TOPICS: tuple[Topic, ...] = (
         "interfaces", f"robots/{ROBOT}/interfaces", "agent → everyone",
         "RobotInterfaces (contract/interfaces.py)", SERVICE_READERS, _roles(Role.ROBOT), True, 1,
         "the ROS interfaces the robot really has (agent.yaml `interfaces`), for drift and drafts",
+    ),
+    Topic(
+        "goals", f"robots/{ROBOT}/goals", "agent → everyone", "GoalsSummary (contract/goals.py)",
+        SERVICE_READERS, _roles(Role.ROBOT), True, 1,
+        "what the robot's brain achieved since the current request: goals ended per task, the "
+        "goal underway with its progress, the last outcome, vitals and recent events",
+    ),
+    Topic(
+        "goal_outcomes", f"robots/{ROBOT}/goals/outcomes", "agent → reconciler",
+        "OutcomeRecord (contract/goals.py)", SERVICE_READERS, _roles(Role.ROBOT), False, 1,
+        "each goal's end (succeeded, failed, canceled, stale) with the revision and digest it "
+        "ran under: the reconciler keeps them in its outcome ledger",
+        by_name=True,
     ),
     Topic(
         "reconciler_status", "reconciler/status", "reconciler → everyone",
@@ -151,7 +165,10 @@ def subscriptions(role: Role, prefix: str, *keys: str, robot_id: str = "+") -> l
     for key in keys:
         if role not in BY_KEY[key].read:
             raise ValueError(f"{role.value} may not read the {key} topics (contract/topics.py)")
-    rows = [BY_KEY[k] for k in keys] or [t for t in TOPICS if role in t.read and not t.per_client]
+    # Without keys: every row but the streams, which are asked for by name (a fleet's outcomes
+    # are a thousand messages a second that a status reader has no use for).
+    every = [t for t in TOPICS if role in t.read and not t.per_client and not t.by_name]
+    rows = [BY_KEY[k] for k in keys] or every
     return [topic.name(prefix, robot_id) for topic in rows]
 
 

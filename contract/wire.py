@@ -58,6 +58,8 @@ class Topics:
     status = _one("status")
     description = _one("description")
     interfaces = _one("interfaces")
+    goals = _one("goals")
+    goal_outcomes = _one("goal_outcomes")
     logs = _one("logs")
     logs_request = _one("logs_request")
     restart = _one("restart")
@@ -67,6 +69,8 @@ class Topics:
     all_status = _fixed("status")
     all_description = _fixed("description")
     all_interfaces = _fixed("interfaces")
+    all_goals = _fixed("goals")
+    all_goal_outcomes = _fixed("goal_outcomes")
 
     @property
     def sync(self) -> str:

@@ -123,8 +123,10 @@ def test_subscriptions_come_from_the_table_and_refuse_a_row_the_role_may_not_rea
         topics.all_status,
         topics.all_description,
         topics.all_interfaces,
+        topics.all_goals,  # the outcomes stream is asked for by name only
         topics.reconciler_status,
     ]
+    assert subscriptions(Role.VIEWER, PREFIX, "goal_outcomes") == [topics.all_goal_outcomes]
     with pytest.raises(ValueError, match="viewer may not read the logs topics"):
         subscriptions(Role.VIEWER, PREFIX, "logs")
 
