@@ -32,6 +32,7 @@ TASK_PATTERN = r"^[A-Za-z0-9_.:/-]{1,128}$"  # a task's name, as the models writ
 MAX_VITALS = 16  # named vitals a robot reports at once; more are refused
 VITAL_NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_.-]{0,31}$"
 MAX_EVENTS_KEPT = 10  # events a summary carries, newest last
+MAX_RECENT_KEPT = 10  # ended goals a summary carries, newest last
 MAX_TASKS_KEPT = 64  # tasks a summary counts separately; the rest are counted under OTHER_TASK
 OTHER_TASK = "(other)"
 MAX_ETA = 7 * 24 * 3600.0  # seconds: a longer ETA is cut to this
@@ -180,6 +181,7 @@ class GoalsSummary(TaskCounts):
     tasks: dict[str, TaskCounts] = Field(default_factory=dict)
     current: CurrentGoal | None = None
     last: LastOutcome | None = None
+    recent: list[LastOutcome] = Field(default_factory=list, description="newest last")
     vitals: dict[str, VitalValue] = Field(default_factory=dict)
     vitals_at: float | None = None
     events: list[BrainEvent] = Field(default_factory=list, description="newest last")
