@@ -14,6 +14,7 @@ from workstation.ui.model import FleetQuery, Snapshot
 from workstation.ui.text import age, definitions, esc
 
 RATES_SHOWN = 50  # (scenario, revision) rows of the fleet page's success rates; the rest counted
+HEADINGS = {"completed": "Succeeded"}  # the counts' names as a table heads them
 
 
 def goals_cell(row: RobotRow) -> str:
@@ -114,7 +115,9 @@ def current_goal(goal: CurrentGoal | None) -> str:
 def task_table(s: GoalsSummary) -> str:
     if not s.tasks:
         return ""
-    head = "".join(f'<th scope="col">{name.capitalize()}</th>' for name in COUNTS)
+    head = "".join(
+        f'<th scope="col">{HEADINGS.get(name, name.capitalize())}</th>' for name in COUNTS
+    )
     rows = "".join(
         f'<tr data-task="{esc(task, 128)}"><th scope="row">{esc(task, 128)}</th>'
         + "".join(f"<td>{getattr(counts, name)}</td>" for name in COUNTS)
