@@ -116,10 +116,13 @@ def test_the_fleet_page_shows_goals_and_success_rates(
     expect(page.locator('tr[data-robot="tb3-02"] td[data-goals]')).to_have_text("unknown")
     rate = page.locator(f'table[data-rates] tr[data-revision="{REV1}"]')
     expect(rate).to_have_attribute("data-rate", "75%", **expect_ms())
-    for folder in screenshot_folders(tmp_path):
-        page.locator('[data-box="rates"]').screenshot(path=str(folder / "ui-rates.png"))
 
     # A robot's goals fail: its cell and the rate follow on the open page.
     publish_summary(url, "tb3-01", summary("tb3-01", completed=9, failed=11))
     expect(cell).to_have_text("9/11", **expect_ms())
     expect(rate).to_have_attribute("data-rate", "46%", **expect_ms())
+    rate.locator("a").click()  # the revision's page: without a ledger here, its robots now
+    expect(page).to_have_url(f"http://127.0.0.1:{proc.port}/revisions/{REV1}", **expect_ms())
+    expect(page.locator('[data-ledger="unavailable"]')).to_contain_text("No outcome ledger")
+    live = page.locator(f'[data-live-goals] tr[data-revision="{REV1}"]')
+    expect(live).to_have_attribute("data-rate", "46%", **expect_ms())
