@@ -74,10 +74,52 @@ def _natural(counts: TaskCounts) -> dict[str, int]:
     return {name: max(0, getattr(counts, name)) for name in COUNTS}
 
 
+def _short(text: str | None, limit: int = MAX_TEXT) -> bool:
+    return text is None or len(text) <= limit
+
+
+def _fits(summary: GoalsSummary) -> bool:
+    """True when `bounded` would change nothing: a well-behaved agent's summary, checked
+    without the copy (10,000 of them are read at once by `status`)."""
+    s = summary
+    if (
+        len(s.recent) > MAX_RECENT_KEPT
+        or len(s.events) > MAX_EVENTS_KEPT
+        or len(s.tasks) > MAX_TASKS_KEPT
+        or len(s.vitals) > MAX_VITALS
+        or min(s.completed, s.failed, s.canceled, s.underway, s.stale) < 0
+        or not all(_short(t, 80) for t in (s.revision, s.digest, s.run))
+        or not _short(s.scenario, MAX_ID)
+    ):
+        return False
+    if any(
+        len(name) > MAX_ID or min(c.completed, c.failed, c.canceled, c.underway, c.stale) < 0
+        for name, c in s.tasks.items()
+    ):
+        return False
+    if any(len(n) > 32 or (isinstance(v, str) and len(v) > MAX_TEXT) for n, v in s.vitals.items()):
+        return False
+    c = s.current
+    if c is not None and not (
+        _short(c.goal, MAX_ID)
+        and _short(c.task, MAX_ID)
+        and _short(c.note)
+        and (c.fraction is None or 0.0 <= c.fraction <= 1.0)
+    ):
+        return False
+    ended = [*s.recent, *([s.last] if s.last is not None else [])]
+    return all(
+        _short(o.goal, MAX_ID) and _short(o.task, MAX_ID) and _short(o.code) and _short(o.message)
+        for o in ended
+    ) and all(_short(e.message) for e in s.events)
+
+
 def bounded(summary: GoalsSummary) -> GoalsSummary:
     """The summary with what a reader keeps of it: the newest recent outcomes and events, the
     first tasks and vitals by name, every text cut, no count below zero. A well-behaved agent's
-    is unchanged."""
+    is returned as it is."""
+    if _fits(summary):
+        return summary
     tasks = {
         name: TaskCounts(**_natural(counts))
         for name, counts in sorted(summary.tasks.items())[:MAX_TASKS_KEPT]
