@@ -12,6 +12,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from contract.goals import GoalsSummary
 from contract.interfaces import (
     MAX_INTERFACES,
     MAX_INTERFACES_BYTES,
@@ -29,11 +30,13 @@ from contract.wire import (
     is_online,
 )
 from reconciler.retained import Ignored, read_object
+from reconciler.robot_goals import bounded
 
 RECONCILER_STATUS = "reconciler-status"
 WAVE_RECORD = "rollout-record"  # reconciler.wave_memory, read by the reconciler alone
 INTERFACES = "interfaces"
-_ROBOT_LEAVES = ("launch", "status", "description", INTERFACES)
+GOALS = "goals"
+_ROBOT_LEAVES = ("launch", "status", "description", INTERFACES, GOALS)
 
 
 @dataclass
@@ -48,6 +51,8 @@ class RobotSeen:
     description: RobotDescription | None = None
     interfaces: KeptInterfaces | None = None  # what it reports of its ROS graph
     interfaces_error: str | None = None  # why its interfaces payload cannot be read
+    goals: GoalsSummary | None = None  # what its brain achieved since its request (bounded)
+    goals_error: str | None = None  # why its goals summary cannot be read
 
     @property
     def online(self) -> bool:
@@ -273,12 +278,16 @@ def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _R
             fields["status"] = AgentStatus.model_validate(raw)
         elif kind == INTERFACES:
             fields["interfaces"] = _interfaces(raw, payload)
+        elif kind == GOALS:
+            fields["goals"] = _goals(robot_id, raw)
         else:
             fields["description"] = RobotDescription.model_validate(raw)
     except (PayloadError, ValidationError, ValueError) as exc:
         reason = " ".join(str(exc).split())[:300]
         if kind == INTERFACES:  # the robot reported, unreadably: `error`, never `unknown`
             fields["interfaces_error"] = reason
+        elif kind == GOALS:
+            fields["goals_error"] = reason
         return _Reading(fields, error=reason)
     return _Reading(fields)
 
@@ -289,6 +298,14 @@ def _interfaces(raw: dict[str, Any], payload: bytes) -> KeptInterfaces:
     if found.count > MAX_INTERFACES:
         raise ValueError(f"{found.count:,} interfaces, over the limit of {MAX_INTERFACES:,}")
     return found
+
+
+def _goals(robot_id: str, raw: dict[str, Any]) -> GoalsSummary:
+    """A goals summary, trusted only on its own robot's topic, kept bounded (robot_goals)."""
+    found = GoalsSummary.model_validate(raw)
+    if found.robot_id != robot_id:
+        raise ValueError(f"a goals summary of robot {found.robot_id!r} on the topic of {robot_id}")
+    return bounded(found)
 
 
 def _read_launch(robot_id: str, raw: dict[str, Any], full: bool, fields: dict[str, Any]) -> None:

@@ -31,6 +31,7 @@ from contract.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutSt
 from contract.wire import short_digest as _short_digest
 from contract.wire import short_rev as _short_rev
 from reconciler.observed import Retained, RobotSeen
+from reconciler.robot_goals import NO_GOALS, RobotGoals
 
 
 class Verdict(str, enum.Enum):
@@ -122,6 +123,7 @@ class RobotRow:
     drift: Drift = UNKNOWN  # its reported interfaces against its desired request
     # While `deferred`: since when its brain's hold file defers a stop (the agent's clock).
     deferred_since: float | None = None
+    goals: RobotGoals = NO_GOALS  # its retained goals summary: unknown when it has none
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -148,6 +150,10 @@ class RobotRow:
                 if self.restart_requested_by is not None
                 else None
             ),
+            "goals": self.goals.as_json(),
+            "goals_state": self.goals.state,
+            "goals_note": self.goals.note,
+            "vitals": self.goals.vitals_json(),
         }
 
     def restart_line(self) -> str | None:
@@ -257,6 +263,7 @@ def build_rows(
                 restart_requested_at=status.restart_requested_at if status else None,
                 drift=robot_drift(robot_id, want, robot, memo),
                 deferred_since=status.deferred_since if status else None,
+                goals=RobotGoals.of(robot.goals, robot.goals_error),
             )
         )
     if memo is not None:

@@ -24,6 +24,12 @@ COLUMNS = (
 # keeps its table.
 LABELS = "LABELS"
 WAVE = "WAVE"
+# Shown after RELOADS when some robot's agent publishes a goals summary: `done/failed` since its
+# current request (`12/3`, `12/3 1 stale`), `unknown` when its brain does not report, `error`.
+GOALS = "GOALS"
+GOALS_LEGEND = (
+    "goals: done/failed since each robot's current request (unknown: its brain does not report)"
+)
 # Shown last when some robot reports its interfaces: `ok`, `1 missing, 1 type`, `error`, ...
 DRIFT = "DRIFT"
 DRIFT_LINES = 20  # drift items listed under the table; the rest are counted
@@ -54,8 +60,9 @@ def columns(rows: list[RobotRow]) -> tuple[str, ...]:
         if shown
     ]
     at = COLUMNS.index("SCENARIO") + 1
+    goals = (GOALS,) if any(r.goals.published for r in rows) else ()
     drift = (DRIFT,) if any(r.drift.interfaces != "unknown" for r in rows) else ()
-    return (*COLUMNS[:at], *extra, *COLUMNS[at:], *drift)
+    return (*COLUMNS[:at], *extra, *COLUMNS[at:], *goals, *drift)
 
 
 def fleet_table(fleet: FleetStatus) -> Table:
@@ -82,10 +89,17 @@ def fleet_table(fleet: FleetStatus) -> Table:
             safe(r.state),
             Text(str(r.restarts)),
             Text(str(r.reloads)),
+            *([_goals_cell(r)] if GOALS in names else []),
             *([_drift_cell(r)] if DRIFT in names else []),
             safe("" if r.verdict is Verdict.IN_SYNC else r.reason),
         )
     return table
+
+
+def _goals_cell(row: RobotRow) -> Text:
+    goals = row.goals
+    style = "red" if goals.failing else "yellow" if goals.unreadable else ""
+    return Text(goals.cell(), style=style)
 
 
 def _drift_cell(row: RobotRow) -> Text:
@@ -117,6 +131,8 @@ def fleet_status_view(fleet: FleetStatus) -> Group:
     parts.append(Text(""))
     if fleet.rows:
         parts.append(fleet_table(fleet))
+        if any(r.goals.published for r in fleet.rows):
+            parts.append(Text(GOALS_LEGEND, style="dim"))
     else:
         parts.append(Text("  ".join(COLUMNS)))
         parts.append(Text("(no robot is assigned or known to the broker)"))

@@ -8,6 +8,7 @@ from collections.abc import Set
 from dataclasses import dataclass, field
 
 from reconciler.verdicts import RobotRow
+from workstation.ui.goals_html import goals_box, rates_box
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
 from workstation.ui.pages import banner_box, reconciler_box, rollout_box, row_html, summary_box
 from workstation.ui.robot_page import robot_box
@@ -51,13 +52,18 @@ class Views:
         if key not in self._boxes:
             snap = self.snap
             if shown.robot is not None:
-                made = {"banner": banner_box(snap), "robot": robot_box(snap, shown.robot)}
+                made = {
+                    "banner": banner_box(snap),
+                    "robot": robot_box(snap, shown.robot),
+                    "goals": goals_box(snap, shown.robot),
+                }
             else:
                 made = {
                     "banner": banner_box(snap),
                     "reconciler": reconciler_box(snap),
                     "rollout": rollout_box(snap),
                     "summary": summary_box(self.seen(shown), shown.query),
+                    "rates": rates_box(snap, shown.query),
                 }
             self._boxes[key] = made
         return self._boxes[key]

@@ -8,8 +8,8 @@ import time
 from urllib.parse import quote
 
 from workstation.ui.auth import Identity
-from workstation.ui.pages import esc
 from workstation.ui.restarts import Outcome
+from workstation.ui.text import esc
 
 MAX_NEXT = 512
 # A path on this site, with a query perhaps: no scheme, no host (`//evil`), no backslash that

@@ -3,12 +3,9 @@ page has an inline script or style (the CSP forbids them). DOM contract: docs/ar
 
 from __future__ import annotations
 
-import html
-import time
 from collections.abc import Iterable
 from urllib.parse import quote, urlencode
 
-from contract.textsafe import printable
 from reconciler.verdicts import (
     Health,
     RobotRow,
@@ -18,9 +15,10 @@ from reconciler.verdicts import (
     short_rev,
 )
 from workstation.ui.auth import Identity
+from workstation.ui.goals_html import goals_cell, rates_box
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
+from workstation.ui.text import age, definitions, esc
 
-MAX_TEXT = 500  # characters of one robot- or commit-supplied string shown
 MAX_LISTED = 300  # items of one list on a robot page (interfaces, mappings); the rest counted
 DIAGNOSTICS = 50  # diagnostics listed; the rest counted
 COLUMNS = (
@@ -35,33 +33,10 @@ COLUMNS = (
     "Reported",
     "Restarts",
     "Reloads",
+    "Goals",
     "Drift",
     "Why",
 )
-
-
-def esc(text: object, limit: int = MAX_TEXT) -> str:
-    """The one way text from a robot, a commit or a request reaches a page: control characters
-    written as escapes, cut at `limit`, then HTML-escaped (quotes too: safe in attributes)."""
-    shown = printable(str(text))
-    if len(shown) > limit:
-        shown = shown[:limit] + "…"
-    return html.escape(shown, quote=True)
-
-
-def when(at: float | None) -> str:
-    """A unix time as UTC text; `-` for none or nonsense (a robot's clock may say anything)."""
-    if at is None or not 0 <= at < 1e11:
-        return "-"
-    return time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(at))
-
-
-def age(at: float | None) -> str:
-    """`<time data-since>`: the script shows its age and counts it on. Without script, the time
-    itself: the HTML of a box does not change as time passes, so only real changes are sent."""
-    if at is None or not 0 <= at < 1e11:
-        return "-"
-    return f'<time data-since="{at:.3f}">{esc(when(at))}</time>'
 
 
 def page(title: str, body: str, who: Identity, attrs: str = "") -> str:
@@ -106,6 +81,7 @@ def fleet_page(snap: Snapshot, query: FleetQuery, who: Identity) -> str:
         + rollout_box(snap)
         + filter_form(query)
         + summary_box(shown, query)
+        + rates_box(snap, query)
         + '<div class="scroll" id="robots"><table data-fleet><caption>Robots, worst first'
         + "</caption><thead><tr>"
         + "".join(f'<th scope="col">{name}</th>' for name in COLUMNS)
@@ -173,6 +149,7 @@ def row_html(row: RobotRow) -> str:
         f"<td><code>{esc(short_digest(row.reported))}</code></td>",
         f"<td>{row.restarts}</td>",
         f"<td>{row.reloads}</td>",
+        goals_cell(row),
         f'<td class="drift">{esc(row.drift.summary())}</td>',
         f"<td>{'' if row.verdict is Verdict.IN_SYNC else esc(row.reason, 200)}</td>",
     ]
@@ -273,11 +250,6 @@ def diagnostics(found: Iterable[object], more: int) -> str:
         '<div class="diagnostics"><h3>Why the commit was refused</h3>'
         f"<ul data-diagnostics>{''.join(items)}</ul>{tail}</div>"
     )
-
-
-def definitions(facts: list[tuple[str, str]]) -> str:
-    """A `<dl>` of (name, already escaped HTML) pairs."""
-    return "<dl>" + "".join(f"<dt>{name}</dt><dd>{value}</dd>" for name, value in facts) + "</dl>"
 
 
 def rollout_box(snap: Snapshot) -> str:

@@ -22,7 +22,7 @@ from reconciler.verdicts import (
 from workstation.fleet_status import Desired, DesiredCache, fleet_status
 from workstation.ui.model import rank
 
-LEAVES = ("launch", "status", "description", "interfaces")
+LEAVES = ("launch", "status", "description", "interfaces", "goals")
 log = logging.getLogger("robotconf.ui")
 
 INCREMENTAL_MAX = 500  # robots changed at once beyond which the whole fleet is read again

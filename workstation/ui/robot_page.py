@@ -9,8 +9,10 @@ from contract.interfaces import Interface, RobotInterfaces
 from contract.launch import LaunchRequest
 from reconciler.verdicts import RobotRow, short_digest
 from workstation.ui.auth import Identity
+from workstation.ui.goals_html import goals_box
 from workstation.ui.model import HistoryEntry, Snapshot
-from workstation.ui.pages import MAX_LISTED, age, banner_box, definitions, esc, page, when
+from workstation.ui.pages import MAX_LISTED, banner_box, page
+from workstation.ui.text import age, definitions, esc, when
 
 
 def robot_page(
@@ -39,6 +41,7 @@ def robot_page(
         f'<div data-robot-page="{rid}"><h1>Robot {rid}</h1>{outcome}{action}'
         + banner_box(snap)
         + robot_box(snap, robot_id)
+        + goals_box(snap, robot_id)
         + launch_section(launch)
         + interfaces_section(interfaces)
         + f"<section><h2>Brain log</h2>{log}</section></div>"

@@ -18,6 +18,7 @@ from workstation.ui.actions import Actions
 from workstation.ui.auth import OperatorAuth
 from workstation.ui.logtail import LogTails
 from workstation.ui.restarts import Restarts
+from workstation.ui.revisions import CachedHistory, RevisionHistory
 from workstation.ui.server import UiService, is_loopback, serve
 from workstation.ui.state import LiveFleet
 
@@ -89,9 +90,20 @@ def _tls(cert: Path, key: Path) -> ssl.SSLContext:
 class RunningUi:
     """The UI serving one fleet until `close`."""
 
-    def __init__(self, connection: Connection, prefix: str, repo: Path, options: UiOptions) -> None:
+    def __init__(
+        self,
+        connection: Connection,
+        prefix: str,
+        repo: Path,
+        options: UiOptions,
+        history: RevisionHistory | None = None,
+    ) -> None:
+        """`history`: the reconciler's outcome ledger, for the revision pages (None: they say
+        that none is open here, and show what the robots report now)."""
         self.live = LiveFleet(connection, prefix, repo)
         self.service = UiService(self.live, options.auth)
+        if history is not None:
+            self.service.history = CachedHistory(history)
         actions = Actions(
             options.auth,
             Restarts(connection, prefix, options.key),

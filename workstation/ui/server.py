@@ -23,6 +23,8 @@ from workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
 from workstation.ui.changes import Shown
 from workstation.ui.model import QueryError, parse_query
 from workstation.ui.pages import error_page, fleet_page
+from workstation.ui.revision_page import revision_page
+from workstation.ui.revisions import REVISION, HistoryError, RevisionHistory
 from workstation.ui.robot_page import robot_page
 from workstation.ui.state import LiveFleet
 
@@ -91,6 +93,12 @@ class UiService:
         self.static = {name: _static(name) for name in STATIC}
         # The write side's: a robot's latest restart outcome (HTML) for an operator's page.
         self.restart_outcome: Callable[[str], str] = lambda robot_id: ""
+        # The reconciler's outcome ledger, for the revision pages; None: not open here.
+        self.history: RevisionHistory | None = None
+        self.no_history = (
+            "No outcome ledger is open here: it is the reconciler's (robotconf ui --ledger DIR "
+            "names its state folder; reconcile --ui and up --ui open their own)."
+        )
         self.routes: list[Route] = [
             Route("GET", r"/", self.fleet),
             Route("GET", r"/healthz", self.healthz),
@@ -98,6 +106,7 @@ class UiService:
             Route("GET", r"/static/(?P<name>[^/]{1,64})", self.file),
             Route("GET", r"/favicon\.ico", self.no_icon),
             Route("GET", r"/robots/(?P<robot>[^/]{1,200})", self.robot),
+            Route("GET", r"/revisions/(?P<rev>[^/]{1,200})", self.revision),
             *extra,
         ]
 
@@ -171,6 +180,27 @@ class UiService:
         )
         outcome = self.restart_outcome(robot_id) if who.operator else ""
         return html(200, robot_page(snap, robot_id, who, launch, interfaces, outcome))
+
+    def revision(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        """What a revision achieved beside the one before it (the ledger's), and what its
+        robots report now (their retained goals summaries)."""
+        revision = match["rev"].lower()
+        if not REVISION.fullmatch(revision):
+            return self.error(400, "a revision is a commit id: 4 to 64 hexadecimal digits", who)
+        kept, why = None, None
+        if self.history is None:
+            why = self.no_history
+        else:
+            try:
+                kept = self.history.compare(revision)
+            except HistoryError as exc:
+                why = f"The outcome ledger cannot be read: {exc}"
+            except Exception as exc:  # a bug in reading it: said, the live part still shown
+                log.error(
+                    "ui: the ledger's answer for %s failed: %s", revision, printable(str(exc))[:300]
+                )
+                why = "The outcome ledger could not be read (the UI's log says why)."
+        return html(200, revision_page(self.live.snapshot, revision, who, kept, why))
 
     def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         """The page's server-sent events: what changed, from the page's own state on."""

@@ -28,7 +28,7 @@ def test_a_page_made_from_the_current_state_gets_no_first_event_and_an_older_one
     reset = message(first(snap, Shown(FleetQuery()), 6))
     assert reset["reset"] is True and reset["v"] == 7
     assert [r[0] for r in reset["rows"]] == ["r1", "r2"]  # type: ignore[attr-defined]
-    assert set(reset["boxes"]) == {"banner", "reconciler", "rollout", "summary"}  # type: ignore[arg-type]
+    assert set(reset["boxes"]) == {"banner", "reconciler", "rollout", "summary", "rates"}  # type: ignore[arg-type]
 
 
 def test_one_robot_changing_sends_its_row_alone_with_its_new_rank() -> None:

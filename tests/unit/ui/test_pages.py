@@ -10,8 +10,9 @@ from reconciler.verdicts import Verdict
 from tests.unit.ui.fleets import fleet, reconciler, refused, row, snapshot
 from workstation.ui.auth import ANONYMOUS, Identity
 from workstation.ui.model import FleetQuery, HistoryEntry
-from workstation.ui.pages import MAX_TEXT, error_page, esc, fleet_page
+from workstation.ui.pages import error_page, fleet_page
 from workstation.ui.robot_page import robot_page
+from workstation.ui.text import MAX_TEXT, esc
 
 OPERATOR = Identity(operator=True, csrf="c" * 32, via="cookie")
 
