@@ -428,12 +428,20 @@ class Ledger:
         if since is not None:
             where += " AND ended_at >= ?"
             args.append(since)
-        groups = [
-            Group(revision, scenario, task, robot_id, OutcomeState(outcome), n, total, timed)
-            for scenario, task, robot_id, outcome, n, total, timed in self._read(
-                "SELECT scenario, task, robot_id, outcome, count(*), total(duration), "
-                f"count(duration) FROM outcomes WHERE {where} "
-                "GROUP BY scenario, task, robot_id, outcome",
+        tasks = [
+            Group(revision, OutcomeState(outcome), n, total, timed, scenario=scenario, task=task)
+            for scenario, task, outcome, n, total, timed in self._read(
+                "SELECT scenario, task, outcome, count(*), total(duration), count(duration) "
+                f"FROM outcomes WHERE {where} GROUP BY scenario, task, outcome",
+                args,
+            )
+            if outcome in _STATES
+        ]
+        robots = [
+            Group(revision, OutcomeState(outcome), n, total, timed, robot_id=robot_id)
+            for robot_id, outcome, n, total, timed in self._read(
+                "SELECT robot_id, outcome, count(*), total(duration), count(duration) "
+                f"FROM outcomes WHERE {where} GROUP BY robot_id, outcome",
                 args,
             )
             if outcome in _STATES
@@ -449,7 +457,7 @@ class Ledger:
             "SELECT first_seen, last_seen FROM revisions WHERE revision = ?", (revision,)
         )
         first, last = seen[0] if seen else (None, None)
-        return aggregate(revision, groups, codes, first_seen=first, last_seen=last)
+        return aggregate(revision, tasks, robots, codes, first_seen=first, last_seen=last)
 
     def history(
         self, rev: str | None = None, *, robot: str | None = None, since: float | None = None

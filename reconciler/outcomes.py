@@ -25,6 +25,7 @@ from contract.goals import (
 )
 from contract.safejson import PayloadError, parse_object
 from contract.textsafe import printable
+from reconciler.events import Event, Kind
 
 MAX_RECORD_BYTES = 8 * 1024  # one OutcomeRecord: its texts are cut at MAX_TEXT by the agent
 MAX_ID = 80  # characters of a run, a revision or a digest
@@ -100,17 +101,18 @@ def cut(text: str, limit: int = MAX_TEXT) -> str:
 
 @dataclass(frozen=True)
 class Group:
-    """One row of the ledger's aggregate query: outcomes of one (revision, scenario, task,
-    robot, outcome), with the sum and count of their known durations."""
+    """One row of the ledger's aggregate queries: outcomes of one revision and outcome, of
+    one scenario and task (`robot_id` empty) or of one robot (`scenario`, `task` empty), with
+    the sum and count of their known durations."""
 
     revision: str
-    scenario: str
-    task: str
-    robot_id: str
     outcome: OutcomeState
     count: int
     duration_sum: float = 0.0
     durations: int = 0  # how many of `count` had a duration
+    scenario: str = ""
+    task: str = ""
+    robot_id: str = ""
 
 
 @dataclass(frozen=True)
@@ -219,30 +221,33 @@ def _rate_key(rate: float | None) -> float:
 
 def aggregate(
     revision: str,
-    groups: Iterable[Group],
+    tasks: Iterable[Group],
+    robots: Iterable[Group] = (),
     codes: Mapping[str, int] | None = None,
     *,
     first_seen: float | None = None,
     last_seen: float | None = None,
 ) -> RevisionReport:
-    """The ledger's rows of one revision, tallied: revision → scenario → task, and per robot."""
+    """The ledger's rows of one revision, tallied: revision → scenario → task (from `tasks`,
+    grouped by scenario and task) and per robot (from `robots`, grouped by robot)."""
     total = Tally()
     scenarios: dict[str, tuple[Tally, dict[str, Tally]]] = {}
-    robots: dict[str, Tally] = {}
-    for group in groups:
+    for group in tasks:
         total = total.add(group)
-        scenario, tasks = scenarios.get(group.scenario, (Tally(), {}))
-        tasks[group.task] = tasks.get(group.task, Tally()).add(group)
-        scenarios[group.scenario] = (scenario.add(group), tasks)
-        robots[group.robot_id] = robots.get(group.robot_id, Tally()).add(group)
+        scenario, by_task = scenarios.get(group.scenario, (Tally(), {}))
+        by_task[group.task] = by_task.get(group.task, Tally()).add(group)
+        scenarios[group.scenario] = (scenario.add(group), by_task)
+    per_robot: dict[str, Tally] = {}
+    for group in robots:
+        per_robot[group.robot_id] = per_robot.get(group.robot_id, Tally()).add(group)
     return RevisionReport(
         revision=revision,
         tally=total,
         scenarios={
-            name: ScenarioReport(tally, dict(sorted(tasks.items())))
-            for name, (tally, tasks) in sorted(scenarios.items())
+            name: ScenarioReport(tally, dict(sorted(by_task.items())))
+            for name, (tally, by_task) in sorted(scenarios.items())
         },
-        robots=robots,
+        robots=per_robot,
         codes=dict(sorted((codes or {}).items(), key=lambda item: (-item[1], item[0]))),
         first_seen=first_seen,
         last_seen=last_seen,
@@ -370,6 +375,58 @@ def advance(
             streak = Streak()
         changed[robot] = streak
     return changed, events
+
+
+def streak_event(found: StreakEvent) -> Event:
+    """The alert of a streak's transition, as receivers get it (`reconciler/notify.py`)."""
+    record = found.record
+    task = f"{record.task} (goal {record.goal})"
+    if found.failing:
+        why = record.outcome.value
+        if record.code:
+            why += f" {record.code}"
+        if record.message:
+            why += f": {record.message}"
+        message = (
+            f"{found.robot_id}: {found.streak} goals in a row failed or went stale; "
+            f"the last, {task}: {why}"
+        )
+        kind, reason = Kind.ROBOT_GOALS_FAILING, record.code or record.outcome.value
+    else:
+        message = f"{found.robot_id}: goals succeed again ({task}), after {found.streak} failed"
+        kind, reason = Kind.ROBOT_GOALS_RECOVERED, record.outcome.value
+    return Event(
+        kind,
+        message,
+        record.ended_at,
+        revision=record.revision,
+        robot=found.robot_id,
+        reason=reason,
+    )
+
+
+# ---------------------------------------------------------------- metrics' labels
+
+MAX_LABEL_VALUES = 64  # scenarios (and tasks) a metric names; robots cannot grow it further
+OTHER = "(other)"
+
+
+class BoundedLabels:
+    """A label's values as a metric shows them: the first `limit` distinct ones by name, the
+    rest as OTHER. What robots report cannot make unbounded series (records are checked, so
+    each value is a short name already)."""
+
+    def __init__(self, limit: int = MAX_LABEL_VALUES) -> None:
+        self.limit = limit
+        self._known: set[str] = set()
+
+    def label(self, value: str) -> str:
+        if value in self._known:
+            return value
+        if len(self._known) >= self.limit:
+            return OTHER
+        self._known.add(value)
+        return value
 
 
 # ---------------------------------------------------------------- durations on a command line
