@@ -61,6 +61,7 @@ from workstation.fleet_status import change_key, open_view
 from workstation.up_desk import UpDesk, remove_desk, write_desk
 
 if TYPE_CHECKING:
+    from reconciler.ledger_feed import LedgerFeed
     from workstation.ui.run import RunningUi, UiOptions
 
 log = logging.getLogger("robotconf.up")
@@ -507,6 +508,7 @@ def _serve(
     )
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
     view = open_view(logins.reconciler, prefix, changed.set)
+    ledger = _start_ledger(setup, logins.reconciler, prefix, say)
 
     def at_once() -> None:  # a second Ctrl-C: do not wait (the brains get SIGTERM as orphans)
         for proc in agents.procs.values():
@@ -542,7 +544,26 @@ def _serve(
         view.stop()
         controller.stop()
         thread.join(10)
+        if ledger is not None:
+            ledger.stop()
     return ExitCode.OK
+
+
+def _start_ledger(
+    setup: UpSetup, connection: Connection, prefix: str, say: Callable[[str], None]
+) -> LedgerFeed | None:
+    """The outcome ledger under up's folder (`robotconf history` finds it there); a state
+    folder that cannot be written is said, and `up` runs without a ledger."""
+    from reconciler.ledger import LedgerError
+    from reconciler.ledger_feed import LedgerFeed, LedgerSettings
+
+    feed = LedgerFeed(connection, prefix, LedgerSettings(setup.workdir / "state"))
+    try:
+        feed.start()
+    except LedgerError as exc:
+        say(f"ledger: {exc}; goal outcomes are not kept")
+        return None
+    return feed
 
 
 def _start_ui(

@@ -22,6 +22,7 @@ from workstation.cli.ui import ui_beside, ui_option
 if TYPE_CHECKING:
     from contract.mqtt import Connection
     from reconciler.controller import Controller
+    from reconciler.ledger_feed import LedgerFeed, LedgerSettings
     from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
     from reconciler.webhook_server import WebhookServer
@@ -70,6 +71,91 @@ def make_telemetry(
         if metrics is not None:
             metrics.receivers([receiver.name for receiver in receivers])
     return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
+
+
+def ledger_settings(
+    state_dir: Path | None, prefix: str, max_age: str, max_records: int, streak: int
+) -> LedgerSettings:
+    """Where and how the outcome ledger is kept, checked before anything starts."""
+    from reconciler.ledger import default_state_dir
+    from reconciler.ledger_feed import LedgerSettings
+    from reconciler.outcomes import parse_duration
+
+    try:
+        age = parse_duration(max_age)
+    except ValueError as exc:
+        raise CliError(f"--ledger-max-age: {exc}") from None
+    if max_records < 1000:
+        raise CliError("--ledger-max-records must be at least 1000")
+    if streak < 1:
+        raise CliError("--goal-failure-streak must be at least 1")
+    folder = state_dir if state_dir is not None else default_state_dir(prefix)
+    return LedgerSettings(folder.absolute(), age, max_records, streak)
+
+
+def start_ledger(
+    connection: Connection, prefix: str, settings: LedgerSettings, telemetry: Telemetry | None
+) -> LedgerFeed:
+    """The outcome ledger's feed, started: its file opened (an unreadable one set aside and
+    a new one started, said in the log), its session connecting. CliError when no ledger can
+    be kept in the state folder at all."""
+    from reconciler.ledger import LedgerError
+    from reconciler.ledger_feed import LedgerFeed
+
+    notifier = telemetry.notifier if telemetry is not None else None
+    feed = LedgerFeed(
+        connection,
+        prefix,
+        settings,
+        metrics=telemetry.metrics if telemetry is not None else None,
+        tell=notifier.tell if notifier is not None else None,
+    )
+    try:
+        feed.start()
+    except LedgerError as exc:
+        raise CliError(f"--state-dir: {exc}") from None
+    return feed
+
+
+def state_options(command: Callable[..., ExitCode]) -> Callable[..., ExitCode]:
+    """The reconciler's state folder and how its outcome ledger is kept."""
+    options = [
+        click.option(
+            "--state-dir",
+            type=click.Path(path_type=Path, file_okay=False),
+            default=None,
+            metavar="DIR",
+            help="the reconciler's state: its outcome ledger (ledger.sqlite3) "
+            "(default: $XDG_STATE_HOME/robotconf/reconciler/PREFIX, ~/.local/state/...)",
+        ),
+        click.option(
+            "--ledger-max-age",
+            default="30d",
+            show_default=True,
+            metavar="DURATION",
+            help="outcomes older than this are removed from the ledger (s, m, h, d, w)",
+        ),
+        click.option(
+            "--ledger-max-records",
+            type=int,
+            default=5_000_000,
+            show_default=True,
+            metavar="N",
+            help="the ledger keeps at most this many outcomes, the newest (about 400 bytes each)",
+        ),
+        click.option(
+            "--goal-failure-streak",
+            type=int,
+            default=3,
+            show_default=True,
+            metavar="N",
+            help="a robot's goals are told failing (--notify) after N failed or stale goals "
+            "in a row, and told recovered at its next success",
+        ),
+    ]
+    for option in reversed(options):
+        command = option(command)
+    return command
 
 
 @dataclass(frozen=True)
@@ -190,6 +276,7 @@ def start_ui(
     help="the webhook's secret (GitHub, Gitea, Forgejo: HMAC-SHA256 key; GitLab: token); "
     "required with --webhook",
 )
+@state_options
 @ui_option
 def reconcile(
     repo: Path,
@@ -203,6 +290,10 @@ def reconcile(
     metrics_at: str | None,
     webhook_at: str | None,
     webhook_secret_file: Path | None,
+    state_dir: Path | None,
+    ledger_max_age: str,
+    ledger_max_records: int,
+    goal_failure_streak: int,
     ui_at: str | None,
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
@@ -220,8 +311,12 @@ def reconcile(
         raise CliError(str(exc)) from None
     webhook = webhook_options(webhook_at, webhook_secret_file)
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
+    kept = ledger_settings(
+        state_dir, mqtt.prefix, ledger_max_age, ledger_max_records, goal_failure_streak
+    )
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
+    ledger = start_ledger(connection, mqtt.prefix, kept, telemetry)
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
     # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.
     no_local = speaks_mqtt5(connection)
@@ -248,7 +343,7 @@ def reconcile(
         mqtt.prefix,
         "5, No Local" if no_local else "3.1.1",
     )
-    _run(controller, telemetry, receiver, ui)
+    _run(controller, telemetry, receiver, ui, ledger)
     return ExitCode.OK
 
 
@@ -257,6 +352,7 @@ def _run(
     telemetry: Telemetry | None,
     receiver: WebhookServer | None,
     ui: RunningUi | None = None,
+    ledger: LedgerFeed | None = None,
 ) -> None:
     """The control loop with its telemetry, until signalled; then what serves it stops."""
     if telemetry is not None:
@@ -268,5 +364,7 @@ def _run(
             receiver.close()
         if ui is not None:
             ui.close()
+        if ledger is not None:
+            ledger.stop()
         if telemetry is not None:
             telemetry.stop()
