@@ -96,7 +96,13 @@ _TABLES = {"outcomes", "revisions", "streaks"}
 
 
 class LedgerError(Exception):
-    """The ledger cannot be used as asked, in one line (never a traceback)."""
+    """The ledger cannot be used as asked, in one line (never a traceback). `unreadable`: the
+    file is not a ledger or is corrupt (a writer sets it aside), rather than out of reach
+    (permissions) or of a newer schema (kept as it is)."""
+
+    def __init__(self, message: str, *, unreadable: bool = False) -> None:
+        super().__init__(message)
+        self.unreadable = unreadable
 
 
 @dataclass(frozen=True)
@@ -166,17 +172,17 @@ class Ledger:
             )
         try:
             connection = _connect(path, read_only)
-        except sqlite3.Error as exc:
-            raise LedgerError(f"cannot open the ledger {path}: {exc}") from None
+        except sqlite3.DatabaseError as exc:
+            raise _refusal(path, exc) from None
         ledger = cls(connection, path, read_only)
         try:
             ledger._prepare(check)
         except LedgerError:
             connection.close()
             raise
-        except sqlite3.Error as exc:
+        except sqlite3.DatabaseError as exc:
             connection.close()
-            raise LedgerError(f"{path} is not a readable ledger: {exc}") from None
+            raise _refusal(path, exc) from None
         return ledger
 
     @classmethod
@@ -198,7 +204,7 @@ class Ledger:
         try:
             return cls.open(path, check=check)
         except LedgerError as exc:
-            if "newer" in str(exc) or not existed:
+            if not exc.unreadable or not existed:
                 raise
             aside = set_aside(path)
             tell(f"{exc}; kept aside as {aside.name}, starting a new ledger")
@@ -215,7 +221,9 @@ class Ledger:
             )
         if version == 0:
             if tables:
-                raise LedgerError(f"{self.path} is an SQLite database but not a ledger")
+                raise LedgerError(
+                    f"{self.path} is an SQLite database but not a ledger", unreadable=True
+                )
             if self.read_only:
                 raise LedgerError(f"{self.path} is an empty ledger")
             db.execute("PRAGMA journal_mode=WAL")
@@ -226,11 +234,12 @@ class Ledger:
                 db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             return
         if not tables >= _TABLES:
-            raise LedgerError(f"{self.path} lacks tables of a ledger: {sorted(_TABLES - tables)}")
+            missing = sorted(_TABLES - tables)
+            raise LedgerError(f"{self.path} lacks tables of a ledger: {missing}", unreadable=True)
         if check:
             found = [row[0] for row in db.execute("PRAGMA quick_check(3)")]
             if found != ["ok"]:
-                raise LedgerError(f"{self.path} is corrupt: {'; '.join(found)}")
+                raise LedgerError(f"{self.path} is corrupt: {'; '.join(found)}", unreadable=True)
         if not self.read_only:
             db.execute("PRAGMA journal_mode=WAL")
 
@@ -488,6 +497,14 @@ class Ledger:
 
 
 _STATES = {state.value for state in OutcomeState}
+
+
+def _refusal(path: Path, exc: sqlite3.DatabaseError) -> LedgerError:
+    """SQLite's error opening `path`, in one line: out of reach (an OperationalError: no
+    permission, a folder), or not a readable ledger (anything else: not a database, corrupt)."""
+    if isinstance(exc, sqlite3.OperationalError) and "malformed" not in str(exc):
+        return LedgerError(f"cannot open the ledger {path}: {exc}")
+    return LedgerError(f"{path} is not a readable ledger: {exc}", unreadable=True)
 
 
 def _connect(path: Path, read_only: bool) -> sqlite3.Connection:
