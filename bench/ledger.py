@@ -26,12 +26,12 @@ import paho.mqtt.client as paho
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from contract.goals import OutcomeRecord, OutcomeState  # noqa: E402
-from contract.mqtt import Connection, make_client  # noqa: E402
-from contract.wire import Topics  # noqa: E402
-from reconciler.ledger import Ledger, ledger_path  # noqa: E402
-from reconciler.ledger_feed import LedgerFeed, LedgerSettings  # noqa: E402
-from tests.support.mosquitto import Mosquitto  # noqa: E402
+from contract.goals import OutcomeRecord, OutcomeState
+from contract.mqtt import Connection, make_client
+from contract.wire import Topics
+from reconciler.ledger import Ledger, ledger_path
+from reconciler.ledger_feed import LedgerFeed, LedgerSettings
+from tests.support.mosquitto import Mosquitto
 
 ROBOTS = 10_000
 TASKS = ("Delivery", "Guide", "Patrol", "Dock")
