@@ -94,27 +94,31 @@ class Metrics:
             ["interfaces"],
             registry=r,
         )
+        self._outcome_series()
+        self._known_series()
+        self._applied: str | None = None
+        self._lock = threading.Lock()
+        self._server: BoundedHTTPServer | None = None
+
+    def _outcome_series(self) -> None:
+        """What the outcome ledger counts (`reconciler/ledger_feed.py`)."""
         self.goal_outcomes = Counter(
             "robotconf_goal_outcomes",
             "Goal outcomes the robots reported, by scenario, task and outcome (the first "
             f"{MAX_LABEL_VALUES} scenarios and tasks seen by name, the rest as {OTHER!r}; no "
             "per-robot series)",
             ["scenario", "task", "outcome"],
-            registry=r,
+            registry=self.registry,
         )
         self.ledger_records = Counter(
             "robotconf_ledger_records",
             "Outcome records the ledger took in: kept, duplicate (delivered again, kept once), "
             "refused (unreadable, too large, or naming another robot than its topic's)",
             ["result"],
-            registry=r,
+            registry=self.registry,
         )
         self._scenarios = BoundedLabels(MAX_LABEL_VALUES)
         self._tasks = BoundedLabels(MAX_LABEL_VALUES)
-        self._known_series()
-        self._applied: str | None = None
-        self._lock = threading.Lock()
-        self._server: BoundedHTTPServer | None = None
 
     def _known_series(self) -> None:
         """Every series whose labels are known at start exists from the first scrape, at 0:

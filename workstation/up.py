@@ -489,11 +489,7 @@ def _serve(
 ) -> ExitCode:
     say = screen.say
     connection = logins.operator
-    signer, public_key, private_key = None, None, None
-    if signing:
-        keys = _demo_keys(setup.workdir / "keys")
-        signer, public_key, private_key = make_signer(keys.private), keys.public, keys.private
-        say(f"signing: every request is signed; agents verify with {public_key}")
+    signer, public_key, private_key = _signing(setup, signing, say)
 
     stop = threading.Event()
     changed = threading.Event()
@@ -547,6 +543,17 @@ def _serve(
         if ledger is not None:
             ledger.stop()
     return ExitCode.OK
+
+
+def _signing(
+    setup: UpSetup, signing: bool, say: Callable[[str], None]
+) -> tuple[Any, Path | None, Path | None]:
+    """The signer, public and private key of `up --sign` (demo keys in its folder), or Nones."""
+    if not signing:
+        return None, None, None
+    keys = _demo_keys(setup.workdir / "keys")
+    say(f"signing: every request is signed; agents verify with {keys.public}")
+    return make_signer(keys.private), keys.public, keys.private
 
 
 def _start_ledger(

@@ -6,7 +6,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -74,23 +74,29 @@ def make_telemetry(
 
 
 def ledger_settings(
-    state_dir: Path | None, prefix: str, max_age: str, max_records: int, streak: int
+    prefix: str,
+    *,
+    state_dir: Path | None,
+    ledger_max_age: str,
+    ledger_max_records: int,
+    goal_failure_streak: int,
 ) -> LedgerSettings:
-    """Where and how the outcome ledger is kept, checked before anything starts."""
+    """Where and how the outcome ledger is kept (`state_options`), checked before anything
+    starts."""
     from reconciler.ledger import default_state_dir
     from reconciler.ledger_feed import LedgerSettings
     from reconciler.outcomes import parse_duration
 
     try:
-        age = parse_duration(max_age)
+        age = parse_duration(ledger_max_age)
     except ValueError as exc:
         raise CliError(f"--ledger-max-age: {exc}") from None
-    if max_records < 1000:
+    if ledger_max_records < 1000:
         raise CliError("--ledger-max-records must be at least 1000")
-    if streak < 1:
+    if goal_failure_streak < 1:
         raise CliError("--goal-failure-streak must be at least 1")
     folder = state_dir if state_dir is not None else default_state_dir(prefix)
-    return LedgerSettings(folder.absolute(), age, max_records, streak)
+    return LedgerSettings(folder.absolute(), age, ledger_max_records, goal_failure_streak)
 
 
 def start_ledger(
@@ -290,11 +296,8 @@ def reconcile(
     metrics_at: str | None,
     webhook_at: str | None,
     webhook_secret_file: Path | None,
-    state_dir: Path | None,
-    ledger_max_age: str,
-    ledger_max_records: int,
-    goal_failure_streak: int,
     ui_at: str | None,
+    **ledger_options: Any,
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds, and at once when --webhook receives a push; runs until signalled."""
@@ -311,9 +314,7 @@ def reconcile(
         raise CliError(str(exc)) from None
     webhook = webhook_options(webhook_at, webhook_secret_file)
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
-    kept = ledger_settings(
-        state_dir, mqtt.prefix, ledger_max_age, ledger_max_records, goal_failure_streak
-    )
+    kept = ledger_settings(mqtt.prefix, **ledger_options)
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
     ledger = start_ledger(connection, mqtt.prefix, kept, telemetry)
@@ -335,16 +336,20 @@ def reconcile(
         receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
     ui = start_ui(ui_at_options, connection, mqtt.prefix, repo)
     on_stop_signals(callback=controller.stop)
+    _say_started(source, connection, mqtt.prefix, no_local)
+    _run(controller, telemetry, receiver, ui, ledger)
+    return ExitCode.OK
+
+
+def _say_started(source: BranchSource, connection: Connection, prefix: str, no_local: bool) -> None:
     logging.getLogger("robotconf.reconciler").info(
         "reconciling %s (branch %s) to %s, prefix %s (MQTT %s)",
         source.description,
-        branch,
+        source.branch,
         connection.address.url,
-        mqtt.prefix,
+        prefix,
         "5, No Local" if no_local else "3.1.1",
     )
-    _run(controller, telemetry, receiver, ui, ledger)
-    return ExitCode.OK
 
 
 def _run(

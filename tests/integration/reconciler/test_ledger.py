@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sqlite3
 import subprocess
+import sys
+import textwrap
 import threading
 import time
 from collections.abc import Iterator
@@ -285,6 +288,11 @@ def test_records_are_checked_counted_and_streaks_told_once(
     finally:
         publisher.close()
         feed.stop()
+    _check_counted(metrics, settings)
+
+
+def _check_counted(metrics: Metrics, settings: LedgerSettings) -> None:
+    """What the metrics and the ledger say of test_records_are_checked_counted_and_streaks."""
     counted = _samples(metrics.registry, "robotconf_goal_outcomes_total")
     assert counted[("delivery-gazebo", "Delivery", "failed")] == 3
     assert counted[("delivery-gazebo", "Delivery", "succeeded")] == 2
@@ -321,3 +329,51 @@ def _messages(path: Path) -> list[str]:
         return [row[0] for row in db.execute("SELECT message FROM outcomes")]
     finally:
         db.close()
+
+
+WRITER = textwrap.dedent(
+    """
+    import sys, time
+    from pathlib import Path
+    from contract.goals import OutcomeRecord
+    from reconciler.ledger import Ledger
+    ledger = Ledger.open_or_start(Path(sys.argv[1]))
+    seq = 0
+    while True:
+        batch = [
+            OutcomeRecord(robot_id="r1", revision="a" * 40, digest=None, run="k", seq=seq + i,
+                          goal="g", task="Deliver", outcome="succeeded", ended_at=time.time())
+            for i in range(500)
+        ]
+        ledger.add(batch)
+        seq += 500
+        print(seq, flush=True)
+    """
+)
+
+
+def test_a_writer_killed_mid_transaction_leaves_whole_batches_and_a_sound_file(
+    tmp_path: Path,
+) -> None:
+    path = ledger_path(tmp_path)
+    writer = subprocess.Popen(
+        [sys.executable, "-c", WRITER, str(path)],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[3],
+    )
+    try:
+        assert writer.stdout is not None
+        committed = 0
+        deadline = time.monotonic() + 60
+        while committed < 20_000 and time.monotonic() < deadline:
+            committed = int(writer.stdout.readline())
+        writer.send_signal(signal.SIGKILL)  # wherever it is: most likely inside a batch
+    finally:
+        writer.kill()
+        writer.wait()
+    with Ledger.open(path, read_only=True) as ledger:  # quick_check passes
+        count = ledger.count()
+    assert count >= committed and count % 500 == 0
+    with Ledger.open_or_start(path) as ledger:  # and a writer goes on from there
+        assert len(ledger.add([record(10**6)]).kept) == 1
