@@ -30,7 +30,8 @@ def record(
     outcome: OutcomeState = OutcomeState.SUCCEEDED,
     ended_at: float = 1000.0,
 ) -> OutcomeRecord:
-    return OutcomeRecord(
+    return OutcomeRecord(  # a failed one has a code
+        code="E_BLOCKED" if outcome is OutcomeState.FAILED else None,
         robot_id=robot,
         revision=revision,
         digest=None,
@@ -182,3 +183,22 @@ def test_where_history_looks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
     up.parent.mkdir(parents=True)
     up.touch()
     assert find_ledger(repo, "lab/one") == up
+
+
+def test_the_tallies_kept_beside_agree_with_the_outcomes(ledger: Ledger) -> None:
+    """A report reads the tallies; one narrowed by time (since=0: everything) reads the rows."""
+    states = list(OutcomeState)
+    ledger.add(
+        [record(i, A, f"r{i % 7}", states[i % 4], ended_at=100.0 + i) for i in range(3000)],
+        received_at=100.0,
+    )
+    ledger.add([record(i, A, "r1", OutcomeState.FAILED) for i in range(2990, 3100)])  # some again
+    ledger.add([record(i, B, "r2") for i in range(3100, 5000)], received_at=200.0)
+    for _ in range(2):
+        for revision in (A, B):
+            assert ledger.report(revision) == ledger.report(revision, since=0.0)
+            assert ledger.report(revision, robot="r1") == ledger.report(
+                revision, robot="r1", since=0.0
+            )
+        ledger.prune(max_age=10**9, max_records=3000, now=300.0)  # and after pruning
+    assert ledger.report(A).tally.total == 1100 and ledger.report(B).tally.total == 1900
