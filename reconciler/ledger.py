@@ -53,7 +53,7 @@ SCHEMA_VERSION = 1
 DEFAULT_MAX_AGE = 30 * 86400.0  # seconds an outcome is kept
 DEFAULT_MAX_RECORDS = 5_000_000  # outcomes kept at most (about 1 GB on disk)
 KEEP_ASIDE = 3  # unreadable ledgers kept beside the new one (older ones are removed)
-PRUNE_CHUNK = 20_000  # rows deleted per transaction when pruning: the writer is never held long
+PRUNE_CHUNK = 5000  # rows deleted per transaction when pruning: the writer is never held long
 BUSY_TIMEOUT_MS = 5000
 CODES_SHOWN = 10
 UP_STATE = Path(".robotconf") / "up" / "state"  # `robotconf up`'s state folder in its repository
@@ -369,13 +369,15 @@ class Ledger:
         max_age: float = DEFAULT_MAX_AGE,
         max_records: int = DEFAULT_MAX_RECORDS,
         now: float | None = None,
+        chunks: int | None = None,
     ) -> int:
         """Removes the oldest outcomes beyond `max_records` and those received more than
-        `max_age` seconds ago, a chunk per transaction; how many went. Revisions left without
-        outcomes go too. The file keeps its size and reuses the free pages."""
+        `max_age` seconds ago, a chunk per transaction (at most `chunks` of them); how many
+        went. Revisions left without outcomes go too. The file keeps its size and reuses the
+        free pages."""
         now = time.time() if now is None else now
         removed = 0
-        while True:
+        while chunks is None or removed < chunks * PRUNE_CHUNK:
             low, high = self._db.execute("SELECT min(id), max(id) FROM outcomes").fetchone()
             if low is None:
                 break

@@ -36,6 +36,7 @@ from contract.wire import Topics
 from reconciler.ledger import (
     DEFAULT_MAX_AGE,
     DEFAULT_MAX_RECORDS,
+    PRUNE_CHUNK,
     Added,
     Ledger,
     LedgerError,
@@ -117,6 +118,7 @@ class LedgerFeed:
         self._says = Throttle(60.0)
         self.ledger: Ledger | None = None
         self.kept = self.duplicates = self.refused = 0  # since start
+        self._pruned = 0  # removed by the pruning under way
         self.committed = threading.Condition()  # notified after each commit (tests, benches)
         self._client = self._paho_client()
         self._thread = threading.Thread(target=self._run, name="ledger", daemon=True)
@@ -129,6 +131,7 @@ class LedgerFeed:
         client.on_connect = self._handle_connect
         client.on_disconnect = self._handle_disconnect
         client.on_message = self._handle_message
+        client.on_subscribe = self._handle_subscribe
         return client
 
     # ------------------------------------------------------------------ lifecycle
@@ -136,7 +139,6 @@ class LedgerFeed:
     def start(self) -> None:
         self.ledger = Ledger.open_or_start(self.settings.path, log.error)
         log.info("ledger: %s", self.settings.path)
-        self._prune()
         address = self.connection.address
         self._client.connect_async(address.host, address.port, keepalive=30)
         self._client.loop_start()
@@ -182,6 +184,19 @@ class LedgerFeed:
             log.info("ledger: a new session on the broker (nothing was queued for this one)")
 
     @_guarded
+    def _handle_subscribe(
+        self, client: paho.Client, userdata: Any, mid: int, reasons: Any, properties: Any
+    ) -> None:
+        failed = [r for r in reasons if getattr(r, "is_failure", False)]
+        if failed:
+            log.error(
+                "ledger: the broker refused the subscription to %s (%s): no goal outcome "
+                "is kept; its ACL must let the reconciler read it (robotconf broker-config)",
+                self.topics.all_goal_outcomes,
+                failed[0],
+            )
+
+    @_guarded
     def _handle_disconnect(
         self, client: paho.Client, userdata: Any, flags: Any, reason: Any, properties: Any
     ) -> None:
@@ -209,7 +224,7 @@ class LedgerFeed:
     # ------------------------------------------------------------------ the writer
 
     def _run(self) -> None:
-        next_prune = time.monotonic() + PRUNE_EVERY
+        next_prune = time.monotonic()  # what went past the bounds while it was down, first
         backoff = Backoff(RETRY_INITIAL, RETRY_MAX)
         while True:
             batch = self._take()
@@ -228,8 +243,9 @@ class LedgerFeed:
                     if self._stop.wait(backoff.next()):
                         return  # the broker keeps what was not acknowledged
             if time.monotonic() >= next_prune:
-                next_prune = time.monotonic() + PRUNE_EVERY
-                self._prune()
+                # A chunk at a time between batches: more left, the next comes at once.
+                more = self._prune()
+                next_prune = time.monotonic() + (0.0 if more else PRUNE_EVERY)
 
     def _take(self) -> list[_Arrived]:
         with self._lock:
@@ -306,14 +322,18 @@ class LedgerFeed:
         if line is not None:
             log.error("%s; the broker keeps the records until it can (retrying)", line)
 
-    def _prune(self) -> None:
+    def _prune(self) -> bool:
+        """One chunk of what is past the ledger's bounds removed; whether more may be left."""
         if self.ledger is None:
-            return
+            return False
         try:
-            removed = self.ledger.prune(self.settings.max_age, self.settings.max_records)
+            removed = self.ledger.prune(self.settings.max_age, self.settings.max_records, chunks=1)
             self.ledger.checkpoint()
         except (sqlite3.Error, LedgerError) as exc:
             log.warning("ledger: pruning failed: %s", exc)
-            return
-        if removed:
-            log.info("ledger: %d outcome(s) past its bounds removed", removed)
+            return False
+        self._pruned += removed
+        if removed < PRUNE_CHUNK and self._pruned:
+            log.info("ledger: %d outcome(s) past its bounds removed", self._pruned)
+            self._pruned = 0
+        return removed >= PRUNE_CHUNK

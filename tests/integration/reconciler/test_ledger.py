@@ -291,6 +291,28 @@ def test_records_are_checked_counted_and_streaks_told_once(
     _check_counted(metrics, settings)
 
 
+def test_the_feed_keeps_the_ledger_in_its_bounds(tmp_path: Path, broker: Mosquitto) -> None:
+    settings = LedgerSettings(tmp_path / "state", max_records=1000)
+    feed = LedgerFeed(Connection(broker.url), PREFIX, settings)
+    feed.start()
+    publisher = Publisher(broker)
+    try:
+        wait_for(lambda: _sent(publisher, record(0)) and feed.kept == 1, "record 0 kept")
+        for info in [publisher.send(record(seq)) for seq in range(1, 1500)]:
+            info.wait_for_publish(10)
+        wait_for(lambda: feed.kept == 1500, "1,500 kept")
+        feed.stop()
+        # Pruned at the next start (and every minute while it runs), oldest first.
+        feed = LedgerFeed(Connection(broker.url), PREFIX, settings)
+        feed.start()
+        wait_for(lambda: kept(settings.path) == 1000, "pruned to 1,000")
+        with Ledger.open(settings.path, read_only=True) as ledger:
+            assert ledger.report(REVISION).tally.total == 1000  # the tallies follow
+    finally:
+        publisher.close()
+        feed.stop()
+
+
 def _check_counted(metrics: Metrics, settings: LedgerSettings) -> None:
     """What the metrics and the ledger say of test_records_are_checked_counted_and_streaks."""
     counted = _samples(metrics.registry, "robotconf_goal_outcomes_total")
