@@ -44,14 +44,17 @@ class Connection:
         return self.password_file.read_text(encoding="utf-8").strip()
 
 
-def make_client(connection: Connection, client_id: str) -> paho.Client:
-    """A configured, not yet connected client."""
+def make_client(connection: Connection, client_id: str, *, session: bool = False) -> paho.Client:
+    """A configured, not yet connected client. `session` (MQTT 3.1.1): a persistent session,
+    the broker keeps the client's subscriptions and queues its QoS 1 messages while it is away
+    (the ledger's feed); its client id must then be the same at every start."""
     address = connection.address
+    v5 = connection.protocol == MQTTProtocolVersion.MQTTv5
     client = paho.Client(
         CallbackAPIVersion.VERSION2,
         client_id=client_id,
         protocol=connection.protocol,
-        clean_session=True if connection.protocol != MQTTProtocolVersion.MQTTv5 else None,
+        clean_session=None if v5 else not session,
     )
     username = connection.username or address.username
     if username:

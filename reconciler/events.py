@@ -38,6 +38,10 @@ class Kind(str, enum.Enum):
     ROBOT_DRIFTED = "robot_drifted"
     ROBOT_DRIFT_CLEARED = "robot_drift_cleared"
     ROBOT_DEFERRED = "robot_deferred"
+    ROBOT_GOALS_FAILING = (
+        "robot_goals_failing"  # told by the outcome ledger (reconciler/outcomes.py)
+    )
+    ROBOT_GOALS_RECOVERED = "robot_goals_recovered"
 
 
 _ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLLED_BACK}

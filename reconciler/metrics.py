@@ -8,7 +8,7 @@ ones that explain them are scraped.
 from __future__ import annotations
 
 import threading
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 from prometheus_client import (
     CONTENT_TYPE_LATEST,
@@ -21,14 +21,17 @@ from prometheus_client import (
 )
 
 from configurator.drift import Drift
+from contract.goals import OutcomeRecord
 from contract.wire import ReconcilerReason
 from reconciler.decide import state_of
 from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
 from reconciler.notify import OUTCOMES
+from reconciler.outcomes import MAX_LABEL_VALUES, NO_SCENARIO, OTHER, BoundedLabels
 from reconciler.verdicts import Verdict
 from reconciler.webhook import SERVERS, UNKNOWN, Outcome
 
 INTERFACES_VERDICTS = ("reported", "unknown", "error")
+LEDGER_RESULTS = ("kept", "duplicate", "refused")
 # A scrape is a GET without a body, one or two Prometheus servers at a time; an idle connection
 # costs only a file descriptor.
 LIMITS = Limits(connections=64, per_client=8, head=5.0, silence=5.0, deadline=10.0)
@@ -91,10 +94,31 @@ class Metrics:
             ["interfaces"],
             registry=r,
         )
+        self._outcome_series()
         self._known_series()
         self._applied: str | None = None
         self._lock = threading.Lock()
         self._server: BoundedHTTPServer | None = None
+
+    def _outcome_series(self) -> None:
+        """What the outcome ledger counts (`reconciler/ledger_feed.py`)."""
+        self.goal_outcomes = Counter(
+            "robotconf_goal_outcomes",
+            "Goal outcomes the robots reported, by scenario, task and outcome (the first "
+            f"{MAX_LABEL_VALUES} scenarios and tasks seen by name, the rest as {OTHER!r}; no "
+            "per-robot series)",
+            ["scenario", "task", "outcome"],
+            registry=self.registry,
+        )
+        self.ledger_records = Counter(
+            "robotconf_ledger_records",
+            "Outcome records the ledger took in: kept, duplicate (delivered again, kept once), "
+            "refused (unreadable, too large, or naming another robot than its topic's)",
+            ["result"],
+            registry=self.registry,
+        )
+        self._scenarios = BoundedLabels(MAX_LABEL_VALUES)
+        self._tasks = BoundedLabels(MAX_LABEL_VALUES)
 
     def _known_series(self) -> None:
         """Every series whose labels are known at start exists from the first scrape, at 0:
@@ -105,6 +129,8 @@ class Metrics:
             self.interfaces.labels(kind).set(0)
         for action in ("publish", "clear"):
             self.publishes.labels(action)
+        for result in LEDGER_RESULTS:
+            self.ledger_records.labels(result)
         for reason in ReconcilerReason:
             if state_of(reason) == "Stalled":
                 self.errors.labels(reason.value)
@@ -180,6 +206,20 @@ class Metrics:
 
     def notified(self, receiver: str, outcome: str) -> None:
         self.notifications.labels(receiver, outcome).inc()
+
+    def outcomes(self, records: Iterable[OutcomeRecord]) -> None:
+        """Counts goal outcomes kept by the ledger, labels bounded (`BoundedLabels`)."""
+        for record in records:
+            self.goal_outcomes.labels(
+                self._scenarios.label(record.scenario or NO_SCENARIO),
+                self._tasks.label(record.task),
+                record.outcome.value,
+            ).inc()
+
+    def ledger(self, kept: int, duplicates: int, refused: int) -> None:
+        for result, count in zip(LEDGER_RESULTS, (kept, duplicates, refused), strict=True):
+            if count:
+                self.ledger_records.labels(result).inc(count)
 
     def webhook(self, server: str, outcome: str) -> None:
         self.webhooks.labels(server, outcome).inc()

@@ -30,6 +30,9 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ.setdefault("PYTEST_DEBUG_TEMPROOT", system)
     folder = tempfile.mkdtemp(prefix=_SESSION_TMP_PREFIX, dir=system)
     config.stash[_session_tmp] = Path(folder)
+    # Reconcilers keep their outcome ledger under $XDG_STATE_HOME unless given --state-dir:
+    # the run's own, not the user's (~/.local/state), removed with the run's folder.
+    os.environ["XDG_STATE_HOME"] = os.path.join(folder, ".state")
     os.environ["TMPDIR"] = folder
     tempfile.tempdir = folder
 
@@ -46,7 +49,7 @@ def temporary_files_checked(pytestconfig: pytest.Config) -> Iterator[None]:
     temporary folder; pytest_unconfigure then removes it, so /tmp stays clean either way."""
     yield
     folder = pytestconfig.stash[_session_tmp]
-    left = sorted(entry.name for entry in folder.iterdir())
+    left = sorted(entry.name for entry in folder.iterdir() if entry.name != ".state")
     assert not left, f"tests left these in the temporary folder (use tmp_path): {left}"
 
 

@@ -61,6 +61,7 @@ from workstation.fleet_status import change_key, open_view
 from workstation.up_desk import UpDesk, remove_desk, write_desk
 
 if TYPE_CHECKING:
+    from reconciler.ledger_feed import LedgerFeed
     from workstation.ui.run import RunningUi, UiOptions
 
 log = logging.getLogger("robotconf.up")
@@ -488,11 +489,7 @@ def _serve(
 ) -> ExitCode:
     say = screen.say
     connection = logins.operator
-    signer, public_key, private_key = None, None, None
-    if signing:
-        keys = _demo_keys(setup.workdir / "keys")
-        signer, public_key, private_key = make_signer(keys.private), keys.public, keys.private
-        say(f"signing: every request is signed; agents verify with {public_key}")
+    signer, public_key, private_key = _signing(setup, signing, say)
 
     stop = threading.Event()
     changed = threading.Event()
@@ -507,6 +504,7 @@ def _serve(
     )
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
     view = open_view(logins.reconciler, prefix, changed.set)
+    ledger = _start_ledger(setup, logins.reconciler, prefix, say)
 
     def at_once() -> None:  # a second Ctrl-C: do not wait (the brains get SIGTERM as orphans)
         for proc in agents.procs.values():
@@ -542,7 +540,37 @@ def _serve(
         view.stop()
         controller.stop()
         thread.join(10)
+        if ledger is not None:
+            ledger.stop()
     return ExitCode.OK
+
+
+def _signing(
+    setup: UpSetup, signing: bool, say: Callable[[str], None]
+) -> tuple[Any, Path | None, Path | None]:
+    """The signer, public and private key of `up --sign` (demo keys in its folder), or Nones."""
+    if not signing:
+        return None, None, None
+    keys = _demo_keys(setup.workdir / "keys")
+    say(f"signing: every request is signed; agents verify with {keys.public}")
+    return make_signer(keys.private), keys.public, keys.private
+
+
+def _start_ledger(
+    setup: UpSetup, connection: Connection, prefix: str, say: Callable[[str], None]
+) -> LedgerFeed | None:
+    """The outcome ledger under up's folder (`robotconf history` finds it there); a state
+    folder that cannot be written is said, and `up` runs without a ledger."""
+    from reconciler.ledger import LedgerError
+    from reconciler.ledger_feed import LedgerFeed, LedgerSettings
+
+    feed = LedgerFeed(connection, prefix, LedgerSettings(setup.workdir / "state"))
+    try:
+        feed.start()
+    except LedgerError as exc:
+        say(f"ledger: {exc}; goal outcomes are not kept")
+        return None
+    return feed
 
 
 def _start_ui(

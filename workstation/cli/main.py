@@ -48,6 +48,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "workstation.cli.status:status",
         "show the fleet: desired vs reported, worst first",
     ),
+    "history": (
+        "workstation.cli.history:history",
+        "what a revision's robots achieved, beside the revision before (the outcome ledger)",
+    ),
     "ui": (
         "workstation.cli.ui:ui",
         "serve the fleet as a live web page (the reconciler, rollouts, every robot)",

@@ -6,7 +6,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -22,6 +22,7 @@ from workstation.cli.ui import ui_beside, ui_option
 if TYPE_CHECKING:
     from contract.mqtt import Connection
     from reconciler.controller import Controller
+    from reconciler.ledger_feed import LedgerFeed, LedgerSettings
     from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
     from reconciler.webhook_server import WebhookServer
@@ -70,6 +71,97 @@ def make_telemetry(
         if metrics is not None:
             metrics.receivers([receiver.name for receiver in receivers])
     return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
+
+
+def ledger_settings(
+    prefix: str,
+    *,
+    state_dir: Path | None,
+    ledger_max_age: str,
+    ledger_max_records: int,
+    goal_failure_streak: int,
+) -> LedgerSettings:
+    """Where and how the outcome ledger is kept (`state_options`), checked before anything
+    starts."""
+    from reconciler.ledger import default_state_dir
+    from reconciler.ledger_feed import LedgerSettings
+    from reconciler.outcomes import parse_duration
+
+    try:
+        age = parse_duration(ledger_max_age)
+    except ValueError as exc:
+        raise CliError(f"--ledger-max-age: {exc}") from None
+    if ledger_max_records < 1000:
+        raise CliError("--ledger-max-records must be at least 1000")
+    if goal_failure_streak < 1:
+        raise CliError("--goal-failure-streak must be at least 1")
+    folder = state_dir if state_dir is not None else default_state_dir(prefix)
+    return LedgerSettings(folder.absolute(), age, ledger_max_records, goal_failure_streak)
+
+
+def start_ledger(
+    connection: Connection, prefix: str, settings: LedgerSettings, telemetry: Telemetry | None
+) -> LedgerFeed:
+    """The outcome ledger's feed, started: its file opened (an unreadable one set aside and
+    a new one started, said in the log), its session connecting. CliError when no ledger can
+    be kept in the state folder at all."""
+    from reconciler.ledger import LedgerError
+    from reconciler.ledger_feed import LedgerFeed
+
+    notifier = telemetry.notifier if telemetry is not None else None
+    feed = LedgerFeed(
+        connection,
+        prefix,
+        settings,
+        metrics=telemetry.metrics if telemetry is not None else None,
+        tell=notifier.tell if notifier is not None else None,
+    )
+    try:
+        feed.start()
+    except LedgerError as exc:
+        raise CliError(f"--state-dir: {exc}") from None
+    return feed
+
+
+def state_options(command: Callable[..., ExitCode]) -> Callable[..., ExitCode]:
+    """The reconciler's state folder and how its outcome ledger is kept."""
+    options = [
+        click.option(
+            "--state-dir",
+            type=click.Path(path_type=Path, file_okay=False),
+            default=None,
+            metavar="DIR",
+            help="the reconciler's state: its outcome ledger (ledger.sqlite3) "
+            "(default: $XDG_STATE_HOME/robotconf/reconciler/PREFIX, ~/.local/state/...)",
+        ),
+        click.option(
+            "--ledger-max-age",
+            default="30d",
+            show_default=True,
+            metavar="DURATION",
+            help="outcomes older than this are removed from the ledger (s, m, h, d, w)",
+        ),
+        click.option(
+            "--ledger-max-records",
+            type=int,
+            default=5_000_000,
+            show_default=True,
+            metavar="N",
+            help="the ledger keeps at most this many outcomes, the newest (about 400 bytes each)",
+        ),
+        click.option(
+            "--goal-failure-streak",
+            type=int,
+            default=3,
+            show_default=True,
+            metavar="N",
+            help="a robot's goals are told failing (--notify) after N failed or stale goals "
+            "in a row, and told recovered at its next success",
+        ),
+    ]
+    for option in reversed(options):
+        command = option(command)
+    return command
 
 
 @dataclass(frozen=True)
@@ -190,6 +282,7 @@ def start_ui(
     help="the webhook's secret (GitHub, Gitea, Forgejo: HMAC-SHA256 key; GitLab: token); "
     "required with --webhook",
 )
+@state_options
 @ui_option
 def reconcile(
     repo: Path,
@@ -204,6 +297,7 @@ def reconcile(
     webhook_at: str | None,
     webhook_secret_file: Path | None,
     ui_at: str | None,
+    **ledger_options: Any,
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds, and at once when --webhook receives a push; runs until signalled."""
@@ -220,8 +314,10 @@ def reconcile(
         raise CliError(str(exc)) from None
     webhook = webhook_options(webhook_at, webhook_secret_file)
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
+    kept = ledger_settings(mqtt.prefix, **ledger_options)
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
+    ledger = start_ledger(connection, mqtt.prefix, kept, telemetry)
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
     # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.
     no_local = speaks_mqtt5(connection)
@@ -240,16 +336,20 @@ def reconcile(
         receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
     ui = start_ui(ui_at_options, connection, mqtt.prefix, repo)
     on_stop_signals(callback=controller.stop)
+    _say_started(source, connection, mqtt.prefix, no_local)
+    _run(controller, telemetry, receiver, ui, ledger)
+    return ExitCode.OK
+
+
+def _say_started(source: BranchSource, connection: Connection, prefix: str, no_local: bool) -> None:
     logging.getLogger("robotconf.reconciler").info(
         "reconciling %s (branch %s) to %s, prefix %s (MQTT %s)",
         source.description,
-        branch,
+        source.branch,
         connection.address.url,
-        mqtt.prefix,
+        prefix,
         "5, No Local" if no_local else "3.1.1",
     )
-    _run(controller, telemetry, receiver, ui)
-    return ExitCode.OK
 
 
 def _run(
@@ -257,6 +357,7 @@ def _run(
     telemetry: Telemetry | None,
     receiver: WebhookServer | None,
     ui: RunningUi | None = None,
+    ledger: LedgerFeed | None = None,
 ) -> None:
     """The control loop with its telemetry, until signalled; then what serves it stops."""
     if telemetry is not None:
@@ -268,5 +369,7 @@ def _run(
             receiver.close()
         if ui is not None:
             ui.close()
+        if ledger is not None:
+            ledger.stop()
         if telemetry is not None:
             telemetry.stop()
