@@ -58,6 +58,14 @@ class Severity(str, Enum):
 VitalValue = float | int | bool | Annotated[str, Field(max_length=MAX_TEXT)]
 
 
+def success_rate(succeeded: int, failed: int) -> float | None:
+    """The one success rate of the project: succeeded of succeeded and failed goals. A canceled
+    goal was called off and a stale one may still end: neither counts for or against a revision.
+    None before any goal has succeeded or failed."""
+    ended = succeeded + failed
+    return succeeded / ended if ended else None
+
+
 # ---------------------------------------------------------------- brain → agent (JSON lines)
 
 

@@ -22,6 +22,7 @@ from contract.goals import (
     TASK_PATTERN,
     OutcomeRecord,
     OutcomeState,
+    success_rate,
 )
 from contract.safejson import PayloadError, parse_object
 from contract.textsafe import printable
@@ -39,8 +40,8 @@ _TASK = re.compile(TASK_PATTERN)
 _ID = re.compile(r"^[A-Za-z0-9_.:+=/-]{1,80}$")
 _SCENARIO = re.compile(r"^[A-Za-z0-9_.-]{1,128}$")
 # What counts toward a robot's failing streak, and what ends one.
-FAILING = frozenset({OutcomeState.FAILED, OutcomeState.STALE})
-DEFAULT_STREAK = 3  # failed (or stale) goals in a row before a robot's goals are failing
+FAILING = frozenset({OutcomeState.FAILED})  # stale may still end: never failing
+DEFAULT_STREAK = 3  # failed goals in a row before a robot's goals are failing
 
 
 class RecordRefused(ValueError):
@@ -117,9 +118,8 @@ class Group:
 
 @dataclass(frozen=True)
 class Tally:
-    """Ended goals counted by outcome, with the success rate and the mean duration of the
-    succeeded ones. The rate is over succeeded, failed and stale (a canceled goal was neither
-    achieved nor failed); None when there are none."""
+    """Ended goals counted by outcome, with the success rate (`contract.goals.success_rate`)
+    and the mean duration of the succeeded ones."""
 
     succeeded: int = 0
     failed: int = 0
@@ -134,8 +134,7 @@ class Tally:
 
     @property
     def success_rate(self) -> float | None:
-        judged = self.succeeded + self.failed + self.stale
-        return self.succeeded / judged if judged else None
+        return success_rate(self.succeeded, self.failed)
 
     @property
     def mean_duration(self) -> float | None:
@@ -191,7 +190,7 @@ class RevisionReport:
             self.robots.items(),
             key=lambda item: (
                 _rate_key(item[1].success_rate),
-                -(item[1].failed + item[1].stale),
+                -item[1].failed,
                 item[0],
             ),
         )
@@ -336,7 +335,7 @@ def _rate(scenario: ScenarioReport | None) -> float | None:
 
 @dataclass(frozen=True)
 class Streak:
-    """A robot's failed (or stale) goals in a row, and whether it was told failing."""
+    """A robot's failed goals in a row, and whether it was told failing."""
 
     count: int = 0
     failing: bool = False
@@ -387,10 +386,7 @@ def streak_event(found: StreakEvent) -> Event:
             why += f" {record.code}"
         if record.message:
             why += f": {record.message}"
-        message = (
-            f"{found.robot_id}: {found.streak} goals in a row failed or went stale; "
-            f"the last, {task}: {why}"
-        )
+        message = f"{found.robot_id}: {found.streak} goals in a row failed; the last, {task}: {why}"
         kind, reason = Kind.ROBOT_GOALS_FAILING, record.code or record.outcome.value
     else:
         message = f"{found.robot_id}: goals succeed again ({task}), after {found.streak} failed"

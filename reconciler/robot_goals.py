@@ -24,6 +24,7 @@ from contract.goals import (
     LastOutcome,
     TaskCounts,
     VitalValue,
+    success_rate,
 )
 
 MAX_ID = 128  # characters of a goal id or a task name kept (the contract's own bound)
@@ -271,7 +272,7 @@ class GoalRate:
     @property
     def rate(self) -> float | None:
         """Succeeded / (succeeded + failed); None before any such end."""
-        return self.completed / self.ended if self.ended else None
+        return success_rate(self.completed, self.failed)
 
     def rate_text(self) -> str:
         rate = self.rate

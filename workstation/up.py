@@ -91,6 +91,11 @@ class UpSetup:
     broker_origin: str = "--broker"  # where a given broker came from, for messages
     ui: UiOptions | None = None  # `up --ui`: the fleet's web page, served beside
 
+    @property
+    def state_dir(self) -> Path:
+        """The reconciler's state folder (its outcome ledger), where `history` looks first."""
+        return self.workdir / "state"
+
 
 def _git_repo(root: Path) -> Any:
     try:
@@ -564,7 +569,7 @@ def _start_ledger(
     from reconciler.ledger import LedgerError
     from reconciler.ledger_feed import LedgerFeed, LedgerSettings
 
-    feed = LedgerFeed(connection, prefix, LedgerSettings(setup.workdir / "state"))
+    feed = LedgerFeed(connection, prefix, LedgerSettings(setup.state_dir))
     try:
         feed.start()
     except LedgerError as exc:
@@ -579,9 +584,12 @@ def _start_ui(
     """`up --ui`: the fleet's web page, read with the operator's login; its address said."""
     if setup.ui is None:
         return None
+    from reconciler.ledger import ledger_path
+    from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi
 
-    ui = RunningUi(connection, prefix, setup.root, setup.ui)
+    history = LedgerHistory(ledger_path(setup.state_dir))
+    ui = RunningUi(connection, prefix, setup.root, setup.ui, history=history)
     say(f"ui: the fleet's web page is at {ui.url}")
     return ui
 

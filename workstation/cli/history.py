@@ -15,7 +15,7 @@ from contract.wire import short_rev
 from reconciler.ledger import Ledger, LedgerError, find_ledger
 from reconciler.outcomes import History, RevisionReport, Tally, parse_duration
 from workstation.cli.broker_options import prefix_option
-from workstation.cli.options import repo_option
+from workstation.cli.options import ledger_dir_option, repo_option
 
 ROBOTS_SHOWN = 10  # robots listed in the text form, worst first (--json: all)
 
@@ -23,14 +23,7 @@ ROBOTS_SHOWN = 10  # robots listed in the text form, worst first (--json: all)
 @click.command("history")
 @repo_option
 @prefix_option
-@click.option(
-    "--state-dir",
-    type=click.Path(path_type=Path, file_okay=False),
-    default=None,
-    metavar="DIR",
-    help="the reconciler's --state-dir whose ledger is read (default: robotconf up's in this "
-    "repository when it has one, else the reconciler's default for --prefix)",
-)
+@ledger_dir_option
 @click.option(
     "--rev", default=None, help="this revision (or its first characters); default: the newest"
 )

@@ -155,7 +155,7 @@ def state_options(command: Callable[..., ExitCode]) -> Callable[..., ExitCode]:
             default=3,
             show_default=True,
             metavar="N",
-            help="a robot's goals are told failing (--notify) after N failed or stale goals "
+            help="a robot's goals are told failing (--notify) after N failed goals "
             "in a row, and told recovered at its next success",
         ),
     ]
@@ -223,14 +223,16 @@ def start_webhook(
 
 
 def start_ui(
-    options: UiOptions | None, connection: Connection, prefix: str, repo: Path
+    options: UiOptions | None, connection: Connection, prefix: str, repo: Path, ledger: Path
 ) -> RunningUi | None:
-    """`--ui`: the fleet's web page beside the loop, read with the reconciler's login."""
+    """`--ui`: the fleet's web page beside the loop, read with the reconciler's login; its
+    revision pages read the reconciler's own outcome ledger (`ledger`)."""
     if options is None:
         return None
+    from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi
 
-    ui = RunningUi(connection, prefix, repo, options)
+    ui = RunningUi(connection, prefix, repo, options, history=LedgerHistory(ledger))
     logging.getLogger("robotconf.reconciler").info("ui: serving the fleet at %s", ui.url)
     return ui
 
@@ -334,7 +336,7 @@ def reconcile(
     if webhook is not None:
         metrics = telemetry.metrics if telemetry is not None else None
         receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
-    ui = start_ui(ui_at_options, connection, mqtt.prefix, repo)
+    ui = start_ui(ui_at_options, connection, mqtt.prefix, repo, kept.path)
     on_stop_signals(callback=controller.stop)
     _say_started(source, connection, mqtt.prefix, no_local)
     _run(controller, telemetry, receiver, ui, ledger)

@@ -12,7 +12,7 @@ import click
 from contract.errors import CliError, ExitCode
 from reconciler.lifecycle import log_to_stderr, on_stop_signals
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import F, repo_option
+from workstation.cli.options import F, ledger_dir_option, repo_option
 from workstation.cli.restart import signing_key_option
 from workstation.ui import DEFAULT_LISTEN
 
@@ -84,6 +84,7 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     help="a reverse proxy in front terminates TLS (for a non-loopback --listen without --tls-cert)",
 )
 @signing_key_option
+@ledger_dir_option
 def ui(
     repo: Path,
     mqtt: BrokerOptions,
@@ -93,6 +94,7 @@ def ui(
     tls_key: Path | None,
     behind_tls_proxy: bool,
     signing_key: Path | None,
+    state_dir: Path | None,
 ) -> ExitCode:
     """Serve the fleet as a live web page: the reconciler and a refused commit's diagnostics,
     the rollout, every robot worst first, each robot's page; runs until signalled.
@@ -103,7 +105,12 @@ def ui(
     confirmed, or POST /robots/ROBOT/restart) through the same signed request as robotconf
     restart (signed with --signing-key when given; the status says `ui.cookie` or
     `ui.bearer` asked) and follow its brain's log on its page. Without a token or with a
-    wrong one a restart is refused (401/403); wrong tokens from one address are throttled."""
+    wrong one a restart is refused (401/403); wrong tokens from one address are throttled.
+
+    A revision's page (/revisions/REV) shows what it achieved beside the revision before,
+    from the reconciler's outcome ledger (read-only; --state-dir says where it is)."""
+    from reconciler.ledger import find_ledger
+    from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi, ui_options
 
     options = ui_options(
@@ -118,7 +125,8 @@ def ui(
     log_to_stderr("ui")
     stop = threading.Event()
     on_stop_signals(stop)
-    running = RunningUi(connection, mqtt.prefix, repo, options)
+    ledger = LedgerHistory(find_ledger(repo, mqtt.prefix, state_dir))
+    running = RunningUi(connection, mqtt.prefix, repo, options, history=ledger)
     try:
         logging.getLogger("robotconf.ui").info(
             "serving the fleet of %s (prefix %s, repository %s) at %s",

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 from urllib.parse import quote
 
+from reconciler.outcomes import History, RevisionReport, Tally
 from reconciler.verdicts import short_rev
 from workstation.ui.auth import Identity
 from workstation.ui.goals_html import duration, rate_row, revision_link
 from workstation.ui.model import Snapshot
 from workstation.ui.pages import banner_box, page
-from workstation.ui.revisions import Comparison, RevisionResult, Tally, live_rates, rate_change
+from workstation.ui.revisions import live_rates, rate_change
 from workstation.ui.text import age, esc
 
 MAX_ROWS = 300  # task or robot rows listed; the rest counted
@@ -22,7 +23,7 @@ def revision_page(
     snap: Snapshot,
     revision: str,
     who: Identity,
-    kept: Comparison | None,
+    kept: History | None,
     why: str | None = None,
 ) -> str:
     """`kept`: the ledger's answer (None: it holds nothing of this revision, or `why` it could
@@ -58,7 +59,7 @@ def live_section(snap: Snapshot, revision: str) -> str:
     )
 
 
-def ledger_section(revision: str, kept: Comparison | None, why: str | None) -> str:
+def ledger_section(revision: str, kept: History | None, why: str | None) -> str:
     if why is not None:
         return (
             '<section data-ledger="unavailable"><h2>Kept in the outcome ledger</h2>'
@@ -69,7 +70,7 @@ def ledger_section(revision: str, kept: Comparison | None, why: str | None) -> s
             '<section data-ledger="empty"><h2>Kept in the outcome ledger</h2><p>The ledger '
             f"holds no goal outcome of <code>{esc(short_rev(revision))}</code>.</p></section>"
         )
-    now, before = kept.revision, kept.before
+    now, before = kept.report, kept.before
     against = (
         f"beside the revision before it, {revision_link(before.revision)}"
         if before is not None
@@ -77,7 +78,7 @@ def ledger_section(revision: str, kept: Comparison | None, why: str | None) -> s
     )
     return (
         '<section data-ledger="kept"><h2>Kept in the outcome ledger</h2>'
-        f"<p>Outcomes recorded from {age(now.first_at)} to {age(now.last_at)}, {against}.</p>"
+        f"<p>Outcomes recorded from {age(now.first_seen)} to {age(now.last_seen)}, {against}.</p>"
         + totals(now, before)
         + task_table(now, before)
         + robot_table(now)
@@ -85,43 +86,55 @@ def ledger_section(revision: str, kept: Comparison | None, why: str | None) -> s
     )
 
 
+def _rate(tally: Tally | None) -> str:
+    rate = tally.success_rate if tally is not None else None
+    return "-" if rate is None else f"{100 * rate:.0f}%"
+
+
 def _tally_cells(tally: Tally) -> str:
-    rate = "-" if tally.rate is None else f"{100 * tally.rate:.0f}%"
     return (
-        f"<td><strong>{rate}</strong></td><td>{tally.succeeded}</td><td>{tally.failed}</td>"
-        f"<td>{tally.canceled}</td><td>{tally.stale}</td>"
+        f"<td><strong>{_rate(tally)}</strong></td><td>{tally.succeeded}</td><td>{tally.failed}"
+        f"</td><td>{tally.canceled}</td><td>{tally.stale}</td>"
     )
 
 
-def totals(now: RevisionResult, before: RevisionResult | None) -> str:
-    mine, theirs = now.total, before.total if before is not None else None
-    change = rate_change(mine.rate, theirs.rate if theirs is not None else None)
-    rate = "-" if mine.rate is None else f"{100 * mine.rate:.0f}%"
+def totals(now: RevisionReport, before: RevisionReport | None) -> str:
+    mine = now.tally
+    change = rate_change(mine.success_rate, before.tally.success_rate if before else None)
+    rate = _rate(mine)
+    codes = ", ".join(f"{esc(code, 64)} ×{n}" for code, n in list(now.codes.items())[:5])
+    said = f"<p data-failure-codes>Failure codes, the most frequent first: {codes}.</p>"
     return (
         f'<p data-total-rate="{rate}" data-rate-change="{change}">All its goals: '
         f"<strong>{rate}</strong> succeeded of succeeded and failed ({mine.succeeded} "
         f"succeeded, {mine.failed} failed, {mine.canceled} canceled, {mine.stale} stale); "
-        f"{change} against the revision before.</p>"
+        f"{change} against the revision before.</p>" + (said if codes else "")
     )
 
 
-def task_table(now: RevisionResult, before: RevisionResult | None) -> str:
-    keys = sorted(
-        set(now.tasks) | (set(before.tasks) if before is not None else set()),
-        key=lambda k: (k[0] or "", k[1]),
-    )
+def _tasks(report: RevisionReport | None) -> dict[tuple[str, str], Tally]:
+    if report is None:
+        return {}
+    return {
+        (scenario, task): tally
+        for scenario, found in report.scenarios.items()
+        for task, tally in found.tasks.items()
+    }
+
+
+def task_table(now: RevisionReport, before: RevisionReport | None) -> str:
+    mine_all, theirs_all = _tasks(now), _tasks(before)
+    keys = sorted(set(mine_all) | set(theirs_all))
     rows = []
     for scenario, task in keys[:MAX_ROWS]:
-        mine = now.tasks.get((scenario, task), NO_TALLY)
-        theirs = before.tasks.get((scenario, task), NO_TALLY) if before is not None else NO_TALLY
-        codes = ", ".join(f"{esc(code, 64)} ×{n}" for code, n in mine.codes[:5]) or "-"
-        change = rate_change(mine.rate, theirs.rate)
+        mine = mine_all.get((scenario, task), NO_TALLY)
+        theirs = theirs_all.get((scenario, task))
+        change = rate_change(mine.success_rate, theirs.success_rate if theirs else None)
         rows.append(
             f'<tr data-scenario="{esc(scenario or "-", 128)}" data-task="{esc(task, 128)}" '
             f'data-rate-change="{change}"><th scope="row">{esc(scenario or "-", 128)}</th>'
             f"<td>{esc(task, 128)}</td>{_tally_cells(mine)}<td>{duration(mine.mean_duration)}"
-            f"</td><td>{codes}</td><td>{'-' if before is None else _rate(theirs)}</td>"
-            f"<td>{change}</td></tr>"
+            f"</td><td>{'-' if before is None else _rate(theirs)}</td><td>{change}</td></tr>"
         )
     more = f"<p>… {len(keys) - MAX_ROWS} more tasks.</p>" if len(keys) > MAX_ROWS else ""
     return (
@@ -129,24 +142,16 @@ def task_table(now: RevisionResult, before: RevisionResult | None) -> str:
         '<th scope="col">Scenario</th><th scope="col">Task</th><th scope="col">Success rate</th>'
         '<th scope="col">Succeeded</th><th scope="col">Failed</th><th scope="col">Canceled</th>'
         '<th scope="col">Stale</th><th scope="col">Mean duration</th>'
-        '<th scope="col">Failure codes</th><th scope="col">Rate before</th>'
+        '<th scope="col">Rate before</th>'
         f'<th scope="col">Change</th></tr></thead><tbody>{"".join(rows)}</tbody></table></div>'
         f"{more}"
     )
 
 
-def _rate(tally: Tally) -> str:
-    return "-" if tally.rate is None else f"{100 * tally.rate:.0f}%"
-
-
-def robot_table(now: RevisionResult) -> str:
-    if not now.robots:
+def robot_table(now: RevisionReport) -> str:
+    ordered = now.worst_robots()  # the lowest success rate first, then the most failures
+    if not ordered:
         return ""
-    # The worst first: the lowest success rate, then the most failures.
-    ordered = sorted(
-        now.robots.items(),
-        key=lambda item: (item[1].rate if item[1].rate is not None else 2.0, -item[1].failed),
-    )
     rows = "".join(
         f'<tr data-robot-result="{esc(robot_id, 64)}"><th scope="row">'
         f'<a href="/robots/{quote(robot_id, safe="")}">{esc(robot_id, 64)}</a></th>'

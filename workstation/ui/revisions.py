@@ -1,7 +1,7 @@
 """What one revision achieved, as the revision page reads it: the small interface the page asks
-of the reconciler's outcome ledger (`RevisionHistory`), the answer's shape, and the page's own
-live part worked out from the robots' retained goals summaries. Pure but for whatever implements
-`RevisionHistory` (the ledger's SQLite edge)."""
+of the reconciler's outcome ledger (`RevisionHistory`, answered with the ledger's own `History`),
+the ledger file behind it (`LedgerHistory`, the one edge here), and the page's live part worked
+out from the robots' retained goals summaries."""
 
 from __future__ import annotations
 
@@ -9,63 +9,14 @@ import re
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Protocol
 
+from reconciler.outcomes import History
 from reconciler.robot_goals import GoalRate, goal_rates
 from reconciler.verdicts import RobotRow
 
 REVISION = re.compile(r"[0-9a-f]{4,64}")  # a commit id or a prefix of one, as links carry it
-
-
-@dataclass(frozen=True)
-class Tally:
-    """Ended goals of one (scenario, task) or one robot under one revision."""
-
-    succeeded: int = 0
-    failed: int = 0
-    canceled: int = 0
-    stale: int = 0
-    mean_duration: float | None = None  # seconds, of the goals whose start was seen
-    codes: tuple[tuple[str, int], ...] = ()  # the most frequent failure codes, most first
-
-    @property
-    def ended(self) -> int:
-        return self.succeeded + self.failed
-
-    @property
-    def rate(self) -> float | None:
-        """Succeeded of succeeded and failed, as the fleet page's rate; None before any."""
-        return self.succeeded / self.ended if self.ended else None
-
-
-@dataclass(frozen=True)
-class RevisionResult:
-    """What the ledger kept of one revision: per (scenario, task) and per robot."""
-
-    revision: str
-    tasks: dict[tuple[str | None, str], Tally] = field(default_factory=dict)
-    robots: dict[str, Tally] = field(default_factory=dict)
-    first_at: float | None = None  # its first and last recorded outcome
-    last_at: float | None = None
-
-    @property
-    def total(self) -> Tally:
-        found = list(self.tasks.values())
-        return Tally(
-            sum(t.succeeded for t in found),
-            sum(t.failed for t in found),
-            sum(t.canceled for t in found),
-            sum(t.stale for t in found),
-        )
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """A revision beside the one before it (None: the ledger holds nothing before it)."""
-
-    revision: RevisionResult
-    before: RevisionResult | None = None
 
 
 class HistoryError(Exception):
@@ -75,10 +26,29 @@ class HistoryError(Exception):
 class RevisionHistory(Protocol):
     """What the revision page asks of the outcome ledger."""
 
-    def compare(self, revision: str) -> Comparison | None:
+    def compare(self, revision: str) -> History | None:
         """`revision` (a full id or a prefix) beside the revision before it; None when the
         ledger holds no outcome of it. HistoryError when the ledger cannot be read."""
         ...
+
+
+class LedgerHistory:
+    """The reconciler's ledger file, opened read-only for each question (the reconciler
+    writes it meanwhile; WAL lets both)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def compare(self, revision: str) -> History | None:
+        from reconciler.ledger import Ledger, LedgerError
+
+        try:
+            with Ledger.open(self.path, read_only=True, check=False) as ledger:
+                if not any(seen.revision.startswith(revision) for seen in ledger.revisions()):
+                    return None
+                return ledger.history(revision)
+        except LedgerError as exc:
+            raise HistoryError(str(exc)) from None
 
 
 class CachedHistory:
@@ -97,13 +67,13 @@ class CachedHistory:
         self.ttl = ttl
         self.size = size
         self.clock = clock
-        self._kept: OrderedDict[str, tuple[float, Comparison | HistoryError | None]] = OrderedDict()
+        self._kept: OrderedDict[str, tuple[float, History | HistoryError | None]] = OrderedDict()
 
-    def compare(self, revision: str) -> Comparison | None:
+    def compare(self, revision: str) -> History | None:
         now = self.clock()
         kept = self._kept.get(revision)
         if kept is None or now - kept[0] > self.ttl:
-            answer: Comparison | HistoryError | None
+            answer: History | HistoryError | None
             try:
                 answer = self.history.compare(revision)
             except HistoryError as exc:

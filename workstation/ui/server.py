@@ -96,8 +96,8 @@ class UiService:
         # The reconciler's outcome ledger, for the revision pages; None: not open here.
         self.history: RevisionHistory | None = None
         self.no_history = (
-            "No outcome ledger is open here: it is the reconciler's (robotconf ui --ledger DIR "
-            "names its state folder; reconcile --ui and up --ui open their own)."
+            "No outcome ledger is open here: it is the reconciler's (robotconf ui --state-dir "
+            "DIR names its state folder; reconcile --ui and up --ui read their own)."
         )
         self.routes: list[Route] = [
             Route("GET", r"/", self.fleet),

@@ -237,6 +237,9 @@ def test_a_state_folder_that_cannot_be_made_is_one_line(tmp_path: Path, broker: 
     assert "Traceback" not in proc.output()
 
 
+F = OutcomeState.FAILED
+
+
 def test_records_are_checked_counted_and_streaks_told_once(
     tmp_path: Path, broker: Mosquitto
 ) -> None:
@@ -263,25 +266,25 @@ def test_records_are_checked_counted_and_streaks_told_once(
         bad_task["task"] = "no spaces allowed"
         publisher.raw(TOPICS.goal_outcomes("tb3-01"), json.dumps(bad_task).encode())
         wait_for(lambda: feed.refused == 4, "four records refused")
-        # tb3-01 fails three in a row (a canceled one neither breaks nor lengthens it).
+        # tb3-01 fails three in a row (a canceled or stale one neither breaks nor lengthens it).
         for seq, outcome in enumerate(
-            [OutcomeState.FAILED, OutcomeState.CANCELED, OutcomeState.FAILED, OutcomeState.STALE],
+            [F, OutcomeState.CANCELED, F, OutcomeState.STALE, F],
             start=10,
         ):
             publisher.send(record(seq, outcome=outcome)).wait_for_publish(10)
-        wait_for(lambda: feed.kept == 5, "five kept")
+        wait_for(lambda: feed.kept == 6, "six kept")
         failing = [e for e in told if e.kind is Kind.ROBOT_GOALS_FAILING]
         assert len(failing) == 1 and failing[0].robot == "tb3-01"
         assert "3 goals in a row" in failing[0].message
         # Once: a fourth failure tells nothing, nor does a redelivered record.
-        publisher.send(record(14, outcome=OutcomeState.FAILED)).wait_for_publish(10)
-        publisher.send(record(14, outcome=OutcomeState.FAILED)).wait_for_publish(10)
-        wait_for(lambda: feed.kept == 6 and feed.duplicates >= 1, "the copy seen")
+        publisher.send(record(15, outcome=F)).wait_for_publish(10)
+        publisher.send(record(15, outcome=F)).wait_for_publish(10)
+        wait_for(lambda: feed.kept == 7 and feed.duplicates >= 1, "the copy seen")
         assert len(told) == 1
         # A restart remembers that tb3-01 was told failing: its success is its recovery.
         feed.stop()
         feed = started()
-        publisher.send(record(15)).wait_for_publish(10)
+        publisher.send(record(16)).wait_for_publish(10)
         wait_for(lambda: feed.kept == 1, "kept after the restart")
         assert [e.kind for e in told] == [Kind.ROBOT_GOALS_FAILING, Kind.ROBOT_GOALS_RECOVERED]
         assert told[1].as_json()["robot"] == "tb3-01"
@@ -316,16 +319,16 @@ def test_the_feed_keeps_the_ledger_in_its_bounds(tmp_path: Path, broker: Mosquit
 def _check_counted(metrics: Metrics, settings: LedgerSettings) -> None:
     """What the metrics and the ledger say of test_records_are_checked_counted_and_streaks."""
     counted = _samples(metrics.registry, "robotconf_goal_outcomes_total")
-    assert counted[("delivery-gazebo", "Delivery", "failed")] == 3
+    assert counted[("delivery-gazebo", "Delivery", "failed")] == 4
     assert counted[("delivery-gazebo", "Delivery", "succeeded")] == 2
     assert counted[("delivery-gazebo", "Delivery", "stale")] == 1
     results = _samples(metrics.registry, "robotconf_ledger_records_total")
-    # Record 0 was sent until kept (more than once, maybe); record 14 twice.
-    assert results[("kept",)] == 7 and results[("refused",)] == 4
+    # Record 0 was sent until kept (more than once, maybe); record 15 twice.
+    assert results[("kept",)] == 8 and results[("refused",)] == 4
     assert results[("duplicate",)] >= 1
     with Ledger.open(settings.path, read_only=True) as ledger:
         history = ledger.history()
-    assert history.report.tally.failed == 3 and history.report.codes == {"NAV2_TIMEOUT": 3}
+    assert history.report.tally.failed == 4 and history.report.codes == {"NAV2_TIMEOUT": 4}
     messages = [r for r in _messages(settings.path) if r]
     assert messages and all("\x1b" not in m for m in messages)  # escaped before it was kept
 

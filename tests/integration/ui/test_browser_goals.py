@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from contract.goals import BrainEvent, CurrentGoal, OutcomeState, Severity
+from contract.goals import BrainEvent, CurrentGoal, OutcomeRecord, OutcomeState, Severity
+from reconciler.ledger import Ledger, ledger_path
 from tests.integration.ui.test_browser import (  # noqa: F401 (pages_without_errors: autouse)
     expect_ms,
     open_page,
@@ -40,11 +41,37 @@ HOSTILE = '<img src=x onerror="window.pwned=1">'
 def ui(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[tuple[UiProc, str]]:
     lab = GitLab(tmp_path / "lab")
     lab.commit("the lab")
-    proc = UiProc(lab.root, mosquitto.url, tmp_path / "ui.log", "--prefix", "robotconf")
+    keep_outcomes(tmp_path / "state")
+    proc = UiProc(
+        lab.root, mosquitto.url, tmp_path / "ui.log", "--prefix", "robotconf",
+        "--state-dir", str(tmp_path / "state"),
+    )  # fmt: skip
     try:
         yield proc, mosquitto.url
     finally:
         proc.stop()
+
+
+def keep_outcomes(state_dir: Path) -> None:
+    """The reconciler's ledger, as its feed writes it: REV1's Delivery goals, 7 of 10 succeeded."""
+    records = [
+        OutcomeRecord(
+            robot_id="tb3-01",
+            revision=REV1,
+            digest=None,
+            scenario="delivery-gazebo",
+            run="run-1",
+            seq=seq,
+            goal=f"g{seq}",
+            task="Delivery",
+            outcome=OutcomeState.SUCCEEDED if seq < 7 else OutcomeState.FAILED,
+            code=None if seq < 7 else "NAV2_TIMEOUT",
+            ended_at=AT + seq,
+        )
+        for seq in range(10)
+    ]
+    with Ledger.open_or_start(ledger_path(state_dir)) as ledger:
+        ledger.add(records, received_at=AT + 10)
 
 
 def underway(fraction: float | None, note: str | None = None) -> CurrentGoal:
@@ -121,8 +148,10 @@ def test_the_fleet_page_shows_goals_and_success_rates(
     publish_summary(url, "tb3-01", summary("tb3-01", completed=9, failed=11))
     expect(cell).to_have_text("9/11", **expect_ms())
     expect(rate).to_have_attribute("data-rate", "46%", **expect_ms())
-    rate.locator("a").click()  # the revision's page: without a ledger here, its robots now
+    rate.locator("a").click()  # the revision's page: what the ledger kept, and its robots now
     expect(page).to_have_url(f"http://127.0.0.1:{proc.port}/revisions/{REV1}", **expect_ms())
-    expect(page.locator('[data-ledger="unavailable"]')).to_contain_text("No outcome ledger")
+    kept = page.locator('[data-ledger="kept"] [data-total-rate]')
+    expect(kept).to_have_attribute("data-total-rate", "70%", **expect_ms())
+    expect(page.locator("[data-failure-codes]")).to_contain_text("NAV2_TIMEOUT ×3")
     live = page.locator(f'[data-live-goals] tr[data-revision="{REV1}"]')
     expect(live).to_have_attribute("data-rate", "46%", **expect_ms())

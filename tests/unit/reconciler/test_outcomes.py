@@ -110,8 +110,9 @@ def test_a_revision_is_tallied_per_scenario_task_and_robot() -> None:
     report = aggregate("rev", tasks, robots, {"E1": 1, "E2": 4})
     assert report.tally.total == 17 and report.tally.succeeded == 9
     delivery = report.scenarios["delivery"]
-    assert delivery.tally.success_rate == pytest.approx(6 / 9)  # canceled not judged
-    assert delivery.tasks["Dock"].success_rate == 0.0
+    # Succeeded of succeeded and failed: neither canceled nor stale is judged.
+    assert delivery.tally.success_rate == pytest.approx(6 / 8)
+    assert delivery.tasks["Dock"].success_rate is None
     assert delivery.tasks["Deliver"].mean_duration == 2.0  # of the succeeded ones
     assert list(report.codes) == ["E2", "E1"]  # most first
     assert [robot for robot, _ in report.worst_robots()] == ["r2", "r1", "r3"]
@@ -142,12 +143,13 @@ def outcome(robot: str, state: OutcomeState, seq: int = 0) -> OutcomeRecord:
 
 
 def test_a_streak_is_told_once_when_it_starts_and_once_when_it_ends() -> None:
+    # Neither a canceled goal nor a stale one (it may still end) breaks or lengthens a streak.
     records = [outcome("r1", state) for state in (F, C, F, ST, F, F)]
     streaks, events = advance({}, records, 3)
     assert [(e.robot_id, e.failing, e.streak) for e in events] == [("r1", True, 3)]
-    assert streaks["r1"] == Streak(5, True)
+    assert streaks["r1"] == Streak(4, True)
     streaks, events = advance(streaks, [outcome("r1", S), outcome("r1", S)], 3)
-    assert [(e.failing, e.streak) for e in events] == [(False, 5)]
+    assert [(e.failing, e.streak) for e in events] == [(False, 4)]
     assert streaks["r1"] == Streak()
 
 
