@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from configurator.types import SERVICE_USERS
-from contract.topics import SERVICES, Role, pattern_lines, role_lines
+from contract.topics import SERVICES, TOPICS, Role, pattern_lines, role_lines
 
 
 @dataclass(frozen=True)
@@ -101,10 +101,10 @@ class Listener:
     require_certificate: bool = False
 
 
-# Retained topics each robot holds: launch, status, description, interfaces; and the
-# reconciler's own two (status, rollout).
-RETAINED_PER_ROBOT = 4
-RETAINED_FLEET_WIDE = 2
+# Retained topics each robot holds (launch, status, description, interfaces, goals) and the
+# fleet-wide ones (the reconciler's status and rollout), counted from the table of topics.
+RETAINED_PER_ROBOT = sum(1 for t in TOPICS if t.retained and t.per_robot)
+RETAINED_FLEET_WIDE = sum(1 for t in TOPICS if t.retained and not t.per_robot and not t.per_client)
 QUEUE_HEADROOM = 2  # live traffic during a read, and robots added before the config is redone
 QUEUE_FLOOR = 10_000  # 10x Mosquitto's default: a small lab may grow past 1,000 robots
 
@@ -123,7 +123,8 @@ def queue_lines(robots: int) -> list[str]:
         "# (the reconciler, `robotconf status`, the desk) is sent every retained message at once",
         f"# when it subscribes: {RETAINED_PER_ROBOT} per robot. Mosquitto drops what is beyond",
         "# max_queued_messages waiting for one client, QoS 0 included: with its default of 1,000",
-        "# such a reader of 10,000 robots got about 2,600 of their 40,000 messages.",
+        "# such a reader of 10,000 robots got about 2,600 of their 40,000 messages. The",
+        "# reconciler's outcome ledger queues here too while it is away (docs: outcome-ledger).",
         f"# {QUEUE_HEADROOM}x the fleet's retained messages, at least {QUEUE_FLOOR:,};"
         " rerun broker-config as the",
         "# fleet grows. Only a client that falls behind queues anything, and what it queues is",
