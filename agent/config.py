@@ -303,8 +303,8 @@ class AgentConfig(StrictModel):
     )
     workdir: Path = Field(
         strict=False,
-        description="where launch-request.json (mode 0600), brain.log, brain.pid and agent.seq "
-        "live; created if missing, must be writable",
+        description="where launch-request.json (mode 0600), brain.log, brain.pid, brain.sock "
+        "and agent.seq live; created if missing, must be writable",
     )
     stop_timeout: float = Field(
         default=10.0, gt=0, description="seconds from SIGTERM (to the brain's group) to SIGKILL"

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from contract.goals import MAX_TEXT, OutcomeState
+from contract.goals import MAX_TEXT, GoalsSummary, OutcomeRecord, OutcomeState
 from contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, AgentProc, make_request, publish
@@ -109,6 +109,13 @@ def test_a_brain_that_says_hello_is_starting_until_ready_and_its_goals_are_relay
     summary = goals.wait_summary(
         ROBOT, lambda s: s.canceled == 1 and s.underway == 1 and bool(s.events), "the goals"
     )
+    check_summary(summary, digest)
+    check_records(goals.wait_records(ROBOT, 3), summary, digest)
+    assert not any(goals.retained_flags), "outcome records are a stream, never retained"
+
+
+def check_summary(summary: GoalsSummary, digest: str) -> None:
+    """The summary of the plan of the test above."""
     assert summary.reporting and summary.ready is True and summary.dropped == 0
     assert (summary.digest, summary.revision, summary.scenario) == (
         digest,
@@ -127,7 +134,8 @@ def test_a_brain_that_says_hello_is_starting_until_ready_and_its_goals_are_relay
     assert summary.vitals == {"battery": 0.82, "pose": "1.0,2.0", "docked": False}
     assert summary.events[-1].message == "all good"
 
-    records = goals.wait_records(ROBOT, 3)
+
+def check_records(records: list[OutcomeRecord], summary: GoalsSummary, digest: str) -> None:
     assert [(r.goal, r.outcome, r.seq) for r in records] == [
         ("g1", OutcomeState.SUCCEEDED, 0),
         ("g2", OutcomeState.FAILED, 1),
@@ -137,7 +145,6 @@ def test_a_brain_that_says_hello_is_starting_until_ready_and_its_goals_are_relay
         (summary.run, digest, "rev-1", "delivery-gazebo")
     }
     assert records[1].code == "NAV2_TIMEOUT" and records[0].duration is not None
-    assert not any(goals.retained_flags), "outcome records are a stream, never retained"
 
 
 def test_a_brain_that_never_says_hello_keeps_startsecs_and_its_goals_are_unknown(
