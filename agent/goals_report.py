@@ -71,8 +71,8 @@ class GoalsReport:
     def watches(self, now: float) -> dict[int, object]:
         return self.socket.watches(now)
 
-    def due(self, now: float) -> float | None:
-        times = [t for t in (self.relay.due(), self.socket.due(now)) if t is not None]
+    def due(self, now: float, connected: bool) -> float | None:
+        times = [t for t in (self.relay.due(connected), self.socket.due(now)) if t is not None]
         return min(times) if times else None
 
     def read(self, ready: set[int], mono: float) -> list[Signal]:

@@ -387,16 +387,17 @@ class GoalsRelay:
                 )
                 self._changed()
 
-    def due(self) -> float | None:
-        """The monotonic time by which `tick` or `publishes` has work."""
+    def due(self, connected: bool) -> float | None:
+        """The monotonic time by which `tick` or `publishes` has work (while disconnected,
+        only `tick`: what waits to be sent waits for the connection, not for a time)."""
         times = [
             goal.updated_mono + self.limits.stale_after
             for goal in self._open.values()
             if not goal.stale
         ]
-        if self._dirty:
+        if connected and self._dirty:
             times.append(self._next_summary)
-        if self._records:
+        if connected and self._records:
             times.append(0.0)
         return min(times) if times else None
 

@@ -247,7 +247,7 @@ class Agent:
         link = self.link.wait_limit(now)
         if link is not None:
             due = min(due, now + link)
-        goals = self.goals.due(now)
+        goals = self.goals.due(now, self.status.connected)
         if goals is not None:
             due = min(due, goals)
         return due

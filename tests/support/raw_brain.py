@@ -6,7 +6,7 @@ follows the plan, a list of steps, then sleeps until it is stopped:
 - `{"send": TEXT}`: TEXT and a newline, as UTF-8 (`{"send_hex": HEX}` for any bytes);
 - `{"flood": TEXT, "count": N}`: TEXT and a newline, N times, as fast as the socket takes them
   (a full socket buffer drops the rest, as the library does);
-- `{"sleep": SECONDS}`;
+- `{"sleep": SECONDS}`; `{"print": TEXT}` (to its log);
 - `{"connect": N}`: N more connections, held open;
 - `{"exit": CODE}`.
 
@@ -53,6 +53,8 @@ def main() -> int:
                     pass
             main_sock.setblocking(True)
             print("flooded", sent, flush=True)
+        elif "print" in step:
+            print(step["print"], flush=True)
         elif "sleep" in step:
             time.sleep(step["sleep"])
         elif "connect" in step:

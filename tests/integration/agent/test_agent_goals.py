@@ -12,7 +12,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import paho.mqtt.client as paho
 import pytest
+from paho.mqtt.enums import CallbackAPIVersion
 
 from contract.goals import MAX_TEXT, GoalsSummary, OutcomeRecord, OutcomeState
 from contract.wire import AgentState, Topics
@@ -395,3 +397,49 @@ def test_a_stale_socket_file_is_replaced(
     mode = (agent.workdir / "brain.sock").lstat().st_mode
     assert stat.S_ISSOCK(mode) and stat.S_IMODE(mode) == 0o600
     wait_for(lambda: "raw brain up" in agent.brain_log(), "the brain's output")
+
+
+def test_records_wait_while_the_broker_is_away(tmp_path: Path) -> None:
+    """Ended goals while the agent has no broker reach the reader once it is back: the agent
+    keeps them (the reader's persistent session keeps them at the broker's side)."""
+    broker = Mosquitto(tmp_path / "broker", persistence=True)
+    broker.start()
+    plan = [
+        {"send": HELLO},
+        {"send": READY},
+        {"sleep": 3.0},  # the broker is taken away meanwhile
+        *[goal(f"w{i}", "Delivery", state) for i in range(3) for state in ("started", "failed")],
+        {"print": "goals sent"},
+    ]
+    plan_path = tmp_path / "plan.json"
+    plan_path.write_text(json.dumps(plan), encoding="utf-8")
+    command = [sys.executable, str(RAW_BRAIN), str(plan_path), "{launch_request}"]
+    agent = AgentProc(tmp_path / "agent", broker.url, command=command)
+    reader = paho.Client(
+        CallbackAPIVersion.VERSION2, client_id="outcome-reader", clean_session=False
+    )
+    got: list[OutcomeRecord] = []
+    reader.on_connect = lambda c, *a: c.subscribe(Topics().all_goal_outcomes, qos=1)
+    reader.on_message = lambda c, u, m: got.append(OutcomeRecord.model_validate_json(m.payload))
+    reader.reconnect_delay_set(min_delay=1, max_delay=2)
+    watch = FleetWatch(broker.url)
+    try:
+        reader.connect(broker.host, broker.port)
+        reader.loop_start()
+        agent.start()
+        watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+        publish(broker.url, LAUNCH, make_request().payload())
+        agent.note_brain(watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent).pid)
+        broker.stop()
+        wait_for(lambda: "goals sent" in agent.brain_log(), "the goals sent without a broker")
+        broker.start()
+        wait_for(lambda: len(got) >= 3, "the records kept while the broker was away")
+        assert [(r.goal, r.outcome) for r in got[:3]] == [
+            (f"w{i}", OutcomeState.FAILED) for i in range(3)
+        ]
+    finally:
+        reader.disconnect()
+        reader.loop_stop()
+        watch.close()
+        agent.cleanup()
+        broker.kill()

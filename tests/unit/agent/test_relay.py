@@ -147,7 +147,7 @@ def test_the_summary_is_coalesced_to_its_interval() -> None:
     r.lines([goal("g", "started")], at(0.1))
     r.lines([goal("g", "progress", fraction=0.1)], at(0.2))
     assert r.publishes(at(0.3), True).summary is None
-    assert r.due() == 1.0
+    assert r.due(connected=True) == 1.0
     later = r.publishes(at(1.0), True).summary
     assert later is not None and later.current is not None and later.current.fraction == 0.1
     assert r.publishes(at(2.5), True).summary is None  # nothing changed
@@ -159,13 +159,15 @@ def test_nothing_is_sent_while_disconnected_and_records_wait() -> None:
     r = relay()
     r.lines([goal("g", "succeeded")], at(1))
     assert r.publishes(at(1), False).records == []
+    assert r.due(connected=False) is None  # nothing to wake up for: no busy loop
     assert len(r.publishes(at(2), True).records) == 1
 
 
 def test_a_goal_without_progress_goes_stale_once_and_may_end_later() -> None:
     r = relay(stale_after=10)
     r.lines([goal("g", "started")], at(0))
-    assert r.due() is not None and r.due() <= 10  # type: ignore[operator]
+    assert r.due(connected=True) == 0.0  # the summary
+    assert r.due(connected=False) == 10.0  # the goal's stale deadline alone
     r.tick(at(9))
     assert r.summary(at(9)).stale == 0
     r.tick(at(10))
