@@ -22,7 +22,14 @@ from agent.config import AgentConfig
 from agent.events import BrainExited, Inbox
 from agent.logs import LogStream
 from agent.supervisor import Effect, Kill, Reload, Spawn, Supervisor, Terminate, describe_exit
-from agent.workdir import PID_FILE, REQUEST_FILE, STAGED_FILE, remove_hold, write_atomic
+from agent.workdir import (
+    PID_FILE,
+    REQUEST_FILE,
+    SOCKET_FILE,
+    STAGED_FILE,
+    remove_hold,
+    write_atomic,
+)
 from contract.launch import LaunchRequest
 from contract.wire import AgentState
 
@@ -59,6 +66,7 @@ class BrainRunner:
                 "ROBOTCONF_LAUNCH_REQUEST": str(self.workdir / REQUEST_FILE),
                 "ROBOTCONF_ROBOT_ID": config.robot_id,
                 "ROBOTCONF_HOLD_FILE": str(hold_file),
+                "ROBOTCONF_BRAIN_SOCKET": str(self.workdir / SOCKET_FILE),
             }
         )
         self.brain: process.Brain | None = None

@@ -76,6 +76,8 @@ class BrokerLink:
         self.logs_request_topic = self.topics.logs_request(robot_id)
         self.logs_topic = self.topics.logs(robot_id)
         self.interfaces_topic = self.topics.interfaces(robot_id)
+        self.goals_topic = self.topics.goals(robot_id)
+        self.goal_outcomes_topic = self.topics.goal_outcomes(robot_id)
         # Every topic a robot may read (contract/topics.py): its launch, status, restart and
         # log request topics.
         self.reads = subscriptions(Role.ROBOT, prefix, robot_id=robot_id)
@@ -284,6 +286,14 @@ class BrokerLink:
     def publish_interfaces(self, payload: bytes) -> None:
         # Retained: a reader that comes later (the reconciler, `status`) needs the last report.
         self.client.publish(self.interfaces_topic, payload, qos=QOS, retain=True)
+
+    def publish_goals(self, payload: bytes) -> None:
+        # Retained: `status` and the browser read the robot's last summary whenever they come.
+        self.client.publish(self.goals_topic, payload, qos=QOS, retain=True)
+
+    def publish_outcome(self, payload: bytes) -> None:
+        # Not retained, QoS 1: the reconciler's ledger keeps every record, once each.
+        self.client.publish(self.goal_outcomes_topic, payload, qos=QOS, retain=False)
 
     def publish_logs(self, payload: bytes) -> None:
         # Not retained: an answer is for who asks now. Paced by LogStream, so QoS 1 costs

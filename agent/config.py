@@ -150,6 +150,32 @@ class LogConfig(StrictModel):
     backups: int = Field(default=3, ge=0, description="rotated copies kept: brain.log.1, ...")
 
 
+class GoalsConfig(StrictModel):
+    """Relaying the brain's goals, vitals and events (agent/relay.py): the bounds a brain
+    cannot pass, however it writes to its socket."""
+
+    stale_after: float = Field(
+        default=300.0,
+        gt=0,
+        description="seconds a goal underway may go without progress before it is stale "
+        "(once, with an outcome record; it may still end later)",
+    )
+    lines_per_second: float = Field(
+        default=50.0,
+        gt=0,
+        le=10_000,
+        description="lines a brain may write a second (twice that in a burst); more are "
+        "refused and counted in the summary's dropped",
+    )
+    records_per_second: float = Field(
+        default=10.0,
+        gt=0,
+        le=10_000,
+        description="outcome records a second (twice that in a burst); more are counted in "
+        "dropped, not sent",
+    )
+
+
 INTERFACES_EXAMPLE = "interfaces: {interval: 30}"
 # The default source runs three `ros2 ... list -t` (each a Python start, and the first one
 # may start the ROS 2 daemon): seconds, not milliseconds, on a small robot computer.
@@ -255,6 +281,9 @@ def _domain_id_problem(value: str) -> str | None:
 # short enough that a brain that forgets its hold file does not keep a fix from the robot long.
 DEFAULT_MAX_DEFER = 300.0
 MAX_MAX_DEFER = 86_400.0  # a day: beyond that a hold is a robot out of the fleet, not a task
+# Two minutes: a ROS 2 brain bringing up Nav2 and its maps takes tens of seconds on a small
+# computer; one that has not said ready by then is wedged, and a restart is the answer.
+DEFAULT_READY_TIMEOUT = 120.0
 
 
 class AgentConfig(StrictModel):
@@ -274,14 +303,21 @@ class AgentConfig(StrictModel):
     )
     workdir: Path = Field(
         strict=False,
-        description="where launch-request.json (mode 0600), brain.log, brain.pid and agent.seq "
-        "live; created if missing, must be writable",
+        description="where launch-request.json (mode 0600), brain.log, brain.pid, brain.sock "
+        "and agent.seq live; created if missing, must be writable",
     )
     stop_timeout: float = Field(
         default=10.0, gt=0, description="seconds from SIGTERM (to the brain's group) to SIGKILL"
     )
     startsecs: float = Field(
         default=1.0, ge=0, description="seconds the brain must stay up to count as running"
+    )
+    ready_timeout: float = Field(
+        default=DEFAULT_READY_TIMEOUT,
+        ge=0,
+        description="seconds a brain that said hello on its socket has to say ready; past "
+        "them it is stopped and counts as a failed start (the restart policy applies); 0: it "
+        "may take as long as it likes (starting until then)",
     )
     max_defer: float = Field(
         default=DEFAULT_MAX_DEFER,
@@ -324,6 +360,10 @@ class AgentConfig(StrictModel):
     interfaces: InterfacesConfig | None = Field(
         None,
         description="report the robot's ROS interfaces; absent: none reported (unknown)",
+    )
+    goals: GoalsConfig = Field(
+        default_factory=lambda: GoalsConfig(),
+        description="the bounds of relaying the brain's goals, vitals and events",
     )
 
     @field_validator("broker")
@@ -455,6 +495,7 @@ _SECTIONS: dict[Loc, type[BaseModel]] = {
     ("log",): LogConfig,
     ("reload",): ReloadConfig,
     ("interfaces",): InterfacesConfig,
+    ("goals",): GoalsConfig,
 }
 
 _HINTS: dict[str, str] = {

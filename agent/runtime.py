@@ -37,6 +37,7 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
+from agent.goals_report import GoalsReport
 from agent.interfaces_report import InterfacesReport
 from agent.logs import LogStream, Redactor
 from agent.status_report import StatusReport
@@ -68,6 +69,7 @@ def policy_of(config: AgentConfig) -> Policy:
         backoff_max=config.restart.backoff_max,
         reset_after=config.restart.reset_after,
         startsecs=config.startsecs,
+        ready_timeout=config.ready_timeout,
         stop_timeout=config.stop_timeout,
         reload_signal=None if config.reload is None else signal.Signals[config.reload.signal],
         max_defer=config.max_defer,
@@ -119,6 +121,7 @@ class Agent:
         self.interfaces = InterfacesReport.of(
             config, self.runner.introspection_env, redactor_of(config), self.link
         )
+        self.goals = GoalsReport(config, self.link, self.supervisor)
         self.status = StatusReport(self.link, self.supervisor, self.seq, self._interfaces_error)
         self.desk = DeskRequests(
             config.robot_id,
@@ -150,6 +153,7 @@ class Agent:
         if recovered:
             log.warning("%s", recovered)
             self.supervisor.message = recovered
+        self.goals.begin()  # before any brain starts: it finds its socket there
         url = self.config.connection().address.url
         log.info("agent for %s connecting to %s", self.config.robot_id, url)
         self.link.start()
@@ -163,6 +167,7 @@ class Agent:
         readable = writable = False
         probe_fds = self.interfaces.watches() if self.interfaces is not None else {}
         probe_ready: list[int] = []
+        goals_ready: set[int] = set()
         for fd, mask in ready.items():
             if fd == self.inbox.fileno():
                 self.inbox.clear_wakeups()
@@ -171,12 +176,14 @@ class Agent:
                 self.inbox.put_local(BrainExited(brain.pid, brain.reap()))
             elif fd in probe_fds:
                 probe_ready.append(fd)
+            elif self.goals.owns(fd):
+                goals_ready.add(fd)
             else:
                 readable = bool(mask & selectors.EVENT_READ)
                 writable = bool(mask & selectors.EVENT_WRITE)
         self.link.service(readable, writable, time.monotonic())
+        handled = self._goals_read(goals_ready) if goals_ready else False
         # Everything that arrived together is handled before one status goes out.
-        handled = False
         while (event := self.inbox.pop()) is not None:
             self._handle_guarded(event, time.monotonic())
             handled = True
@@ -191,6 +198,7 @@ class Agent:
         if self.status.connected:
             self.desk.send_logs(now)
         self.runner.tell_deferral()
+        self._goals_publish(now)
         report = self.status.held_until
         if handled or (report is not None and now >= report):
             # The status changes with events and deadlines, nothing else.
@@ -214,6 +222,8 @@ class Agent:
         if self.interfaces is not None:
             for fd, identity in self.interfaces.watches().items():
                 wanted[fd] = (selectors.EVENT_READ, identity)
+        for fd, identity in self.goals.watches(time.monotonic()).items():
+            wanted[fd] = (selectors.EVENT_READ, identity)
         return wanted
 
     def due(self) -> float:
@@ -237,9 +247,14 @@ class Agent:
         link = self.link.wait_limit(now)
         if link is not None:
             due = min(due, now + link)
+        goals = self.goals.due(now, self.status.connected)
+        if goals is not None:
+            due = min(due, goals)
         return due
 
     def end(self) -> None:
+        self._goals_publish(time.monotonic(), final=True)
+        self.goals.close()
         final = self.status.final()
         if self.interfaces is not None:
             self.interfaces.close()
@@ -264,6 +279,7 @@ class Agent:
         self._last_connect_problem = None
         log.info("connected (seq %d)", event.seq)
         self.link.publish_description(self.description)
+        self.goals.connected()
         if self.interfaces is not None:
             self.interfaces.republish()
         self.status.publish(force=True)
@@ -338,6 +354,30 @@ class Agent:
         """The supervisor's effects, each carried out with what it answers, in order."""
         for effect in effects:
             self._apply(self.runner.carry_out(effect))
+
+    # ------------------------------------------------------------ the brain's goals
+    # Guarded like an event: whatever a brain writes, a bug in relaying it is logged and the
+    # loop goes on.
+
+    def _goals_read(self, ready: set[int]) -> bool:
+        """Reads the brain's socket; True when its readiness changed the supervisor."""
+        try:
+            now = time.monotonic()
+            signals = self.goals.read(ready, now)
+            if not signals:
+                return False
+            self._apply(self.goals.tell(signals, now))
+            return True
+        except Exception:
+            log.exception("internal error while reading the brain's socket")
+            return False
+
+    def _goals_publish(self, now: float, final: bool = False) -> None:
+        try:
+            self.goals.follow(now)
+            self.goals.publish(now, self.status.connected, final)
+        except Exception:
+            log.exception("internal error while relaying the brain's goals")
 
     def _interfaces_error(self) -> str | None:
         return self.interfaces.error if self.interfaces is not None else None

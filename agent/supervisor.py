@@ -57,6 +57,7 @@ class Policy:
     backoff_max: float = 60.0
     reset_after: float = 60.0
     startsecs: float = 1.0
+    ready_timeout: float = 120.0  # after a hello, seconds to say ready; 0: no limit
     stop_timeout: float = 10.0
     reload_signal: signal.Signals | None = None  # None: every new request restarts
     max_defer: float = 0.0  # seconds the hold file may defer a stop; 0: never deferred
@@ -123,6 +124,13 @@ class Supervisor:
         self.restart_requested_at: float | None = None
         self._started_at = 0.0
         self._killed = False
+        # Readiness (docs/architecture.md#the-agents-states): a brain that said hello on its
+        # socket is `starting` until it says ready, not until startsecs have passed; one that
+        # does not say it within ready_timeout is stopped, and that counts as a failed start.
+        self._hello = False
+        self._hello_at = 0.0
+        self._ready = False
+        self._unready_stop = False
         # While DEFERRED: the phase it interrupted, the monotonic time it proceeds anyway, since
         # when (wall clock), and a restart from the desk that waits (who asked, issued when).
         self._phase_before = AgentState.RUNNING
@@ -243,6 +251,7 @@ class Supervisor:
     def spawned(self, pid: int, now: float) -> list[Effect]:
         self.pid = pid
         self._killed = False
+        self._hello = self._ready = self._unready_stop = False
         self._started_at = now
         self.exit_code = None
         if self.policy.startsecs <= 0:
@@ -272,7 +281,18 @@ class Supervisor:
             # never deferred), as after a stop: the desired request starts, or none.
             self._end_deferral()
             self.phase = AgentState.STOPPING
-        if self.phase == AgentState.STOPPING or self.shutting_down:
+        # Stopped because it never said ready, and nothing else asked for the stop since: a
+        # failed start, which the restart policy answers as it answers a crash.
+        unready = (
+            self._unready_stop
+            and self.phase == AgentState.STOPPING
+            and not self.shutting_down
+            and self.desired is self.brain
+        )
+        self._unready_stop = False
+        if unready:
+            how = f"was not ready within {self.policy.ready_timeout:g} s (ready_timeout)"
+        elif self.phase == AgentState.STOPPING or self.shutting_down:
             if self.shutting_down:
                 self._enter(AgentState.IDLE, f"brain stopped ({how})")
                 return []
@@ -283,12 +303,13 @@ class Supervisor:
             self.reloads = 0
             self._enter(AgentState.IDLE, "no launch request for this robot")
             return []
-        if now - self._started_at >= self.policy.reset_after:
-            self.streak = 0
+        if not unready and now - self._started_at >= self.policy.reset_after:
+            self.streak = 0  # a brain that never became ready was never healthy
         policy = self.policy
-        restart = policy.restart == "always" or (policy.restart == "on-failure" and code != 0)
+        failed = code != 0 or unready
+        restart = policy.restart == "always" or (policy.restart == "on-failure" and failed)
         if not restart:
-            self._enter(AgentState.EXITED if code == 0 else AgentState.FAILED, f"brain {how}")
+            self._enter(AgentState.FAILED if failed else AgentState.EXITED, f"brain {how}")
             return []
         if self.streak >= policy.max_restarts:
             self._enter(
@@ -329,6 +350,7 @@ class Supervisor:
         self.restart_requested_at = issued_at
         self.restarts = 0
         self.streak = 0
+        self._unready_stop = False  # asked for: its exit starts the brain again at once
         why = f"restart requested by {requested_by}"
         if self.pid is not None:
             if self.phase == AgentState.STOPPING:
@@ -345,7 +367,15 @@ class Supervisor:
         if self.phase == AgentState.DEFERRED:
             return self._look_at_hold(now)
         if self.phase == AgentState.STARTING and self.pid is not None:
-            self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
+            if not self._hello:
+                self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
+            elif not self._ready:
+                self._unready_stop = True
+                return self._begin_stop(
+                    now,
+                    f"brain pid {self.pid} said hello but not ready within "
+                    f"{self.policy.ready_timeout:g} s (ready_timeout): stopping it",
+                )
         elif self.phase == AgentState.STOPPING and self.pid is not None and not self._killed:
             self._killed = True
             self.message = (
@@ -356,6 +386,36 @@ class Supervisor:
         elif self.phase == AgentState.BACKOFF and self.desired is not None:
             self.restarts += 1
             return self._spawn(now)
+        return []
+
+    def hello(self, now: float) -> list[Effect]:
+        """The running brain said hello on its socket: from now on it is healthy from its
+        `ready`, not from startsecs. One that counted as running already (it took longer than
+        startsecs to connect) is `starting` again until then."""
+        if self.pid is None or self.shutting_down or self._hello or self._ready:
+            return []
+        self._hello = True
+        self._hello_at = now
+        if self.phase == AgentState.RUNNING:
+            self.phase = AgentState.STARTING
+        elif self.phase == AgentState.DEFERRED and self._phase_before == AgentState.RUNNING:
+            self._phase_before = AgentState.STARTING
+        if self.phase == AgentState.STARTING:
+            self.deadline = self._starting_deadline()
+            self._enter(AgentState.STARTING, self._starting_message())
+        return []
+
+    def ready(self, now: float) -> list[Effect]:
+        """The running brain said ready (as systemd's READY=1): it is `running`."""
+        if self.pid is None or self.shutting_down or self._ready:
+            return []
+        self._ready = True
+        self._hello = True
+        if self.phase == AgentState.STARTING:
+            self.deadline = None
+            self._enter(AgentState.RUNNING, f"running (pid {self.pid}, ready)")
+        elif self.phase == AgentState.DEFERRED and self._phase_before == AgentState.STARTING:
+            self._phase_before = AgentState.RUNNING
         return []
 
     def shutdown(self, now: float) -> list[Effect]:
@@ -500,8 +560,8 @@ class Supervisor:
         """Back to what the brain was doing: nothing waits any more."""
         self._end_deferral()
         if self._phase_before == AgentState.STARTING and self.pid is not None:
-            self.deadline = self._started_at + self.policy.startsecs
-            self._enter(AgentState.STARTING, f"started pid {self.pid}")
+            self.deadline = self._starting_deadline()
+            self._enter(AgentState.STARTING, self._starting_message())
         else:
             self.deadline = None
             self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
@@ -510,6 +570,22 @@ class Supervisor:
         self._defer_until = None
         self._deferred_since = None
         self._pending_restart = None
+
+    def _starting_deadline(self) -> float | None:
+        """When `tick` looks at a starting brain: startsecs after its start, or, once it said
+        hello, ready_timeout after the hello (never, with ready_timeout 0)."""
+        if not self._hello:
+            return self._started_at + self.policy.startsecs
+        if self.policy.ready_timeout <= 0:
+            return None
+        return self._hello_at + self.policy.ready_timeout
+
+    def _starting_message(self) -> str:
+        if not self._hello:
+            return f"started pid {self.pid}"
+        limit = self.policy.ready_timeout
+        within = f" (ready_timeout {limit:g} s)" if limit > 0 else ""
+        return f"brain pid {self.pid} said hello; starting until it says ready{within}"
 
     def _forget_desk_restart(self) -> None:
         """A restart from the desk is shown (`restart: ROBOT by WHO at WHEN`) only while it is

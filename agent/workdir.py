@@ -25,6 +25,7 @@ LOCK_FILE = "agent.lock"
 ISSUED_FILE = "newest-issued-at"
 RESTART_ISSUED_FILE = "newest-restart-issued-at"  # the restarts' watermark (RestartLedger)
 RESTARTS_AHEAD_FILE = "restarts-ahead"  # restarts carried out that were dated ahead of the clock
+SOCKET_FILE = "brain.sock"  # the brain's reports (ROBOTCONF_BRAIN_SOCKET), mode 0600
 HOLD_FILE = "brain.hold"  # the brain's "not now" (ROBOTCONF_HOLD_FILE): defers a stop
 
 

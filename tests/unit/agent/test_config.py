@@ -334,3 +334,26 @@ def test_a_wrong_type_reads_naturally(tmp_path: Path, value: str, expected: str)
     text = GOOD.replace("max_restarts: 5", f"max_restarts: {value}")
     line = next(n for n, row in enumerate(text.splitlines(), 1) if row.startswith("restart:"))
     assert problems(tmp_path, text) == [f"{line}: {expected}"]
+
+
+def test_the_goals_relay_settings_and_ready_timeout(tmp_path: Path) -> None:
+    default = load_config(write(tmp_path, GOOD))
+    assert default.ready_timeout == 120.0
+    assert (default.goals.stale_after, default.goals.lines_per_second) == (300.0, 50.0)
+    config = load_config(
+        write(
+            tmp_path,
+            GOOD + "ready_timeout: 0\ngoals: {stale_after: 30, records_per_second: 2}\n",
+        )
+    )
+    assert config.ready_timeout == 0 and config.goals.stale_after == 30
+    assert config.goals.records_per_second == 2 and config.goals.lines_per_second == 50
+
+
+def test_bad_goals_settings_are_located_lines(tmp_path: Path) -> None:
+    found = problems(tmp_path, GOOD + "goals:\n  stale_after: 0\n  lines_per_secnd: 5\n")
+    assert any(line.startswith("9:") and "stale_after" in line for line in found), found
+    assert any(
+        line.startswith("10:") and "did you mean 'lines_per_second'" in line for line in found
+    ), found
+    assert problems(tmp_path, GOOD + "ready_timeout: -1\n")[0].startswith("8:")

@@ -630,3 +630,93 @@ def test_a_reload_keeps_the_desk_restart_and_a_cleared_request_forgets_it() -> N
     assert sup.status().reloads == 1 and sup.status().restart_requested_by == "alice"
     sup.clear(6.0)
     assert sup.status().restart_requested_by is None
+
+
+# ---------------------------------------------------------------- readiness (issue 30)
+
+
+def test_a_brain_that_said_hello_is_starting_until_ready() -> None:
+    sup = supervisor(startsecs=1.0, ready_timeout=30.0)
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    sup.hello(0.2)
+    assert sup.state == AgentState.STARTING and "said hello" in sup.message
+    assert sup.deadline == 30.2  # the ready_timeout, from the hello; startsecs no longer
+    assert sup.tick(1.0) == [] and sup.state == AgentState.STARTING
+    sup.ready(5.0)
+    assert sup.state == AgentState.RUNNING and sup.deadline is None
+    assert "ready" in sup.message
+
+
+def test_a_hello_after_startsecs_is_starting_again_until_ready() -> None:
+    sup = running(supervisor(ready_timeout=30.0))
+    sup.hello(3.0)
+    assert sup.state == AgentState.STARTING and sup.deadline == 33.0
+    sup.ready(4.0)
+    assert sup.state == AgentState.RUNNING
+    sup.hello(5.0)  # a reconnection: readiness was said already
+    assert sup.state == AgentState.RUNNING
+
+
+def test_no_ready_within_ready_timeout_is_a_failed_start() -> None:
+    sup = supervisor(ready_timeout=10.0, max_restarts=1, reset_after=5.0)
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    sup.hello(0.1)
+    assert sup.tick(10.1) == [Terminate(100)]
+    assert sup.state == AgentState.STOPPING and "not ready within 10 s" in sup.message
+    sup.exited(100, -15, 10.2)
+    # A failure although it ran past reset_after: it was never healthy.
+    assert sup.state == AgentState.BACKOFF
+    assert "not ready within 10 s (ready_timeout)" in sup.message
+    assert sup.tick(sup.deadline or 0) == [Spawn(A)]
+    sup.spawned(101, 12.0)
+    sup.hello(12.0)
+    assert sup.tick(22.0) == [Terminate(101)]
+    sup.exited(101, 0, 22.1)  # even a clean exit after the stop
+    assert sup.state == AgentState.FAILED and "gave up after 1 restarts" in sup.message
+
+
+def test_no_ready_under_policy_never_is_failed() -> None:
+    sup = supervisor(ready_timeout=1.0, restart="never")
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    sup.hello(0.0)
+    sup.tick(1.0)
+    sup.exited(100, -15, 1.1)
+    assert sup.state == AgentState.FAILED
+
+
+def test_a_new_request_during_an_unready_stop_starts_at_once() -> None:
+    sup = supervisor(ready_timeout=1.0)
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    sup.hello(0.0)
+    sup.tick(1.0)
+    assert sup.accept(B, [], 1.1) == []
+    assert sup.exited(100, -15, 1.2) == [Spawn(B)]
+
+
+def test_ready_timeout_zero_waits_for_ready_as_long_as_it_takes() -> None:
+    sup = supervisor(ready_timeout=0.0)
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    sup.hello(0.0)
+    assert sup.deadline is None and sup.tick(1e6) == []
+    assert sup.state == AgentState.STARTING
+
+
+def test_ready_without_hello_and_a_brain_without_either() -> None:
+    sup = supervisor()
+    sup.accept(A, [], 0.0)
+    sup.spawned(100, 0.0)
+    sup.ready(0.1)
+    assert sup.state == AgentState.RUNNING
+    plain = running(supervisor())  # no hello: startsecs, as ever
+    assert plain.state == AgentState.RUNNING
+
+
+def test_hello_and_ready_without_a_brain_change_nothing() -> None:
+    sup = supervisor()
+    assert sup.hello(0.0) == [] and sup.ready(0.0) == []
+    assert sup.state == AgentState.IDLE
