@@ -328,6 +328,8 @@ class Ledger:
                 if cursor.rowcount == 1:
                     kept.append(record)
                     revisions[revision] = None
+            duplicates = len(records) - len(kept)
+            kept = self._supersede_stale(kept)
             db.executemany(_TALLY, _tallies(kept))
             db.executemany(
                 "INSERT INTO revisions (revision, first_seen, last_seen) VALUES (?, ?, ?) "
@@ -335,7 +337,39 @@ class Ledger:
                 [(revision, now, now) for revision in revisions],
             )
             events = self._advance_streaks(kept, streak) if streak is not None else []
-        return Added(kept, len(records) - len(kept), events)
+        return Added(kept, duplicates, events)
+
+    def _supersede_stale(self, kept: list[OutcomeRecord]) -> list[OutcomeRecord]:
+        """A goal the agent called stale that ended after all (its end comes later in the same
+        run, with a higher seq) is counted by its end alone: its stale record goes, from the
+        tallies too. Returns `kept` less the stale records of this batch that went."""
+        db = self._db
+        batch = {(r.robot_id, r.run, r.seq) for r in kept}
+        gone: set[tuple[str, str, int]] = set()
+        for record in kept:
+            if record.outcome is OutcomeState.STALE:
+                continue
+            rows = db.execute(
+                f"SELECT id, seq, {_TALLY_KEY}, duration FROM outcomes WHERE robot_id = ? "
+                "AND run = ? AND goal = ? AND outcome = 'stale' AND seq < ?",
+                (record.robot_id, record.run, record.goal, record.seq),
+            ).fetchall()
+            for row_id, seq, *key, duration in rows:
+                db.execute("DELETE FROM outcomes WHERE id = ?", (row_id,))
+                found = (record.robot_id, record.run, seq)
+                gone.add(found)
+                if found in batch:
+                    continue  # of this batch: not tallied yet
+                db.execute(
+                    "UPDATE tallies SET count = count - 1, duration_sum = duration_sum - ?, "
+                    "durations = durations - ? WHERE revision = ? AND scenario = ? AND "
+                    "task = ? AND robot_id = ? AND outcome = ? AND code = ?",
+                    (duration or 0.0, int(duration is not None), *key),
+                )
+        if not gone:
+            return kept
+        db.execute("DELETE FROM tallies WHERE count <= 0")
+        return [r for r in kept if (r.robot_id, r.run, r.seq) not in gone]
 
     def _advance_streaks(self, kept: list[OutcomeRecord], threshold: int) -> list[StreakEvent]:
         robots = sorted({record.robot_id for record in kept})

@@ -202,3 +202,27 @@ def test_the_tallies_kept_beside_agree_with_the_outcomes(ledger: Ledger) -> None
             )
         ledger.prune(max_age=10**9, max_records=3000, now=300.0)  # and after pruning
     assert ledger.report(A).tally.total == 1100 and ledger.report(B).tally.total == 1900
+
+
+def test_a_stale_goal_that_ends_after_all_is_counted_by_its_end(ledger: Ledger) -> None:
+    # The agent calls goal g0 stale (seq 0), then the brain ends it (seq 5, same run and goal):
+    # one goal, counted once, as it ended; in one batch or across two.
+    stale = record(0, outcome=OutcomeState.STALE)
+    ended = record(5, outcome=OutcomeState.FAILED).model_copy(update={"goal": "g0"})
+    ledger.add([stale], received_at=1000.0)
+    assert ledger.report(A).tally.stale == 1
+    ledger.add([ended], received_at=1001.0)
+    tally = ledger.report(A).tally
+    assert (tally.stale, tally.failed, tally.total) == (0, 1, 1)
+    assert ledger.count() == 1
+    # Both in one batch, with another goal that only went stale (it stays stale).
+    other_stale = record(7, outcome=OutcomeState.STALE).model_copy(update={"run": "run-2"})
+    only_stale = record(8, outcome=OutcomeState.STALE).model_copy(update={"run": "run-2"})
+    other_end = record(9).model_copy(update={"run": "run-2", "goal": "g7"})
+    added = ledger.add([other_stale, only_stale, other_end], received_at=1002.0)
+    assert added.duplicates == 0
+    tally = ledger.report(A).tally
+    assert (tally.stale, tally.failed, tally.succeeded, tally.total) == (1, 1, 1, 3)
+    assert ledger.count() == 3
+    # The tallies agree with the rows.
+    assert ledger.report(A, since=0.0).tally == tally
