@@ -1,7 +1,10 @@
 """A stand-in brain service for demos and tests: `python -m agent.standin_brain REQUEST.json`.
 
-It loads nothing real: it prints what a brain would load, runs until signalled, reloads on
-SIGHUP; asked to, it holds its agent off with the hold file (`--hold`, `--hold-while`).
+It loads nothing real: it prints what a brain would load, says it is ready, runs its scenario's
+goal tasks as goals through `robotconf.brain` (each taking STANDIN_GOAL_SECONDS, succeeding at
+the rate STANDIN_SUCCESS_RATE, both from the scenario's knowledge), runs until signalled and
+reloads on SIGHUP; asked to, it holds its agent off with the hold file (`--hold`,
+`--hold-while`).
 """
 
 from __future__ import annotations
@@ -50,6 +53,13 @@ def describe(request: LaunchRequest, environ: Mapping[str, str]) -> list[str]:
 
 
 CRASH_KEY = "STANDIN_CRASH"
+# Knowledge keys of a scenario that shape the stand-in's goals, so that a commit can lower the
+# success rate and `status`, `history` and the browser show it.
+SUCCESS_RATE_KEY = "STANDIN_SUCCESS_RATE"  # 0..1, the share of goals that succeed (default 1)
+GOAL_SECONDS_KEY = "STANDIN_GOAL_SECONDS"  # how long one goal takes (default 5 s)
+FAILURE_CODE = "STANDIN_FAILED"
+DEFAULT_GOAL_SECONDS = 5.0
+PROGRESS_STEPS = 5  # progress reports per goal
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -151,6 +161,72 @@ def _crash_code(request: LaunchRequest) -> int | None:
     return crash if isinstance(crash, int) and not isinstance(crash, bool) else 1
 
 
+def _number(
+    knowledge: Mapping[str, object], key: str, default: float, low: float, high: float
+) -> float:
+    value = knowledge.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return default
+    return min(high, max(low, float(value)))
+
+
+def goal_plan(request: LaunchRequest) -> tuple[list[str], float, float]:
+    """(goal tasks, success rate, seconds a goal) the stand-in runs for `request`."""
+    knowledge = request.scenario.environment_knowledge
+    rate = _number(knowledge, SUCCESS_RATE_KEY, 1.0, 0.0, 1.0)
+    seconds = _number(knowledge, GOAL_SECONDS_KEY, DEFAULT_GOAL_SECONDS, 0.05, 3600.0)
+    return [goal.task for goal in request.scenario.goals], rate, seconds
+
+
+def run_goals(current: list[LaunchRequest], stop: threading.Event) -> None:
+    """The scenario's goal tasks, one after another, round and round: each reports progress
+    and ends succeeded or failed as the (current, reloaded) request's knowledge asks."""
+    import random
+
+    from robotconf import brain
+
+    chance = random.Random()
+    battery = 1.0
+    while not stop.is_set():
+        tasks, rate, seconds = goal_plan(current[0])
+        if not tasks:
+            stop.wait(1.0)
+            continue
+        for task in tasks:
+            goal = brain.goal(task)
+            for step in range(1, PROGRESS_STEPS + 1):
+                if stop.wait(seconds / PROGRESS_STEPS):
+                    goal.canceled()
+                    return
+                left = seconds * (PROGRESS_STEPS - step) / PROGRESS_STEPS
+                goal.progress(step / PROGRESS_STEPS, eta=left)
+            if chance.random() < rate:
+                goal.succeeded()
+            else:
+                goal.failed(FAILURE_CODE, f"failed as {SUCCESS_RATE_KEY} {rate:g} asks")
+            battery = max(0.05, battery - 0.01)
+            brain.vitals({"battery": round(battery, 2)})
+            tasks, rate, seconds = goal_plan(current[0])  # a reload applies from the next goal
+
+
+def _start_work(
+    args: argparse.Namespace, request: LaunchRequest, stop: threading.Event
+) -> list[LaunchRequest]:
+    """Ready, then the goals (and the hold, when asked) on threads of their own; returns the
+    request they follow, which a reload replaces in place."""
+    from robotconf import brain
+
+    brain.ready()  # nothing to set up: ready at once (a real brain says it once it can work)
+    current = [request]
+    threading.Thread(target=run_goals, args=(current, stop), daemon=True).start()
+    held = os.environ.get(HOLD_VARIABLE)
+    if held and (args.hold is not None or args.hold_while is not None):
+        threading.Thread(
+            target=hold, args=(Path(held), args.hold, args.hold_while, stop), daemon=True
+        ).start()
+    return current
+
+
 def main(argv: list[str]) -> int:
     stop = threading.Event()
     wake = threading.Event()
@@ -186,18 +262,20 @@ def main(argv: list[str]) -> int:
         print(f"stand-in brain: crashing with code {crash}, as {CRASH_KEY} asks", flush=True)
         return crash
 
-    held = os.environ.get(HOLD_VARIABLE)
-    if held and (args.hold is not None or args.hold_while is not None):
-        threading.Thread(
-            target=hold, args=(Path(held), args.hold, args.hold_while, stop), daemon=True
-        ).start()
+    current = _start_work(args, request, stop)
     deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
     while not stop.is_set():
         if reloads:
             reloads.clear()  # several signals before it looked: one reading is enough
             with contextlib.suppress(OSError):  # the log may be gone
-                request = _reload(args.request, request)
+                request = current[0] = _reload(args.request, request)
                 sys.stdout.flush()
+            crash = _crash_code(request)
+            if crash is not None:  # a settings-only change reloads: the rehearsal still crashes
+                print(
+                    f"stand-in brain: crashing with code {crash}, as {CRASH_KEY} asks", flush=True
+                )
+                return crash
             continue
         remaining = None if deadline is None else deadline - time.monotonic()
         if remaining is not None and remaining <= 0:

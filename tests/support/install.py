@@ -11,7 +11,7 @@ from pathlib import Path
 
 from tests.support.lab import ROOT
 
-PACKAGES = ("contract", "configurator", "reconciler", "workstation", "agent")
+PACKAGES = ("contract", "configurator", "reconciler", "workstation", "agent", "robotconf")
 INSTALL_TIMEOUT = 600
 
 

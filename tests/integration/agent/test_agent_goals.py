@@ -152,7 +152,9 @@ def check_records(records: list[OutcomeRecord], summary: GoalsSummary, digest: s
 def test_a_brain_that_never_says_hello_keeps_startsecs_and_its_goals_are_unknown(
     mosquitto: Mosquitto, watch: FleetWatch, goals: GoalsWatch, make_agent: AgentFactory
 ) -> None:
-    agent = make_agent().start()  # the stand-in brain, which does not speak the wire here
+    # A brain that knows nothing of the library (the stand-in speaks it now).
+    silent = [sys.executable, "-c", "import time; time.sleep(3600)", "{launch_request}"]
+    agent = make_agent(command=silent).start()
     watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
     digest = launch(mosquitto)
     running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=digest)

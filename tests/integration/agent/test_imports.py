@@ -14,7 +14,7 @@ ON_DEMAND = ["cryptography"]
 def test_agent_imports_nothing_from_the_server_side() -> None:
     code = (
         "import json, sys\n"
-        "import agent.cli, agent.runtime, agent.standin_brain\n"
+        "import agent.cli, agent.runtime, agent.standin_brain, robotconf.brain\n"
         "print(json.dumps(sorted(sys.modules)))\n"
     )
     result = subprocess.run(

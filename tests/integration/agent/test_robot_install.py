@@ -43,6 +43,10 @@ def test_the_robot_install_brings_only_the_three_libraries(robot_env: Path) -> N
     assert not installed & SERVER_ONLY, installed & SERVER_ONLY
     where = run([str(robot_env / "bin" / "python"), "-c", "import agent; print(agent.__file__)"])
     assert where.startswith(str(robot_env)), where
+    # The brain library is the robot side's too: it imports with the three alone.
+    code = "import sys, robotconf.brain as b; print(b.__file__, 'click' in sys.modules)"
+    where, click = run([str(robot_env / "bin" / "python"), "-c", code]).split()
+    assert where.startswith(str(robot_env)) and click == "False", where
 
 
 def test_the_workstation_commands_say_what_to_install(robot_env: Path) -> None:
