@@ -211,6 +211,9 @@ def _droppable(line: bytes) -> bool:
     ) or b'"state":"progress"' in line
 
 
+_READY = b'{"v":1,"type":"ready"'
+
+
 class Link:
     """The brain's side of the socket: lines queued, sent by a daemon thread, never blocking
     the caller. One per process (`_link()`), or made by tests."""
@@ -242,7 +245,7 @@ class Link:
             self._local(line)
             return
         with self._lock:
-            if isinstance(line, bytes) and line.startswith(b'{"v":1,"type":"ready"'):
+            if line.startswith(_READY):
                 self._ready = True
             self._waiting.append(line)
             while len(self._waiting) > MAX_WAITING:
@@ -296,11 +299,11 @@ class Link:
             return False
         self._sock = sock
         hello = _line(Hello(type="hello", pid=os.getpid(), digest=self.digest, library=LIBRARY))
-        ready = [_line(Ready(type="ready"))] if self._ready else []
+        # A ready said before is said again to this agent, unless one waits to be sent.
+        again = self._ready and not any(line.startswith(_READY) for line in self._waiting)
+        ready = [_line(Ready(type="ready"))] if again else []
         self._partial = b""
-        # Those already waiting keep their order after hello (a ready among them is sent
-        # twice: harmless, the agent counts one).
-        self._waiting.extendleft(reversed([hello, *ready]))
+        self._waiting.extendleft(reversed([hello, *ready]))  # before those already waiting
         return True
 
     def _flush(self) -> None:
