@@ -319,7 +319,6 @@ def reconcile(
     kept = ledger_settings(mqtt.prefix, **ledger_options)
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
     log_to_stderr("reconciler")
-    ledger = start_ledger(connection, mqtt.prefix, kept, telemetry)
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
     # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.
     no_local = speaks_mqtt5(connection)
@@ -336,6 +335,12 @@ def reconcile(
     if webhook is not None:
         metrics = telemetry.metrics if telemetry is not None else None
         receiver = start_webhook(webhook, branch, controller.resync_now, metrics)
+    try:  # after the listeners: a port that cannot be had is the one line said
+        ledger = start_ledger(connection, mqtt.prefix, kept, telemetry)
+    except CliError:
+        if receiver is not None:
+            receiver.close()
+        raise
     ui = start_ui(ui_at_options, connection, mqtt.prefix, repo, kept.path)
     on_stop_signals(callback=controller.stop)
     _say_started(source, connection, mqtt.prefix, no_local)

@@ -73,6 +73,7 @@ def fleet_messages(robots: int) -> list[tuple[str, bytes]]:
             (TOPICS.status(robot), status.encode()),
             (TOPICS.description(robot), b"D" * 2000),
             (TOPICS.interfaces(robot), b"I" * 5000),
+            (TOPICS.goals(robot), b"G" * 2000),
         ]
     return items
 
@@ -95,7 +96,7 @@ def test_the_generated_queue_delivers_a_large_fleet_to_a_whole_fleet_reader(
     finally:
         view.stop()
     if generated:
-        assert settings == ["max_queued_messages 21000"]
+        assert settings == ["max_queued_messages 26000"]
         assert len(got) == len(items) and view.lost is None
     else:  # Mosquitto's default of 1,000: the reader is told, whatever it got
         assert len(got) < len(items) and view.lost is not None, len(got)
