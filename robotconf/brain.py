@@ -23,6 +23,7 @@ Robot-only: the standard library, pydantic and `contract` (docs/how-to/write-a-b
 
 from __future__ import annotations
 
+import atexit
 import collections
 import contextlib
 import itertools
@@ -71,6 +72,7 @@ LIBRARY = "robotconf.brain/1"
 MAX_WAITING = 256  # lines kept while the agent is slow or away; then the least needed go
 RETRY_EVERY = 1.0  # seconds between attempts to reach the agent's socket
 SEND_EVERY = 0.2  # seconds between the sender's looks while lines wait
+EXIT_FLUSH = 1.0  # seconds a brain's exit waits, at most, for its last lines to go
 _LONGEST = 4 * MAX_TEXT  # the most text a line carries (the agent cuts further)
 
 
@@ -206,9 +208,11 @@ def _line(message: BaseModel) -> bytes:
 def _droppable(line: bytes) -> bool:
     """Progress, vitals and events may go when the buffer is full; starts, ends, hello and
     ready are kept as long as anything can be."""
-    return line.startswith(b'{"v":1,"type":"vitals"') or line.startswith(
-        b'{"v":1,"type":"event"'
-    ) or b'"state":"progress"' in line
+    return (
+        line.startswith(b'{"v":1,"type":"vitals"')
+        or line.startswith(b'{"v":1,"type":"event"')
+        or b'"state":"progress"' in line
+    )
 
 
 _READY = b'{"v":1,"type":"ready"'
@@ -254,6 +258,17 @@ class Link:
             if self._waiting or self._partial:
                 self._start_sender()
                 self._wake.notify()
+
+    def drain(self, seconds: float = EXIT_FLUSH) -> None:
+        """Sends what waits, for at most `seconds` (at exit: a brain that ends its last goal
+        and returns should not lose that end)."""
+        deadline = time.monotonic() + seconds
+        while self.pending() and time.monotonic() < deadline:
+            with self._lock:
+                self._next_try = min(self._next_try, time.monotonic())
+                self._flush()
+            if self.pending():
+                time.sleep(0.02)
 
     def close(self) -> None:
         with self._lock:
@@ -357,6 +372,7 @@ def _link() -> Link:
                 report=os.environ.get(REPORT_ENV, "print"),
                 digest=os.environ.get(DIGEST_ENV) or None,
             )
+            atexit.register(_the_link.drain)
         return _the_link
 
 

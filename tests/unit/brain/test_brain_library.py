@@ -6,7 +6,10 @@ listener, a listener that never reads, one that goes away and comes back."""
 from __future__ import annotations
 
 import io
+import os
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -26,8 +29,9 @@ MESSAGE: TypeAdapter[object] = TypeAdapter(BrainMessage)
 class Listener:
     """The agent's side, reduced: accepts connections on a socket and keeps the lines."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, read_after: float = 0.0) -> None:
         self.path = path
+        self.read_after = read_after  # seconds a connection waits before it is read
         self.server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.server.bind(str(path))
         self.server.listen(4)
@@ -49,6 +53,7 @@ class Listener:
 
     def _read(self, conn: socket.socket) -> None:
         buffer = b""
+        self._stop.wait(self.read_after)
         conn.settimeout(0.1)
         with conn:
             while not self._stop.is_set():
@@ -222,3 +227,26 @@ def test_the_request_is_typed_and_a_bad_file_is_one_clear_error(tmp_path: Path) 
     (tmp_path / "bad.json").write_text('{"kind": "LaunchRequest"}')
     with pytest.raises(BrainError, match="is not a launch request: robot_id"):
         read_request(tmp_path / "bad.json")
+
+
+def test_a_brain_that_ends_its_goal_and_exits_at_once_loses_no_line(sock_path: Path) -> None:
+    # More than the socket's buffer holds, to an agent slow to read: the last lines still
+    # wait in the library as the brain returns, and go before the process ends.
+    listener = Listener(sock_path, read_after=0.5)
+    code = (
+        "from robotconf import brain\n"
+        "brain.ready()\n"
+        "g = brain.goal('Delivery')\n"
+        "for i in range(200): g.progress(i / 200, note='n' * 790)\n"
+        "g.failed('E_LAST', 'the very last line')\n"
+    )
+    env = {**os.environ, "ROBOTCONF_BRAIN_SOCKET": str(sock_path)}
+    try:
+        subprocess.run([sys.executable, "-c", code], env=env, check=True, timeout=30)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and b"E_LAST" not in b"".join(listener.lines):
+            time.sleep(0.05)
+        last = listener.messages()[-1]
+        assert isinstance(last, GoalLine) and last.code == "E_LAST"
+    finally:
+        listener.close()
