@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 from tests.support.agents import AgentProc
+from tests.support.goals_watch import GoalsWatch
 from tests.support.mosquitto import Mosquitto
 
 AgentFactory = Callable[..., AgentProc]
@@ -29,3 +30,13 @@ def make_agent(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[AgentFactory]:
     finally:
         for agent in made:
             agent.cleanup()
+
+
+@pytest.fixture
+def goals(mosquitto: Mosquitto) -> Iterator[GoalsWatch]:
+    """The robots' goals summaries and outcome records, as the broker sends them."""
+    watcher = GoalsWatch(mosquitto.url)
+    try:
+        yield watcher
+    finally:
+        watcher.close()

@@ -8,12 +8,10 @@ import os
 import signal
 import stat
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import paho.mqtt.client as paho
-import pytest
 from paho.mqtt.enums import CallbackAPIVersion
 
 from contract.goals import MAX_TEXT, GoalsSummary, OutcomeRecord, OutcomeState
@@ -37,15 +35,6 @@ def line(**fields: Any) -> dict[str, str]:
 
 def goal(id: str, task: str, state: str, **more: Any) -> dict[str, str]:
     return line(type="goal", id=id, task=task, state=state, **more)
-
-
-@pytest.fixture
-def goals(mosquitto: Mosquitto) -> Iterator[GoalsWatch]:
-    watcher = GoalsWatch(mosquitto.url)
-    try:
-        yield watcher
-    finally:
-        watcher.close()
 
 
 def raw_agent(

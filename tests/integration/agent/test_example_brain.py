@@ -9,10 +9,8 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
 from pydantic import TypeAdapter
 
 from contract.goals import BrainMessage, GoalLine, OutcomeState, Ready
@@ -36,15 +34,6 @@ def patrol_request() -> LaunchRequest:
     goals = [LaunchGoal(task="Delivery", location={"x": 1.0}), LaunchGoal(task="Patrol")]
     scenario = base.scenario.model_copy(update={"goals": goals})
     return make_launch_request(ROBOT, base.robot_name, base.revision, scenario)
-
-
-@pytest.fixture
-def goals(mosquitto: Mosquitto) -> Iterator[GoalsWatch]:
-    watcher = GoalsWatch(mosquitto.url)
-    try:
-        yield watcher
-    finally:
-        watcher.close()
 
 
 def test_the_page_shows_the_example_as_it_is() -> None:

@@ -4,10 +4,7 @@ knowledge sets, and a new request with another rate starts new counts."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
-
-import pytest
 
 from agent.standin_brain import FAILURE_CODE, GOAL_SECONDS_KEY, SUCCESS_RATE_KEY
 from contract.goals import OutcomeState
@@ -18,15 +15,6 @@ from tests.support.agents import ROBOT, make_request, publish
 from tests.support.goals_watch import GoalsWatch
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch
-
-
-@pytest.fixture
-def goals(mosquitto: Mosquitto) -> Iterator[GoalsWatch]:
-    watcher = GoalsWatch(mosquitto.url)
-    try:
-        yield watcher
-    finally:
-        watcher.close()
 
 
 def with_goals(rate: float, revision: str) -> LaunchRequest:
