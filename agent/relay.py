@@ -45,25 +45,23 @@ from contract.goals import (
     VitalValue,
 )
 from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable
+from contract.textsafe import printable, shorten
 
 MAX_OPEN_GOALS = 32  # goals underway at once; a start beyond is refused (and counted)
 MAX_PENDING_RECORDS = 1000  # records kept while the broker is away; the oldest go first
 MAX_LINE_DEPTH = 4  # a line's JSON nesting: {"values": {...}} is 2
-ELLIPSIS = "…"
 
 _LINE: TypeAdapter[Hello | Ready | GoalLine | VitalsLine | EventLine] = TypeAdapter(BrainMessage)
 
 
 def safe_text(text: str, limit: int = MAX_TEXT) -> str:
     """Printable (every control, line break and bidi character escaped), cut to `limit`."""
-    shown = printable(text)
-    return shown if len(shown) <= limit else shown[: limit - 1] + ELLIPSIS
+    return shorten(printable(text), limit)
 
 
 def _short(digest: str) -> str:
     """A digest as a message names it: `sha256:` and 12 hex digits."""
-    return digest if len(digest) <= 19 else digest[:19] + ELLIPSIS
+    return shorten(digest, 20)
 
 
 @dataclass(frozen=True)
@@ -492,9 +490,6 @@ class GoalsRelay:
         message: str | None,
         now: Now,
     ) -> None:
-        duration = (
-            None if goal.started_wall is None else round(max(0.0, now.wall - goal.started_wall), 3)
-        )
         last = LastOutcome(
             goal=goal.goal,
             task=goal.task,
@@ -502,7 +497,7 @@ class GoalsRelay:
             code=code,
             message=message,
             ended_at=round(now.wall, 3),
-            duration=duration,
+            duration=_duration(goal, now),
         )
         self._last = last
         self._recent.append(last)
@@ -540,10 +535,16 @@ class GoalsRelay:
                 message=message,
                 started_at=None if started is None else round(started, 3),
                 ended_at=round(now.wall, 3),
-                duration=None if started is None else round(max(0.0, now.wall - started), 3),
+                duration=_duration(goal, now),
             )
         )
         self._seq += 1
 
     def _changed(self) -> None:
         self._dirty = True
+
+
+def _duration(goal: _Open, now: Now) -> float | None:
+    """Seconds from the goal's start (when it was seen) to now, never negative."""
+    started = goal.started_wall
+    return None if started is None else round(max(0.0, now.wall - started), 3)

@@ -35,6 +35,11 @@ def printable(text: str) -> str:
     return _UNSAFE.sub(_escape, text)
 
 
+def shorten(text: str, limit: int) -> str:
+    """`text` of at most `limit` characters: cut, with `…` as its last, when longer."""
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
 def printable_lines(lines: list[str]) -> str:
     """Lines of a report, each made printable, each ending in a newline."""
     return "".join(printable(line) + "\n" for line in lines)

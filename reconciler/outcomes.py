@@ -25,7 +25,7 @@ from contract.goals import (
     success_rate,
 )
 from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable
+from contract.textsafe import printable, shorten
 from reconciler.events import Event, Kind
 
 MAX_RECORD_BYTES = 8 * 1024  # one OutcomeRecord: its texts are cut at MAX_TEXT by the agent
@@ -84,17 +84,13 @@ def check_record(topic_robot: str, payload: bytes) -> OutcomeRecord:
     if any(t is not None and (not math.isfinite(t) or t < 0) for t in times):
         raise RecordRefused("a time or duration is not a finite, positive number")
     if record.message is not None:
-        record = record.model_copy(update={"message": cut(printable(record.message))})
+        record = record.model_copy(update={"message": shorten(printable(record.message), MAX_TEXT)})
     return record
 
 
 def _shaped(value: str, pattern: re.Pattern[str], name: str) -> None:
     if not pattern.match(value):
         raise RecordRefused(f"its {name} is not of the shape {pattern.pattern}")
-
-
-def cut(text: str, limit: int = MAX_TEXT) -> str:
-    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 # ---------------------------------------------------------------- what a revision achieved

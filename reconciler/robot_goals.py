@@ -26,6 +26,7 @@ from contract.goals import (
     VitalValue,
     success_rate,
 )
+from contract.textsafe import shorten
 
 MAX_ID = 128  # characters of a goal id or a task name kept (the contract's own bound)
 UNKNOWN = "unknown"  # the goals cell and state of a robot that does not report its goals
@@ -36,9 +37,7 @@ COUNTS = ("completed", "failed", "canceled", "underway", "stale")
 
 def cut(text: str | None, limit: int = MAX_TEXT) -> str | None:
     """`text` cut to `limit` characters (ended by …); None stays None."""
-    if text is None or len(text) <= limit:
-        return text
-    return text[: limit - 1] + "…"
+    return None if text is None else shorten(text, limit)
 
 
 def _vital(value: VitalValue) -> VitalValue:

@@ -51,6 +51,7 @@ from contract.goals import (
     VitalsLine,
 )
 from contract.launch import LaunchRequest
+from contract.textsafe import shorten
 
 __all__ = [
     "Binding",
@@ -382,9 +383,7 @@ _ids = itertools.count(1)
 
 
 def _cut(text: str | None) -> str | None:
-    if text is None:
-        return None
-    return text if len(text) <= _LONGEST else text[: _LONGEST - 1] + "…"
+    return None if text is None else shorten(text, _LONGEST)
 
 
 def _checked(make: Any, **fields: Any) -> bytes:
