@@ -217,7 +217,8 @@ class Ledger:
         made there at all (the folder cannot be written, a newer schema)."""
         tell = say or log.error
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
+            # The reconciler's alone: outcome messages are the robots' words, for its operators.
+            path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
         except OSError as exc:
             raise LedgerError(
                 f"cannot make the state folder {path.parent}: {exc.strerror or exc}"

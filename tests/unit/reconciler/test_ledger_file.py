@@ -226,3 +226,9 @@ def test_a_stale_goal_that_ends_after_all_is_counted_by_its_end(ledger: Ledger) 
     assert ledger.count() == 3
     # The tallies agree with the rows.
     assert ledger.report(A, since=0.0).tally == tally
+
+
+def test_a_new_state_folder_is_the_reconciler_s_alone(tmp_path: Path) -> None:
+    state = tmp_path / "made" / "state"
+    Ledger.open_or_start(ledger_path(state)).close()
+    assert state.stat().st_mode & 0o777 == 0o700
