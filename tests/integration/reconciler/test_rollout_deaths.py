@@ -130,7 +130,7 @@ def test_a_robot_killed_at_the_gate_fails_the_wave_it_was_just_sent(fleet: Fleet
 
 
 def test_a_robot_dead_before_its_wave_is_waited_for_then_passed_over(fleet: Fleet) -> None:
-    stable = start(fleet, healthy_after=0.5, wave_timeout=3, offline="wait")
+    stable = start(fleet, healthy_after=0.5, wave_timeout=6, offline="wait")
     kill_robot(fleet, CANARY)
     head = rename_all(fleet, "v2")
     status = fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
@@ -173,13 +173,15 @@ def test_a_reconciler_killed_during_healthy_after_and_back_after_the_timeout_goe
 ) -> None:
     """The issue's example: the canary runs the new request all along; the reconciler comes
     back after the wave's timeout. It must not blame the canary for what it did not watch."""
-    stable = start(fleet, healthy_after=4, wave_timeout=5)
+    # The next wave's robots restart at once and count healthy from their brains' `ready`:
+    # wave_timeout leaves them seconds beyond healthy_after even on a busy machine.
+    stable = start(fleet, healthy_after=4, wave_timeout=8)
     head = rename_all(fleet, "v2")
     new = fleet.requests(head)
     wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary running")
     kill_reconciler(fleet)
     pid = fleet.watch.status(CANARY)
-    time.sleep(6)  # past the wave's timeout, with nobody watching
+    time.sleep(9)  # past the wave's timeout, with nobody watching
     fleet.start_reconciler("--interval", "5")
     fleet.watch.wait_reconciler(lambda s: complete(s, head), "the rollout complete")
     fleet.watch.wait_running(new)
