@@ -8,8 +8,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
+from contract.durations import parse_duration
+from contract.goals import CODE_PATTERN
 from contract.models import MAX_ROS_DOMAIN_ID as MAX_ROS_DOMAIN_ID
 from contract.models import ROBOT_ID_PATTERN as ROBOT_ID_PATTERN
 from contract.models import ROS_DOMAIN_DESCRIPTION as ROS_DOMAIN_DESCRIPTION
@@ -271,6 +273,65 @@ class Wave(StrictModel):
     percent: int | None = Field(None, description="cumulative share, 1 to 100")
 
 
+def _duration(value: str | float) -> str | float:
+    if isinstance(value, str):
+        parse_duration(value)  # its ValueError says what is wrong and what would be right
+    elif value <= 0:
+        raise ValueError(f"{value} is not a positive duration")
+    return value
+
+
+class Verify(StrictModel):
+    """What a wave must show in goal outcomes before the next one starts (Argo Rollouts'
+    analysis, counted in goals): its robots' goals ended on the new revision since the wave
+    was published, judged against a threshold and/or the robots still on the stable one."""
+
+    min_goals: int = Field(
+        1,
+        ge=0,
+        description="goals (succeeded or failed) the wave's robots must end before a verdict; "
+        "0 lets a wave pass on no evidence",
+    )
+    success_rate: float | None = Field(
+        None, ge=0.0, le=1.0, description="succeeded / (succeeded + failed) at least this"
+    )
+    compare: Literal["stable"] | None = Field(
+        None,
+        description="stable: no worse than the same scenarios' robots still on the stable "
+        "revision over the same window",
+    )
+    max_drop: float = Field(
+        0.1, ge=0.0, le=1.0, description="with compare: how far below the stable rate is allowed"
+    )
+    critical: list[Annotated[str, Field(pattern=CODE_PATTERN)]] = Field(
+        default_factory=_new_list,
+        description="failure codes that fail the wave at once, whatever the sample",
+    )
+    timeout: Annotated[str | float, AfterValidator(_duration)] = Field(
+        "10m",
+        description="how long after the wave is published its evidence is gathered (30m, 2h; "
+        "a number: seconds); too few goals by then is Inconclusive",
+    )
+    inconclusive: Literal["pause", "fail", "pass"] = Field(
+        "pause", description="what Inconclusive does: pause for an operator, fail, or pass"
+    )
+    dry_run: bool = Field(
+        False, description="judge and show the verdict, but gate on health alone (shadow)"
+    )
+
+    @model_validator(mode="after")
+    def _drop_needs_compare(self) -> Verify:
+        if "max_drop" in self.model_fields_set and self.compare is None:
+            raise ValueError("max_drop needs compare: stable (the rate it is a drop from)")
+        return self
+
+    @property
+    def timeout_seconds(self) -> float:
+        return (
+            self.timeout if isinstance(self.timeout, float | int) else parse_duration(self.timeout)
+        )
+
+
 class RolloutPolicy(StrictModel):
     """How a commit reaches the fleet: wave by wave, each gated by the robots' health."""
 
@@ -295,6 +356,9 @@ class RolloutPolicy(StrictModel):
         "and it gets the revision its wave reached when it reconnects, still health-gated), wait "
         "(up to wave_timeout) or fail (it counts as failed at once). A robot that goes dark after "
         "its wave published its request has failed, whatever this says",
+    )
+    verify: Verify | None = Field(
+        None, description="gate each wave on its robots' goal outcomes, not only their health"
     )
 
 

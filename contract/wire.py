@@ -351,6 +351,36 @@ RolloutState = Literal["Progressing", "Paused", "Complete", "Halted", "RolledBac
 MAX_LISTED = 100  # robot ids a rollout status lists per kind; the counts say how many in all
 
 
+Verdict = Literal["Successful", "Failed", "Inconclusive"]
+
+
+class WaveVerification(_Message):
+    """What a wave's goal outcomes show against what `rollout.verify` asks (Argo Rollouts'
+    analysis run, counted in goals). No verdict yet: the evidence is still being gathered."""
+
+    verdict: Verdict | None = Field(None, description="none yet: still gathering")
+    dry_run: bool = Field(False, description="judged and shown, not gating")
+    goals: int = Field(0, description="goals the wave's robots ended on the revision (decided)")
+    min_goals: int = 0
+    succeeded: int = 0
+    failed: int = 0
+    canceled: int = 0
+    robots: int = Field(0, description="the wave's robots that reported an ended goal")
+    rate: float | None = Field(None, description="succeeded / (succeeded + failed)")
+    success_rate: float | None = Field(None, description="the threshold, when one is set")
+    stable_rate: float | None = Field(
+        None, description="the stable revision's robots' rate over the same window (compare)"
+    )
+    stable_goals: int = Field(0, description="the goals that rate is over")
+    max_drop: float | None = None
+    critical: list[str] = Field(default_factory=list, description="critical codes reported")
+    deadline: float | None = Field(None, description="unix time the evidence is judged by")
+    decided_by: str | None = Field(
+        None, description="the operator who resumed (passed) or aborted (failed) it by hand"
+    )
+    message: str = ""
+
+
 class RolloutStatus(_Message):
     """A rollout of `revision`, wave by wave, as the reconciler status carries it: where it is
     and why, and (stateless) what a restarted reconciler resumes from."""
@@ -375,6 +405,9 @@ class RolloutStatus(_Message):
     counts: dict[str, int] = Field(
         default_factory=dict,
         description="healthy, failed and pending robots of the wave, and offline ones as listed",
+    )
+    verification: WaveVerification | None = Field(
+        None, description="the wave's goal outcomes against rollout.verify, when it is set"
     )
     message: str = ""
 

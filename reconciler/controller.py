@@ -27,6 +27,7 @@ from contract.backoff import Backoff
 from contract.interfaces import Reported
 from contract.launch import LaunchRequest, StopRequest
 from contract.mqtt import Connection
+from contract.notes import VerdictNote
 from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError
 from contract.signing import Signed
 from contract.topics import Role, subscriptions
@@ -43,6 +44,9 @@ from reconciler import heap
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
+from reconciler.evidence import Counts, WaveEvidence
+from reconciler.evidence_feed import EvidenceCounter
+from reconciler.notes_store import NotesError, NotesStore
 from reconciler.observed import (
     RECONCILER_STATUS,
     WAVE_RECORD,
@@ -133,6 +137,7 @@ class Controller:
         builder: Builder | None = None,
         on_step: Callable[[Step], None] | None = None,
         no_local: bool = False,
+        ledger: Path | None = None,
     ) -> None:
         self.source = source
         self.connection = connection
@@ -177,6 +182,11 @@ class Controller:
         self._sizes = RequestSizes()
         self._health_memo = ReadMemo()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
+        # rollout.verify: the outcome ledger's rows counted into the current wave's evidence,
+        # and the verdicts kept as git notes on the commits rolled out.
+        self._evidence = EvidenceCounter(ledger) if ledger is not None else None
+        self.notes = NotesStore(source.root)
+        self._notes_failed = False
 
     def _launch_view(self, no_local: bool) -> RetainedView:
         """The retained launch topics and the reconciler's own, mirrored. Statuses are not:
@@ -342,6 +352,7 @@ class Controller:
             return Outcome.WAIT, None, None
         decision = decide(seen)
         self._keep_wave_record(decision.wave_record)
+        self._keep_verdicts(decision.verdicts)
         condition = decision.condition
         if decision.changes:
             condition = self._apply(decision)
@@ -379,6 +390,7 @@ class Controller:
         now = time.time()
         rollout = build.fleet is not None and build.fleet.rollout is not None
         previous = self.writer.status
+        evidence, baseline, notes = self._verification(build, previous, head)
         return Observation(
             head=head,
             build=build,
@@ -395,7 +407,55 @@ class Controller:
             watching_since=self._watching_since,
             dark_since=dict(self._dark_since),
             interfaces=interfaces,
+            evidence=evidence,
+            baseline=baseline,
+            notes=notes,
         )
+
+    def _verification(
+        self, build: Desired, previous: ReconcilerStatus | None, head: str | None
+    ) -> tuple[WaveEvidence | None, dict[str, Counts], list[VerdictNote]]:
+        """What a rollout of the head is judged on beyond health: its wave's goal outcomes
+        (rollout.verify) and the notes on its commit (an operator's resume or abort)."""
+        fleet = build.fleet
+        rollout = previous.rollout if previous is not None else None
+        if fleet is None or fleet.rollout is None or head is None:
+            return None, {}, []
+        notes: list[VerdictNote] = []
+        if rollout is not None and rollout.revision == head:
+            try:
+                notes = self.notes.read(head)
+                self._notes_failed = False
+            except NotesError as exc:
+                if not self._notes_failed:
+                    log.warning("%s", exc)
+                    self._notes_failed = True
+        if self._evidence is None or fleet.rollout.verify is None:
+            return None, {}, notes
+        stable = self.serving.fleet if self.serving is not None else None
+        counted = self._evidence.count(fleet, stable, rollout)
+        return counted.evidence, counted.baseline, notes
+
+    def _keep_verdicts(self, verdicts: tuple[VerdictNote, ...]) -> None:
+        """The step's verdicts, as git notes on their commits; a failure is said and the
+        verdict noted again at a later step (a verdict is recomputed the same from the ledger)."""
+        if not verdicts:
+            return
+        try:
+            self.notes.append(verdicts)
+        except NotesError as exc:
+            log.warning("cannot keep the rollout's verdict as a git note: %s", exc)
+            return
+        for note in verdicts:
+            if note.verdict is not None:
+                log.info(
+                    "wave %s of %s: %s%s (%s)",
+                    note.wave_name,
+                    short_rev(note.revision),
+                    note.verdict,
+                    " [dry run]" if note.dry_run else "",
+                    note.message,
+                )
 
     def _head_and_build(self) -> tuple[str | None, Desired]:
         """The branch's head commit and its build; no head, and a build saying why, when the

@@ -7,13 +7,14 @@ without a broker.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Set
+from collections.abc import Mapping, Sequence, Set
 from dataclasses import dataclass, field, replace
 
 from configurator.drift import Drift, drift_of, needs_of_rendered
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from contract.interfaces import Reported
+from contract.notes import VerdictNote
 from contract.wire import (
     MAX_LISTED,
     AgentStatus,
@@ -26,6 +27,7 @@ from contract.wire import (
 )
 from reconciler.desired import Desired
 from reconciler.diff import Actions, diff
+from reconciler.evidence import Counts, WaveEvidence
 from reconciler.rollout import RolloutInput, RolloutStep, roll_out
 from reconciler.wave_memory import WaveRecord
 
@@ -68,6 +70,11 @@ class Observation:
     # The robots' readable interfaces reports, followed while fleet.yaml says `drift: hold`
     # (None: not followed; a robot absent reports nothing readable: never held).
     interfaces: Mapping[str, Reported] | None = None
+    # rollout.verify: the current wave's goal outcomes, counted from the ledger; the stable
+    # revision's own counts per scenario; the verdict notes of the head's commit.
+    evidence: WaveEvidence | None = None
+    baseline: Mapping[str, Counts] = field(default_factory=dict)
+    notes: Sequence[VerdictNote] = ()
 
 
 @dataclass(frozen=True)
@@ -98,6 +105,7 @@ class Decision:
     stable: Desired | None = None  # the last revision fully applied, once this step is
     recheck_at: float | None = None  # unix time to look again though nothing arrives
     wave_record: WaveRecord | None = None  # what a rollout's current wave established
+    verdicts: tuple[VerdictNote, ...] = ()  # reached in this step: to keep as git notes
 
     @property
     def changes(self) -> bool:
@@ -224,6 +232,9 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
             watching_since=seen.watching_since,
             dark_since=seen.dark_since,
             held=frozenset(waiting),
+            evidence=seen.evidence,
+            baseline=seen.baseline,
+            notes=seen.notes,
         )
     )
     if step.serve_stable and stable is not None and stable.fleet is not None:
@@ -233,7 +244,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
             back.requests, seen.launches, back.suspended | held.keys(), True, seen.active
         )
         condition = with_held(_rollout_condition(seen, step), held)
-        return Decision(stable, actions, condition, stable=stable)
+        return Decision(stable, actions, condition, stable=stable, verdicts=tuple(step.verdicts))
     # Robots whose wave has not come are left as they are anyway: not held, only waiting.
     moving = {r: q for r, q in step.requests.items() if r not in step.keep}
     held = held_back(fleet, moving, seen)
@@ -262,6 +273,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
         stable=new_stable,
         recheck_at=step.recheck_at,
         wave_record=step.record,
+        verdicts=tuple(step.verdicts),
     )
 
 

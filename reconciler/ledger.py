@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from contract.goals import OutcomeRecord, OutcomeState
+from reconciler.evidence import Counts, Row
 from reconciler.outcomes import (
     NO_REVISION,
     NO_SCENARIO,
@@ -80,6 +81,7 @@ CREATE TABLE outcomes (
 );
 CREATE INDEX outcomes_by_revision ON outcomes (revision, ended_at);
 CREATE INDEX outcomes_by_robot ON outcomes (robot_id, ended_at);
+CREATE INDEX outcomes_by_received ON outcomes (received_at);
 CREATE TABLE revisions (
     revision TEXT PRIMARY KEY,
     first_seen REAL NOT NULL,
@@ -265,6 +267,8 @@ class Ledger:
                 raise LedgerError(f"{self.path} is corrupt: {'; '.join(found)}", unreadable=True)
         if not self.read_only:
             db.execute("PRAGMA journal_mode=WAL")
+            # Ledgers made before rollouts counted evidence lack it (made once, at open).
+            db.execute("CREATE INDEX IF NOT EXISTS outcomes_by_received ON outcomes (received_at)")
 
     def close(self) -> None:
         self._db.close()
@@ -503,6 +507,42 @@ class Ledger:
             (revision,),
         )
         return row[0][0] if row else None
+
+    def evidence_rows(
+        self, *, after: int = 0, since: float | None = None, limit: int = 50_000
+    ) -> list[Row]:
+        """Outcomes in the order the ledger kept them, for a wave's evidence: those after the
+        row `after`, or (a first count) those received at or after `since`; at most `limit`."""
+        if since is not None and after == 0:
+            where, args = "received_at >= ?", (since, limit)
+        else:
+            where, args = "id > ?", (after, limit)
+        return [
+            Row(*row)
+            for row in self._read(
+                "SELECT id, robot_id, digest, scenario, outcome, code, received_at FROM outcomes "
+                f"WHERE {where} ORDER BY id LIMIT ?",
+                list(args),
+            )
+        ]
+
+    def scenario_counts(self, revision: str) -> dict[str, Counts]:
+        """A revision's outcomes per scenario, all it kept (its tallies): the stable side of
+        a comparison when too few of its robots are left to compare over a wave's window."""
+        found: dict[str, Counts] = {}
+        for scenario, outcome, count in self._read(
+            "SELECT scenario, outcome, sum(count) FROM tallies WHERE revision = ? "
+            "GROUP BY scenario, outcome",
+            [revision],
+        ):
+            counts = found.setdefault(scenario, Counts())
+            if outcome == OutcomeState.SUCCEEDED.value:
+                counts.succeeded += count
+            elif outcome == OutcomeState.FAILED.value:
+                counts.failed += count
+            elif outcome == OutcomeState.CANCELED.value:
+                counts.canceled += count
+        return found
 
     def report(
         self, revision: str, *, robot: str | None = None, since: float | None = None

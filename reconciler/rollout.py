@@ -10,7 +10,7 @@ healthy it has not seen so.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -18,15 +18,18 @@ from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
 from configurator.types import RolloutPolicy
 from configurator.waves import assign_waves, failure_budget
+from contract.notes import VerdictNote
 from contract.wire import (
     MAX_LISTED,
     AgentState,
     AgentStatus,
     RolloutState,
     RolloutStatus,
+    WaveVerification,
     is_online,
     short_rev,
 )
+from reconciler.evidence import Counts, EvidenceKey, Roles, WaveEvidence, judge, new_evidence
 from reconciler.wave_memory import WaveMemory, WaveRecord, memory_of
 
 # An agent reporting these about the new request has failed it.
@@ -34,6 +37,9 @@ _FAILED_STATES = {AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED}
 # Seconds a robot stays dark, watched without a break, before it counts as gone: a broker that
 # shuts down publishes every client's Last Will just before it drops the reconciler too.
 DARK_GRACE = 2.0
+# Seconds between looks at a wave's evidence while it is gathered: outcomes arrive on their own
+# schedule (the ledger's feed), and a verdict a second or two later is soon enough.
+VERIFY_POLL = 2.0
 
 
 class Health(str, Enum):
@@ -68,6 +74,12 @@ class RolloutInput:
     # Robots whose new request is held back for drift (drift: hold): not sent it, they count
     # as absent — pending, never failed; the wave goes on without them at its timeout.
     held: frozenset[str] = frozenset()
+    # rollout.verify: the goal outcomes counted for the wave `evidence.key` names (another
+    # wave's are not used), the stable revision's own counts per scenario (compare's fallback),
+    # and the notes of the head's commit (an operator's resume or abort of a wave run).
+    evidence: WaveEvidence | None = None
+    baseline: Mapping[str, Counts] = field(default_factory=dict)
+    notes: Sequence[VerdictNote] = ()
 
 
 @dataclass
@@ -81,6 +93,8 @@ class RolloutStep:
     complete: bool = False  # every wave healthy: `head` is the new stable revision
     serve_stable: bool = False  # rolled back: the fleet gets the stable revision
     record: WaveRecord | None = None  # what the current wave established, to keep retained
+    # Verdicts reached in this step (a wave verified and passed, failed, inconclusive): to note.
+    verdicts: list[VerdictNote] = field(default_factory=list)
 
     @property
     def stopped(self) -> bool:
@@ -103,12 +117,7 @@ def roll_out(seen: RolloutInput) -> RolloutStep:
     assert policy is not None
     waves = assign_waves(head.labels, policy.waves)
     stable_requests = stable.requests if stable is not None else {}
-    changed = {
-        robot
-        for robot, request in head.requests.items()
-        if robot not in head.suspended
-        and (robot not in stable_requests or stable_requests[robot].digest != request.digest)
-    }
+    changed = _changed(head, stable_requests)
     same = previous is not None and previous.revision == head.revision
     base = _Rollout(seen, policy, waves, changed, stable_requests)
     if not changed or (same and previous is not None and previous.state == "Complete"):
@@ -126,6 +135,34 @@ def roll_out(seen: RolloutInput) -> RolloutStep:
     return base.advance(-1, None)
 
 
+def _changed(head: FleetRender, stable_requests: Mapping[str, RenderedRequest]) -> set[str]:
+    """The robots the rollout moves: not suspended, and with a request the stable lacks."""
+    return {
+        robot
+        for robot, request in head.requests.items()
+        if robot not in head.suspended
+        and (robot not in stable_requests or stable_requests[robot].digest != request.digest)
+    }
+
+
+def wave_roles(head: FleetRender, stable: FleetRender | None, wave: int) -> Roles:
+    """Whose goal outcomes count toward `wave`'s verification: its moved robots on the head's
+    requests, and the robots no wave has moved yet on the stable ones (the comparison)."""
+    assert head.rollout is not None
+    stable_requests = stable.requests if stable is not None else {}
+    waves = assign_waves(head.labels, head.rollout.waves)
+    last = len(head.rollout.waves)
+    new: dict[str, str] = {}
+    kept: dict[str, str] = {}
+    for robot in _changed(head, stable_requests):
+        at = waves.get(robot, last)
+        if at == wave:
+            new[robot] = head.requests[robot].digest
+        elif at > wave and robot in stable_requests:
+            kept[robot] = stable_requests[robot].digest
+    return Roles(new, kept)
+
+
 class _Rollout:
     def __init__(
         self,
@@ -141,6 +178,11 @@ class _Rollout:
         self.changed = changed
         self.stable_requests = stable_requests
         self.count = len(policy.waves)
+        self.noted: list[VerdictNote] = []  # verdicts reached in this step
+
+    def _with_verdicts(self, step: RolloutStep) -> RolloutStep:
+        step.verdicts = self.noted
+        return step
 
     # ------------------------------------------------------------------ what to hold
 
@@ -198,24 +240,70 @@ class _Rollout:
             # A share of the robots that took part: four robots on chargers do not widen it.
             taking_part = sum(1 for h in judged.values() if h is not Health.OFFLINE)
             budget = failure_budget(self.policy.max_failures, taking_part) or 0
+            verification = self._verify(wave, started_at) if known else None
+            by_hand = self._decision(wave, started_at)
+            name = self.policy.waves[wave].name
+            if by_hand is not None and by_hand.kind == "abort":
+                why = f"aborted by {by_hand.by or 'an operator'} in wave '{name}'"
+                return self._failed(wave, started_at, judged, why, verification)
             if len(failed) > budget:
-                return self._failed(wave, started_at, judged)
+                return self._failed(wave, started_at, judged, None, verification)
+            gating = verification is not None and not verification.dry_run
+            if gating and verification is not None and verification.verdict == "Failed":
+                why = f"verification of wave '{name}' failed: {verification.message}"
+                return self._failed(wave, started_at, judged, why, verification)
             done = known and (
                 all(h in (Health.HEALTHY, Health.FAILED, Health.OFFLINE) for h in judged.values())
                 or (all(h is not Health.PENDING for h in judged.values()) and now >= deadline)
             )
+            held_for = ""  # why a wave healthy throughout is held: its evidence
+            if done and gating and verification is not None:
+                verdict = verification.verdict
+                assert self.policy.verify is not None
+                inconclusive = self.policy.verify.inconclusive
+                if by_hand is not None and by_hand.kind == "resume":
+                    verification = verification.model_copy(update={"decided_by": by_hand.by})
+                elif verdict == "Inconclusive" and inconclusive == "fail":
+                    why = f"verification of wave '{name}' inconclusive: {verification.message}"
+                    return self._failed(wave, started_at, judged, why, verification)
+                elif verdict == "Inconclusive" and inconclusive == "pause":
+                    done, held_for = False, "inconclusive"
+                elif verdict is None:
+                    done, held_for = False, "gathering"
+                    soon = min(now + VERIFY_POLL, verification.deadline or math.inf)
+                    recheck = soon if recheck is None else min(recheck, soon)
+            elif verification is not None and verification.verdict is None:
+                soon = min(now + VERIFY_POLL, verification.deadline or math.inf)
+                recheck = soon if recheck is None else min(recheck, soon)  # shown as it grows
+            if (
+                done
+                and verification is not None
+                and (verification.verdict or verification.decided_by)
+            ):
+                self.noted.append(self._note(wave, started_at, verification))
             if done and wave == self.count - 1:
-                return self.everyone()
+                return self._with_verdicts(self.everyone())
             if done and not self.policy.paused:
                 wave, started_at = wave + 1, now
                 continue
             step = self.hold(wave)
-            state = "Paused" if done and self.policy.paused else "Progressing"
-            why = "paused (rollout.paused)" if state == "Paused" else ""
-            step.status = self._status(state, wave, started_at, judged, why)
+            state = "Progressing"
+            why = ""
+            if done and self.policy.paused:
+                state, why = "Paused", "paused (rollout.paused): a commit setting it false resumes"
+            elif held_for == "inconclusive" and verification is not None:
+                state = "Paused"
+                why = (
+                    f"wave '{name}' inconclusive ({verification.message}): "
+                    "robotconf rollout resume passes it, robotconf rollout abort rolls back"
+                )
+                self.noted.append(self._note(wave, started_at, verification))
+            elif held_for == "gathering" and verification is not None:
+                why = f"wave '{name}' verifying: {verification.message}"
+            step.status = self._status(state, wave, started_at, judged, why, verification)
             step.recheck_at = recheck
             step.record = memory.record() if memory is not None else None
-            return step
+            return self._with_verdicts(step)
 
     def halted(self, previous: RolloutStatus) -> RolloutStep:
         wave = min(max(previous.wave, 0), self.count - 1)
@@ -233,25 +321,79 @@ class _Rollout:
         return step
 
     def _failed(
-        self, wave: int, started_at: float | None, judged: dict[str, Health]
+        self,
+        wave: int,
+        started_at: float | None,
+        judged: dict[str, Health],
+        reason: str | None = None,
+        verification: WaveVerification | None = None,
     ) -> RolloutStep:
         failed = sorted(r for r, h in judged.items() if h is Health.FAILED)
-        why = (
+        why = reason or (
             f"{len(failed)} robot(s) of wave '{self.policy.waves[wave].name}' failed "
             f"({', '.join(failed[:5])}{', ...' if len(failed) > 5 else ''}), over max_failures "
             f"{self.policy.max_failures}"
         )
+        if verification is not None and verification.verdict and started_at is not None:
+            self.noted.append(self._note(wave, started_at, verification))
         rollback = self.policy.on_failure == "rollback" and self.seen.stable is not None
         if rollback:
             step = RolloutStep(serve_stable=True)
             what = f"; rolled back to {short_rev(self._stable_revision())}"
-            step.status = self._status("RolledBack", wave, started_at, judged, why + what)
-            return step
+            step.status = self._status(
+                "RolledBack", wave, started_at, judged, why + what, verification
+            )
+            return self._with_verdicts(step)
         step = self.hold(wave)
         if self.policy.on_failure == "rollback":
             why += "; no revision ever fully rolled out to go back to: halted"
-        step.status = self._status("Halted", wave, started_at, judged, why)
-        return step
+        step.status = self._status("Halted", wave, started_at, judged, why, verification)
+        return self._with_verdicts(step)
+
+    # ------------------------------------------------------------------ evidence
+
+    def _verify(self, wave: int, started_at: float) -> WaveVerification | None:
+        """The wave's verification by its goal outcomes (`rollout.verify`), None without one.
+        Evidence counted for another wave, or none yet, is no evidence: this wave's counts
+        start empty (the reconciler counts them from the ledger in the steps that follow)."""
+        verify = self.policy.verify
+        if verify is None:
+            return None
+        key = EvidenceKey(self.seen.head.revision, wave, started_at)
+        evidence = self.seen.evidence
+        if evidence is None or evidence.key != key:
+            evidence = new_evidence(key, Roles({}, {}), verify)
+        return judge(verify, evidence, self.seen.now, self.seen.baseline)
+
+    def _decision(self, wave: int, started_at: float) -> VerdictNote | None:
+        """An operator's resume or abort of this very wave run, the latest, from the notes."""
+        found = [
+            note
+            for note in self.seen.notes
+            if note.kind in ("resume", "abort")
+            and note.about(self.seen.head.revision, wave, started_at)
+        ]
+        return max(found, key=lambda note: note.at) if found else None
+
+    def _note(self, wave: int, started_at: float, found: WaveVerification) -> VerdictNote:
+        return VerdictNote(
+            kind="verification",
+            revision=self.seen.head.revision,
+            at=self.seen.now,
+            wave=wave,
+            wave_name=self.policy.waves[wave].name,
+            started_at=started_at,
+            verdict=found.verdict,
+            dry_run=found.dry_run,
+            goals=found.goals,
+            min_goals=found.min_goals,
+            rate=found.rate,
+            success_rate=found.success_rate,
+            stable_rate=found.stable_rate,
+            max_drop=found.max_drop,
+            by=found.decided_by,
+            message=found.message,
+        )
 
     # ------------------------------------------------------------------ health
 
@@ -384,6 +526,7 @@ class _Rollout:
         started_at: float | None,
         judged: Mapping[str, Health],
         message: str,
+        verification: WaveVerification | None = None,
     ) -> RolloutStatus:
         def robots(*kinds: Health) -> list[str]:
             return sorted(r for r, h in judged.items() if h in kinds)
@@ -406,6 +549,7 @@ class _Rollout:
             pending=pending[:MAX_LISTED],
             offline=offline[:MAX_LISTED],
             counts={**counts, "offline": len(offline)} if offline else counts,
+            verification=verification,
             message=message,
         )
 

@@ -9,11 +9,12 @@ from pathlib import Path
 
 import click
 
+from contract.durations import parse_duration
 from contract.errors import CliError, ExitCode
 from contract.textsafe import printable
 from contract.wire import short_rev
 from reconciler.ledger import Ledger, LedgerError, find_ledger
-from reconciler.outcomes import History, RevisionReport, Tally, parse_duration
+from reconciler.outcomes import History, RevisionReport, Tally
 from workstation.cli.broker_options import prefix_option
 from workstation.cli.options import ledger_dir_option, repo_option
 

@@ -83,9 +83,9 @@ def ledger_settings(
 ) -> LedgerSettings:
     """Where and how the outcome ledger is kept (`state_options`), checked before anything
     starts."""
+    from contract.durations import parse_duration
     from reconciler.ledger import default_state_dir
     from reconciler.ledger_feed import LedgerSettings
-    from reconciler.outcomes import parse_duration
 
     try:
         age = parse_duration(ledger_max_age)
@@ -330,6 +330,7 @@ def reconcile(
         signer=signer,
         on_step=telemetry.on_step if telemetry is not None else None,
         no_local=no_local,
+        ledger=kept.path,
     )
     receiver = None
     if webhook is not None:

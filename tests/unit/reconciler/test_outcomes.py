@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from contract.durations import parse_duration
 from contract.goals import OutcomeRecord, OutcomeState
 from reconciler.events import Kind
 from reconciler.outcomes import (
@@ -22,7 +23,6 @@ from reconciler.outcomes import (
     aggregate,
     check_record,
     compare,
-    parse_duration,
     streak_event,
 )
 
