@@ -55,14 +55,15 @@ ROLE_COMMENTS = {
         "its only",
         "# memory), writes its own status and what a rollout's wave established, reads what the "
         "robots",
-        "# report, and may ask for a restart.",
+        "# report, takes operators' rollout actions, and may ask for a restart.",
     ],
     Role.VIEWER: ["# `robotconf status` reads everything and writes nothing."],
     Role.OPERATOR: [
-        "# Operators (`robotconf logs`, `robotconf restart`) read everything `status` reads and "
+        "# Operators (`robotconf logs`, `restart`, `rollout`) read everything `status` reads and "
         "the",
-        "# robots' logs, and may ask any robot for its log and for a restart; they publish "
-        "nothing else.",
+        "# robots' logs, may ask any robot for its log and for a restart, and the reconciler to "
+        "resume",
+        "# or abort a rollout; they publish nothing else.",
     ],
 }
 

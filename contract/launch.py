@@ -172,6 +172,23 @@ class RestartRequest(_Published):
     issued_at: float = Field(description="unix time the restart was asked for")
 
 
+class RolloutAction(_Published):
+    """An operator's decision about a rollout, from the desk (`robotconf rollout resume`,
+    `robotconf rollout abort`) or the browser view, to the reconciler. It names the wave run
+    it is about (revision, wave, wave_started_at): one about a run that has moved on is refused,
+    never applied to the next. Signed with the launch requests' key when the lab signs; the
+    reconciler keeps each one it carries out as a git note on the revision (who, when)."""
+
+    apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
+    kind: Literal["RolloutAction"] = "RolloutAction"
+    action: Literal["resume", "abort"]
+    revision: str = Field(pattern=r"^[0-9a-f]{40}$", description="the commit rolled out")
+    wave: int = Field(ge=0, le=10_000, description="the wave it is about (0-based)")
+    wave_started_at: float = Field(description="when that wave was published")
+    requested_by: str = Field(pattern=REQUESTER_PATTERN, description="who asked")
+    issued_at: float = Field(description="unix time it was asked for")
+
+
 # One encoder for every call: json.dumps makes a new one whenever an option is not its default.
 _CANONICAL = json.JSONEncoder(
     sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False

@@ -14,7 +14,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from contract.files import write_atomic
-from contract.launch import LaunchRequest, RestartRequest, StopRequest, canonical_json
+from contract.launch import (
+    LaunchRequest,
+    RestartRequest,
+    RolloutAction,
+    StopRequest,
+    canonical_json,
+)
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
@@ -22,7 +28,7 @@ if TYPE_CHECKING:
         Ed25519PublicKey,
     )
 
-Signed = TypeVar("Signed", LaunchRequest, StopRequest, RestartRequest)
+Signed = TypeVar("Signed", LaunchRequest, StopRequest, RestartRequest, RolloutAction)
 
 PRIVATE_NAME = "launch-signing.key"
 PUBLIC_NAME = "launch-signing.pub"
@@ -110,7 +116,9 @@ def load_public_key(path: Path) -> Ed25519PublicKey:
     return key
 
 
-def signed_bytes(request: LaunchRequest | StopRequest | RestartRequest) -> bytes:
+def signed_bytes(
+    request: LaunchRequest | StopRequest | RestartRequest | RolloutAction,
+) -> bytes:
     return canonical_json(request.wire(signature=False))
 
 
@@ -128,7 +136,7 @@ def sign(request: Signed, key: Ed25519PrivateKey, issued_at: float | None = None
 
 
 def verify(
-    request: LaunchRequest | StopRequest | RestartRequest, key: Ed25519PublicKey
+    request: LaunchRequest | StopRequest | RestartRequest | RolloutAction, key: Ed25519PublicKey
 ) -> str | None:
     """None when the reconciler's key signed exactly this request, else why not."""
     return verify_object(request.wire(), key)

@@ -116,6 +116,13 @@ TOPICS: tuple[Topic, ...] = (
         True, 1, "what the current wave of a rollout established: a restarted reconciler resumes",
     ),
     Topic(
+        "rollout_request", "reconciler/requests", "operator → reconciler",
+        "RolloutAction (contract/launch.py)", _roles(Role.RECONCILER), _roles(Role.OPERATOR),
+        False, 1, "resume or abort a rollout's wave (`robotconf rollout`); signed when the lab "
+        "signs, answered in the reconciler's status",
+        by_name=True,
+    ),
+    Topic(
         "restart", f"robots/{ROBOT}/restart", "operator or reconciler → agent",
         "RestartRequest (contract/launch.py)", _roles(Role.ROBOT),
         _roles(Role.RECONCILER, Role.OPERATOR),

@@ -65,6 +65,7 @@ class Topics:
     restart = _one("restart")
     reconciler_status = _fixed("reconciler_status")
     reconciler_rollout = _fixed("reconciler_rollout")
+    rollout_request = _fixed("rollout_request")
     all_launch = _fixed("launch")
     all_status = _fixed("status")
     all_description = _fixed("description")
@@ -381,6 +382,17 @@ class WaveVerification(_Message):
     message: str = ""
 
 
+class OperatorAnswer(_Message):
+    """The reconciler's answer to the last operator action it was sent (`robotconf rollout`):
+    the desk that asked waits for the status that names its `issued_at`."""
+
+    action: str
+    requested_by: str
+    issued_at: float
+    accepted: bool
+    message: str = ""
+
+
 class RolloutStatus(_Message):
     """A rollout of `revision`, wave by wave, as the reconciler status carries it: where it is
     and why, and (stateless) what a restarted reconciler resumes from."""
@@ -408,6 +420,9 @@ class RolloutStatus(_Message):
     )
     verification: WaveVerification | None = Field(
         None, description="the wave's goal outcomes against rollout.verify, when it is set"
+    )
+    answer: OperatorAnswer | None = Field(
+        None, description="the answer to the last operator action about this rollout"
     )
     message: str = ""
 

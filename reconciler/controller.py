@@ -8,15 +8,16 @@ writer). Level-triggered and stateless: what is published is learned from the br
 
 from __future__ import annotations
 
+import collections
 import enum
 import logging
 import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from pydantic import ValidationError
 
@@ -34,6 +35,7 @@ from contract.topics import Role, subscriptions
 from contract.wire import (
     AgentState,
     AgentStatus,
+    OperatorAnswer,
     ReconcilerStatus,
     StatusDiagnostic,
     Topics,
@@ -56,6 +58,7 @@ from reconciler.observed import (
     parse_retained,
     summarise_launches,
 )
+from reconciler.operator_actions import Refused, judge_action
 from reconciler.report import Followed, StatusWriter, one_line, status_of
 from reconciler.retained import (
     Ignored,
@@ -68,7 +71,12 @@ from reconciler.retained import (
 from reconciler.source import BranchSource
 from reconciler.wave_memory import WaveRecord
 
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+
 log = logging.getLogger("robotconf.reconciler")
+ROLLOUT_ACTION = "rollout-action"  # an operator's rollout action (reconciler.operator_actions)
+MAX_WAITING_ACTIONS = 16  # operator actions waiting for the loop; a flood beyond is dropped
 
 BACKOFF_INITIAL, BACKOFF_MAX = 1.0, 30.0
 LOCAL_POLL = 1.0  # when refs cannot be watched, look at the branch this often
@@ -138,6 +146,7 @@ class Controller:
         on_step: Callable[[Step], None] | None = None,
         no_local: bool = False,
         ledger: Path | None = None,
+        verifier: Ed25519PublicKey | None = None,
     ) -> None:
         self.source = source
         self.connection = connection
@@ -187,6 +196,12 @@ class Controller:
         self._evidence = EvidenceCounter(ledger) if ledger is not None else None
         self.notes = NotesStore(source.root)
         self._notes_failed = False
+        # Operators' rollout actions as they arrive (bounded: a flood is dropped, counted),
+        # judged on the loop; the answer to the last one goes into the rollout's status.
+        self._verifier = verifier
+        self._actions: collections.deque[bytes] = collections.deque(maxlen=MAX_WAITING_ACTIONS)
+        self._actions_lock = threading.Lock()
+        self._answer: OperatorAnswer | None = None
 
     def _launch_view(self, no_local: bool) -> RetainedView:
         """The retained launch topics and the reconciler's own, mirrored. Statuses are not:
@@ -200,6 +215,7 @@ class Controller:
                 "launch",
                 "reconciler_status",
                 "reconciler_rollout",
+                "rollout_request",
             ),
             self.topics.sync,
             role="reconciler",
@@ -326,6 +342,9 @@ class Controller:
         """Network thread: an Offline status while we run (the Last Will of one of our
         connections that dropped, or of a broker shutting down) is replaced at once. Only
         Offline: two reconcilers on one prefix must not answer each other in a loop."""
+        if topic == self.topics.rollout_request:
+            self._action_arrived(self.view.get(topic))
+            return
         if topic != self.topics.reconciler_status:
             return
         payload = self.view.get(topic)
@@ -340,6 +359,54 @@ class Controller:
         if offline and not self._stop.is_set():
             self._wake.set()
 
+    def _action_arrived(self, payload: bytes | None) -> None:
+        """Network thread: an operator's rollout action, kept for the loop to judge."""
+        if not payload:
+            return
+        with self._actions_lock:
+            if len(self._actions) == self._actions.maxlen:
+                self.ignored.note(
+                    ROLLOUT_ACTION, self.topics.rollout_request, payload, "too many at once"
+                )
+                return
+            self._actions.append(payload)
+        self._wake.set()
+
+    def _take_actions(self) -> None:
+        """Judges the operators' actions that arrived, against the rollout as it stands; one
+        carried out is a git note on the revision, read by the step that follows."""
+        with self._actions_lock:
+            waiting = list(self._actions)
+            self._actions.clear()
+        status = self.writer.status
+        for payload in waiting:
+            found = judge_action(
+                payload, status.rollout if status else None, time.time(), self._verifier
+            )
+            if isinstance(found, Refused):
+                if found.answer is None:
+                    self.ignored.note(
+                        ROLLOUT_ACTION, self.topics.rollout_request, payload, found.why
+                    )
+                else:
+                    log.warning(
+                        "refused %s by %s: %s",
+                        found.answer.action,
+                        found.answer.requested_by,
+                        found.why,
+                    )
+                    self._answer = found.answer
+                continue
+            try:
+                self.notes.append([found.note])
+            except NotesError as exc:
+                why = f"cannot keep the decision as a git note: {exc}"
+                log.warning("%s", why)
+                self._answer = found.answer.model_copy(update={"accepted": False, "message": why})
+                continue
+            log.info("%s", found.note.message)
+            self._answer = found.answer
+
     # ------------------------------------------------------------------ one step
 
     def reconcile_once(
@@ -350,10 +417,15 @@ class Controller:
         seen = self._observe(fetch)
         if seen is None:
             return Outcome.WAIT, None, None
+        if self._actions:
+            self._take_actions()
+            seen = self._observe(False)  # with the notes they added
+            if seen is None:
+                return Outcome.WAIT, None, None
         decision = decide(seen)
         self._keep_wave_record(decision.wave_record)
         self._keep_verdicts(decision.verdicts)
-        condition = decision.condition
+        condition = self._answered(decision.condition)
         if decision.changes:
             condition = self._apply(decision)
         self._recheck_at = decision.recheck_at
@@ -435,6 +507,13 @@ class Controller:
         stable = self.serving.fleet if self.serving is not None else None
         counted = self._evidence.count(fleet, stable, rollout)
         return counted.evidence, counted.baseline, notes
+
+    def _answered(self, condition: Condition) -> Condition:
+        """The condition with the answer to the last operator action about its rollout."""
+        rollout, answer = condition.rollout, self._answer
+        if rollout is None or answer is None:
+            return condition
+        return replace(condition, rollout=rollout.model_copy(update={"answer": answer}))
 
     def _keep_verdicts(self, verdicts: tuple[VerdictNote, ...]) -> None:
         """The step's verdicts, as git notes on their commits; a failure is said and the

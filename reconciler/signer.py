@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 from contract.signing import Signed
 
 if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+
     from reconciler.controller import Signer
 
 
@@ -24,3 +26,13 @@ def make_signer(key_path: Path | None) -> Signer | None:
         return sign(request, key)
 
     return signer
+
+
+def make_verifier(key_path: Path | None) -> Ed25519PublicKey | None:
+    """The public half of the signing key: operators' rollout actions must be signed with it
+    when the lab signs (None: signing is off, the broker's ACL alone says who may act)."""
+    if key_path is None:
+        return None
+    from contract.signing import load_private_key
+
+    return load_private_key(key_path).public_key()

@@ -64,6 +64,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "workstation.cli.restart:restart",
         "start a robot's brain again from the desk, without a commit",
     ),
+    "rollout": (
+        "workstation.cli.rollout:rollout",
+        "resume a paused rollout's wave, or abort the rollout, from the desk",
+    ),
     "up": (
         "workstation.cli.up:up",
         "the whole loop on this machine: broker, reconciler, agents, status",

@@ -13,7 +13,7 @@ import click
 from contract.errors import CliError, ExitCode
 from contract.signing import SigningKeyError
 from reconciler.lifecycle import log_to_stderr, on_stop_signals, parse_address
-from reconciler.signer import make_signer
+from reconciler.signer import make_signer, make_verifier
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 from workstation.cli.broker_options import BrokerOptions, broker_options
 from workstation.cli.options import repo_option
@@ -312,6 +312,7 @@ def reconcile(
     source = make_source(repo, branch, remote, cache_dir)  # a SourceError is one line, exit 2
     try:
         signer = make_signer(signing_key)
+        verifier = make_verifier(signing_key)
     except SigningKeyError as exc:
         raise CliError(str(exc)) from None
     webhook = webhook_options(webhook_at, webhook_secret_file)
@@ -331,6 +332,7 @@ def reconcile(
         on_step=telemetry.on_step if telemetry is not None else None,
         no_local=no_local,
         ledger=kept.path,
+        verifier=verifier,
     )
     receiver = None
     if webhook is not None:
