@@ -1,0 +1,148 @@
+"""Rollouts verified by what the robots achieve, on real processes: stand-in brains that fail
+their goals on the new revision stop it at the canary and roll it back; good ones pass wave by
+wave; too few goals pause the rollout until an operator resumes or aborts it from the desk.
+Every verdict is a git note on the revision."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+from contract.notes import NOTES_REF, read_notes
+from contract.wire import ReconcilerStatus
+from tests.integration.reconciler.conftest import Fleet
+from tests.integration.reconciler.test_rollout import (
+    CANARY,
+    complete,
+    launched,
+    rename_all,
+    running_digest,
+    with_policy,
+)
+from tests.integration.reconciler.test_rollout_deaths import rolled_back
+from tests.support.fleet import robotconf_argv
+from tests.support.watch import wait_for
+
+SCENARIO = "configs/scenarios/delivery-gazebo.yaml"  # tb3-01 (the canary) and tb3-06 run it
+KNOWLEDGE = 'knowledge: {TARGET: {GOAL_ID: "2"}}'
+
+
+def policy(verify: str) -> str:
+    return (
+        "rollout:\n  waves: [{name: canary, selector: {ring: canary}}, {name: all}]\n"
+        "  healthy_after: 0.5\n  max_failures: 0\n  wave_timeout: 60\n  on_failure: rollback\n"
+        f"  verify: {{{verify}}}\n"
+    )
+
+
+def brains(fleet: Fleet, rate: float, message: str) -> str:
+    """A commit whose stand-in brains on the canary's scenario end a goal every 0.2 s, and
+    succeed at `rate`."""
+    fleet.lab.replace(
+        SCENARIO,
+        KNOWLEDGE,
+        'knowledge: {TARGET: {GOAL_ID: "2"}, STANDIN_GOAL_SECONDS: 0.2, '
+        f"STANDIN_SUCCESS_RATE: {rate}}}",
+    )
+    return fleet.lab.commit(message)
+
+
+def notes(fleet: Fleet, revision: str) -> list[dict[str, object]]:
+    done = subprocess.run(
+        ["git", "-C", str(fleet.lab.root), "notes", f"--ref={NOTES_REF}", "show", revision],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    return [n.model_dump() for n in read_notes(done.stdout, revision)]
+
+
+def paused_in(status: ReconcilerStatus, revision: str, wave: str) -> bool:
+    rollout = status.rollout
+    return (
+        rollout is not None
+        and rollout.revision == revision
+        and rollout.state == "Paused"
+        and rollout.wave_name == wave
+    )
+
+
+def desk(fleet: Fleet, *args: str) -> subprocess.CompletedProcess[str]:
+    done = subprocess.run(
+        robotconf_argv("rollout", *args, "--broker", fleet.broker.url, "--as", "ada"),
+        capture_output=True,
+        text=True,
+        timeout=90,
+    )
+    assert "Traceback" not in done.stdout + done.stderr, done.stderr
+    return done
+
+
+def test_brains_that_fail_their_goals_are_stopped_at_the_canary(fleet: Fleet) -> None:
+    stable = with_policy(fleet, policy("min_goals: 5, success_rate: 0.8, timeout: 120"))
+    before = fleet.requests(stable)
+    fleet.watch.live_launches.clear()
+    bad = brains(fleet, 0.0, "brains that fail every goal")
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, bad), "the rollback")
+    assert status.rollout is not None and status.rollout.verification is not None
+    verification = status.rollout.verification
+    assert verification.verdict == "Failed" and verification.failed >= 2
+    assert "verification of wave 'canary' failed" in status.message
+    # Alive all along (healthy by the old measure), rolled back for what it achieved.
+    assert status.rollout.failed == []
+    wait_for(lambda: running_digest(fleet, CANARY, before[CANARY]), "the canary rolled back")
+    assert launched(fleet, "tb3-06") == []  # the next wave never got it
+    kept = notes(fleet, bad)
+    assert [(n["kind"], n["wave_name"], n["verdict"]) for n in kept] == [
+        ("verification", "canary", "Failed")
+    ]
+    # `robotconf status` shows the evidence; `git log --notes=robotconf` the verdict.
+    report = json.loads(fleet.status_cli("--json").stdout)
+    assert report["reconciler"]["rollout"]["verification"]["verdict"] == "Failed"
+    log = subprocess.run(
+        ["git", "-C", str(fleet.lab.root), "log", "-1", "--notes=robotconf", bad],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert '"verdict": "Failed"' in log
+
+
+def test_brains_that_do_their_work_pass_every_wave_on_evidence(fleet: Fleet) -> None:
+    with_policy(fleet, policy("min_goals: 3, success_rate: 0.9, timeout: 120"))
+    good = brains(fleet, 1.0, "faster brains")
+    fleet.watch.wait_reconciler(lambda s: complete(s, good), "the rollout complete")
+    fleet.watch.wait_running(fleet.requests(good))
+    kept = notes(fleet, good)
+    assert [(n["wave_name"], n["verdict"]) for n in kept] == [
+        ("canary", "Successful"),
+        ("all", "Successful"),
+    ]
+    assert all(isinstance(n["goals"], int) and n["goals"] >= 3 for n in kept)
+
+
+def test_too_few_goals_pause_it_until_an_operator_resumes_or_aborts(fleet: Fleet) -> None:
+    stable = with_policy(fleet, policy("min_goals: 100000, timeout: 3, inconclusive: pause"))
+    head = rename_all(fleet, "v2")
+    fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "canary"), "the canary paused")
+    status = fleet.watch.reconciler()
+    assert status is not None and status.rollout is not None
+    assert "robotconf rollout resume" in status.rollout.message
+    assert status.rollout.verification is not None
+    assert status.rollout.verification.verdict == "Inconclusive"
+    # Nothing to abort of another revision; the resume is carried out and confirmed.
+    refused = desk(fleet, "resume", "--revision", stable[:12])
+    assert refused.returncode == 1 and "not" in refused.stderr
+    resumed = desk(fleet, "resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "resumed by ada" in resumed.stdout
+    fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "all"), "the last wave paused")
+    assert desk(fleet, "abort").returncode == 0
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the rollback")
+    assert "aborted by ada" in status.message
+    fleet.watch.wait_running(fleet.requests(stable))
+    kinds = [(n["kind"], n.get("wave_name"), n.get("by")) for n in notes(fleet, head)]
+    assert ("resume", "canary", "ada") in kinds and ("abort", "all", "ada") in kinds
+    # Aborted, there is nothing left to resume.
+    again = desk(fleet, "resume")
+    assert again.returncode == 1 and "RolledBack" in again.stderr
