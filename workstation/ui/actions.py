@@ -14,6 +14,7 @@ from workstation.ui.auth import MAX_TOKEN, Identity, OperatorAuth, refusal_text
 from workstation.ui.logtail import LogTails
 from workstation.ui.pages import page
 from workstation.ui.restarts import Restarts
+from workstation.ui.rollout_decisions import Decisions
 from workstation.ui.server import CSP, Handler, Route
 
 MAX_FORM = 4096  # bytes of a form body: a token, a CSRF token and a path fit
@@ -61,11 +62,13 @@ class Actions:
         restarts: Restarts | None,
         tails: LogTails | None,
         layout: Layout = framed,
+        decisions: Decisions | None = None,
     ) -> None:
         self.auth = auth
         self.restarts = restarts
         self.tails = tails
         self.layout = layout
+        self.decisions = decisions
 
     def routes(self) -> list[Route]:
         robot = r"/robots/(?P<id>[^/]{1,200})"
@@ -77,6 +80,8 @@ class Actions:
             ("POST", robot + "/restart", self.restart),
             ("GET", robot + "/restart/outcome", self.outcome),
             ("GET", robot + "/logs", self.logs),
+            ("GET", r"/rollout/(?P<action>resume|abort)", self.confirm_decision),
+            ("POST", r"/rollout/(?P<action>resume|abort)", self.decide),
         ]
         return [Route(m, re.compile(p), self._guard(h)) for m, p, h in table]
 
@@ -170,6 +175,35 @@ class Actions:
         """The robot page's outcome of the latest restart asked of `robot_id`, if any."""
         return forms.outcome_html(self.restarts.outcome(robot_id) if self.restarts else None)
 
+    # ------------------------------------------------------------------ rollout decisions
+
+    def confirm_decision(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        self._require_operator(request, who)
+        action = match.group("action")
+        latest = self.decisions.latest if self.decisions else None
+        body = forms.confirm_decision(action, who, latest)
+        return self.page(200, f"{action.capitalize()} the rollout?", body, who)
+
+    def decide(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        """An operator's resume or abort, sent as `robotconf rollout` sends it; the page
+        that follows shows the reconciler's answer once it comes."""
+        self._require_operator(request, who)
+        _same_origin(request)
+        if who.via == "cookie":
+            fields = _form(request)
+            if not who.csrf_matches(fields.get("csrf", "")):
+                raise Refused(403, "the form is stale (its CSRF token does not match): reload it")
+        elif request.body:
+            _form(request)
+        if self.decisions is None:
+            raise Refused(503, "this UI has no broker to send a decision through")
+        action = match.group("action")
+        if self.decisions.start("resume" if action == "resume" else "abort", f"ui.{who.via}") == (
+            "already"
+        ):
+            raise Refused(409, "a decision is waiting for the reconciler's answer: reload soon")
+        return _see_other(f"/rollout/{action}")
+
     # ------------------------------------------------------------------ logs
 
     def logs(self, request: Request, match: re.Match[str], who: Identity) -> Response:
@@ -195,8 +229,16 @@ class Actions:
     # ------------------------------------------------------------------ who may
 
     def _operator(self, request: Request, match: re.Match[str], who: Identity) -> str:
-        """The robot id of an operator's request; Refused otherwise: 401 without
-        credentials, 403 with a wrong token, 429 for an address that guessed too often."""
+        """The robot id of an operator's request; Refused otherwise (`_require_operator`)."""
+        self._require_operator(request, who)
+        robot_id = match.group("id")
+        if not is_robot_id(robot_id):
+            raise Refused(404, "no such robot: not a robot id")
+        return robot_id
+
+    def _require_operator(self, request: Request, who: Identity) -> None:
+        """Refused unless an operator asks: 401 without credentials, 403 with a wrong token,
+        429 for an address that guessed too often."""
         client = client_key(request.client)
         if who.via == "bearer" and not who.operator:
             self.auth.failed(client)
@@ -215,10 +257,6 @@ class Actions:
             )
         if not who.operator:
             raise Refused(403, "that is not the operator token")
-        robot_id = match.group("id")
-        if not is_robot_id(robot_id):
-            raise Refused(404, "no such robot: not a robot id")
-        return robot_id
 
 
 def _see_other(path: str, *headers: tuple[str, str]) -> Response:

@@ -9,6 +9,7 @@ from urllib.parse import quote
 
 from workstation.ui.auth import Identity
 from workstation.ui.restarts import Outcome
+from workstation.ui.rollout_decisions import Decision
 from workstation.ui.text import esc
 
 MAX_NEXT = 512
@@ -99,3 +100,48 @@ def refusal(title: str, message: str, link: tuple[str, str] | None = None) -> st
     if link is not None:
         more = f' <a href="{esc(link[0])}">{esc(link[1])}</a>'
     return f'<h1>{esc(title)}</h1><p role="alert">{esc(message)}{more}</p>'
+
+
+_DOES = {
+    "resume": (
+        "Resume the rollout",
+        "The wave paused for inconclusive evidence (too few goals by rollout.verify's timeout) "
+        "passes as it is, and the next wave starts. The reconciler keeps the decision, with "
+        "your name, as a git note on the revision.",
+    ),
+    "abort": (
+        "Abort the rollout",
+        "The rollout stops as a failed wave: its robots get the last revision that fully "
+        "rolled out (rollout.on_failure: halt keeps them where they are). The reconciler keeps "
+        "the decision, with your name, as a git note on the revision.",
+    ),
+}
+
+
+def confirm_decision(action: str, who: Identity, latest: Decision | None) -> str:
+    """The confirmation page's body for a rollout decision, and the form that asks for it."""
+    title, does = _DOES[action]
+    csrf = f'<input type="hidden" name="csrf" value="{esc(who.csrf)}">' if who.csrf else ""
+    return (
+        f"<h1>{esc(title)}?</h1><div><p>{esc(does)}</p>{decision_html(latest)}"
+        f'<form method="post" action="/rollout/{action}" data-confirm-rollout>{csrf}'
+        f'<button type="submit">{esc(title)}</button> <a href="/">Cancel</a></form></div>'
+    )
+
+
+def decision_html(decision: Decision | None) -> str:
+    """The latest rollout decision the UI sent (`[data-rollout-decision]`), or nothing."""
+    if decision is None:
+        return ""
+    at = time.strftime("%H:%M:%S UTC", time.gmtime(decision.at))
+    asked = f"{decision.action.capitalize()} asked by {esc(decision.by)} at {at}"
+    if decision.state == "pending":
+        text = f"{asked}: waiting for the reconciler (reload to see)."
+    elif decision.state == "confirmed":
+        text = f"{asked}: {esc(decision.text)}."
+    else:
+        text = f"{asked}: not done: {esc(decision.text)}"
+    return (
+        f'<p class="outcome outcome-{decision.state}" role="status" '
+        f'data-rollout-decision="{decision.state}">{text}</p>'
+    )

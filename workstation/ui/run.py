@@ -19,6 +19,7 @@ from workstation.ui.auth import OperatorAuth
 from workstation.ui.logtail import LogTails
 from workstation.ui.restarts import Restarts
 from workstation.ui.revisions import CachedHistory, RevisionHistory
+from workstation.ui.rollout_decisions import Decisions
 from workstation.ui.server import UiService, is_loopback, serve
 from workstation.ui.state import LiveFleet
 
@@ -108,6 +109,7 @@ class RunningUi:
             options.auth,
             Restarts(connection, prefix, options.key),
             LogTails(connection, prefix),
+            decisions=Decisions(connection, prefix, options.key),
         )
         self.service.routes += actions.routes()
         self.service.restart_outcome = actions.outcome_html

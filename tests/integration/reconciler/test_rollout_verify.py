@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import json
 import subprocess
+from pathlib import Path
 
 from contract.notes import NOTES_REF, read_notes
 from contract.wire import ReconcilerStatus
+from tests.integration.agent.test_ui_operator import FORM, TOKEN, UiProc
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_rollout import (
     CANARY,
@@ -146,3 +148,37 @@ def test_too_few_goals_pause_it_until_an_operator_resumes_or_aborts(fleet: Fleet
     # Aborted, there is nothing left to resume.
     again = desk(fleet, "resume")
     assert again.returncode == 1 and "RolledBack" in again.stderr
+
+
+def test_an_operator_resumes_from_the_browser_view_and_a_viewer_cannot(
+    fleet: Fleet, tmp_path: Path
+) -> None:
+    with_policy(fleet, policy("min_goals: 100000, timeout: 3, inconclusive: pause"))
+    head = rename_all(fleet, "v2")
+    fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "canary"), "the canary paused")
+    (tmp_path / "ui").mkdir()
+    ui = UiProc(tmp_path / "ui", fleet.broker, "--prefix", "robotconf")
+    try:
+        page = ui.ask("GET", "/rollout/resume")
+        assert page.code == 401  # a viewer may look, not decide
+        assert ui.ask("POST", "/rollout/resume", "csrf=x", Content_Type=FORM).code == 401
+        bearer = {"Authorization": f"Bearer {TOKEN}"}
+        confirm = ui.ask("GET", "/rollout/resume", **bearer)
+        assert confirm.code == 200 and "data-confirm-rollout" in confirm.body
+        done = ui.ask("POST", "/rollout/resume", b"", **bearer)
+        assert done.code == 303, done.body
+        fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "all"), "the next wave paused")
+        outcome = wait_for(
+            lambda: (
+                'data-rollout-decision="confirmed"'
+                in (body := ui.ask("GET", "/rollout/abort", **bearer).body)
+                and body
+            ),
+            "the UI shows the reconciler's answer",
+        )
+        assert "resumed by ui.bearer" in outcome
+    finally:
+        ui.close()
+        assert "Traceback" not in ui.stderr(), ui.stderr()
+    kinds = [(n["kind"], n.get("by")) for n in notes(fleet, head)]
+    assert ("resume", "ui.bearer") in kinds
