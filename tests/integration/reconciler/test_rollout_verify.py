@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 from pathlib import Path
 
 from contract.notes import NOTES_REF, read_notes
@@ -21,7 +22,11 @@ from tests.integration.reconciler.test_rollout import (
     running_digest,
     with_policy,
 )
-from tests.integration.reconciler.test_rollout_deaths import rolled_back
+from tests.integration.reconciler.test_rollout_deaths import (
+    kill_reconciler,
+    never_rolled_back,
+    rolled_back,
+)
 from tests.support.fleet import robotconf_argv
 from tests.support.watch import wait_for
 
@@ -182,3 +187,57 @@ def test_an_operator_resumes_from_the_browser_view_and_a_viewer_cannot(
         assert "Traceback" not in ui.stderr(), ui.stderr()
     kinds = [(n["kind"], n.get("by")) for n in notes(fleet, head)]
     assert ("resume", "ui.bearer") in kinds
+
+
+# ------------------------------------------------------------------ a reconciler that dies
+
+
+def test_a_reconciler_killed_while_evidence_is_gathered_reaches_the_same_verdicts(
+    fleet: Fleet,
+) -> None:
+    stable = with_policy(fleet, policy("min_goals: 15, success_rate: 0.9, timeout: 120"))
+    fleet.watch.live_launches.clear()
+    good = brains(fleet, 1.0, "faster brains")
+    new = fleet.requests(good)
+    wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary on it")
+    kill_reconciler(fleet)  # its goals keep coming, queued for the ledger's session
+    time.sleep(2)
+    fleet.start_reconciler("--interval", "5")
+    fleet.watch.wait_reconciler(lambda s: complete(s, good), "the rollout complete")
+    never_rolled_back(fleet, fleet.requests(stable))
+    kept = notes(fleet, good)
+    assert [(n["wave_name"], n["verdict"]) for n in kept] == [
+        ("canary", "Successful"),
+        ("all", "Successful"),
+    ]
+
+
+def test_brains_failing_while_the_reconciler_is_down_are_judged_when_it_is_back(
+    fleet: Fleet,
+) -> None:
+    with_policy(fleet, policy("min_goals: 10, success_rate: 0.8, timeout: 120"))
+    bad = brains(fleet, 0.0, "brains that fail every goal")
+    new = fleet.requests(bad)
+    wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary on it")
+    kill_reconciler(fleet)
+    time.sleep(2)  # ten failed goals, reported while nobody reads them
+    fleet.start_reconciler("--interval", "5")
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, bad), "the rollback")
+    assert status.rollout is not None and status.rollout.verification is not None
+    assert status.rollout.verification.failed >= 3
+
+
+def test_a_paused_rollout_stays_paused_across_a_restart(fleet: Fleet) -> None:
+    with_policy(fleet, policy("min_goals: 100000, timeout: 3, inconclusive: pause"))
+    fleet.watch.live_launches.clear()
+    head = rename_all(fleet, "v2")
+    fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "canary"), "the canary paused")
+    kill_reconciler(fleet)
+    fleet.start_reconciler("--interval", "5")
+    time.sleep(3)  # a few steps of the new reconciler
+    status = fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "canary"), "still paused")
+    assert status.rollout is not None and status.rollout.verification is not None
+    assert status.rollout.verification.verdict == "Inconclusive"
+    assert launched(fleet, "tb3-06") == []
+    assert desk(fleet, "resume").returncode == 0
+    fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "all"), "the next wave")
