@@ -150,13 +150,7 @@ class Actions:
 
     def restart(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         robot_id = self._operator(request, match, who)
-        _same_origin(request)
-        if who.via == "cookie":
-            fields = _form(request)
-            if not who.csrf_matches(fields.get("csrf", "")):
-                raise Refused(403, "the form is stale (its CSRF token does not match): reload it")
-        elif request.body:
-            _form(request)  # a script's body is a form too, or nothing
+        _posted(request, who)
         if self.restarts is None:
             raise Refused(503, "this UI has no broker to send a restart through")
         started = self.restarts.start(robot_id, f"ui.{who.via}")
@@ -188,13 +182,7 @@ class Actions:
         """An operator's resume or abort, sent as `robotconf rollout` sends it; the page
         that follows shows the reconciler's answer once it comes."""
         self._require_operator(request, who)
-        _same_origin(request)
-        if who.via == "cookie":
-            fields = _form(request)
-            if not who.csrf_matches(fields.get("csrf", "")):
-                raise Refused(403, "the form is stale (its CSRF token does not match): reload it")
-        elif request.body:
-            _form(request)
+        _posted(request, who)
         if self.decisions is None:
             raise Refused(503, "this UI has no broker to send a decision through")
         action = match.group("action")
@@ -257,6 +245,18 @@ class Actions:
             )
         if not who.operator:
             raise Refused(403, "that is not the operator token")
+
+
+def _posted(request: Request, who: Identity) -> None:
+    """An operator's form, from this origin and, with a login cookie, with the session's CSRF
+    token; Refused otherwise."""
+    _same_origin(request)
+    if who.via == "cookie":
+        fields = _form(request)
+        if not who.csrf_matches(fields.get("csrf", "")):
+            raise Refused(403, "the form is stale (its CSRF token does not match): reload it")
+    elif request.body:
+        _form(request)  # a script's body is a form too, or nothing
 
 
 def _see_other(path: str, *headers: tuple[str, str]) -> Response:
