@@ -562,6 +562,7 @@ class BuildCache:
             labels=dict(before.labels),
             allow_empty=before.allow_empty,
             rollout=before.rollout,
+            stages=before.stages,
             drift=before.drift,
         )
         used: dict[int, ScenarioRequests] = {}

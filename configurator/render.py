@@ -22,6 +22,7 @@ from configurator.types import (
     RobotAssignment,
     RolloutPolicy,
     SettingDefinition,
+    Stage,
     logic_choice,
     logic_names,
 )
@@ -45,6 +46,7 @@ class FleetRender:
     labels: dict[str, dict[str, str]] = field(default_factory=dict)  # every robot's, maybe {}
     allow_empty: bool = False
     rollout: RolloutPolicy | None = None  # None: every robot at once
+    stages: list[Stage] = field(default_factory=list)  # the promotion ladder; [] none
     drift: str = "warn"  # fleet.yaml's drift policy: warn or hold
     # capability -> mapping -> the selected logics that need it (drift messages name them)
     needed_by: dict[str, dict[str, tuple[str, ...]]] = field(default_factory=dict)
@@ -199,6 +201,7 @@ def _render_fleet(
         requests=FleetRequests(repo.revision),
         allow_empty=fleet.allow_empty,
         rollout=fleet.rollout,
+        stages=fleet.stages,
         drift=fleet.drift,
     )
     scenarios: dict[str, ScenarioRequests] = {}

@@ -362,6 +362,33 @@ class RolloutPolicy(StrictModel):
     )
 
 
+class Soak(StrictModel):
+    """How long a revision stays on a stage before the next stage gets it, counted in goals."""
+
+    goals: int = Field(
+        ge=1,
+        description="goals the stage's robots end on the revision after its last wave, judged "
+        "as rollout.verify judges a wave, before the next stage gets it",
+    )
+
+
+class Stage(StrictModel):
+    """One rung of the promotion ladder (sim, then Gazebo, then the real robots): the robots
+    whose scenario runs in one of `environments` (an environment's name or type), or whose
+    labels match `selector`. A revision reaches a stage only once verified on the one before."""
+
+    name: str = Field(description="shown in status and plan; `robotconf promote --to` names it")
+    environments: list[str] = Field(
+        default_factory=_new_list,
+        description="environment names or types (GazeboDemo1, Gazebo, Real): the robots whose "
+        "scenario runs in one",
+    )
+    selector: str | None = Field(
+        None, description='labels a robot must have, "key=value" (several: "k=v,k2=v2")'
+    )
+    soak: Soak | None = Field(None, description="goals to end on the stage before the next")
+
+
 class Fleet(StrictModel):
     """The desired robot assignments."""
 
@@ -371,6 +398,11 @@ class Fleet(StrictModel):
     allow_empty: bool = Field(False, description="allow a commit that unassigns every robot")
     rollout: RolloutPolicy | None = Field(
         None, description="roll out in health-gated waves; absent: every robot at once"
+    )
+    stages: list[Stage] = Field(
+        default_factory=_new_list,
+        description="the promotion ladder, in order: each stage's robots get a revision only "
+        "once it was verified on the stage before (needs rollout:)",
     )
     drift: Literal["warn", "hold"] = Field(
         "warn",

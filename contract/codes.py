@@ -302,6 +302,19 @@ RULES: dict[str, Rule] = {
             TUNABLE,
         ),
         Rule(
+            "RC707",
+            Severity.ERROR,
+            "stages: a stage without environments or selector (or with both), a bad selector, "
+            "an environment no scenario names, a name used twice, or stages without a rollout",
+            ROLLOUT,
+        ),
+        Rule(
+            "RC708",
+            Severity.ERROR,
+            "stages: a robot falls in no stage, so no revision would be promoted to it",
+            ROLLOUT,
+        ),
+        Rule(
             "RC801",
             Severity.ERROR,
             "`.robotconf.yaml`: an unknown rule code (did you mean), a severity other than "

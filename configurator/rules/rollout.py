@@ -3,8 +3,9 @@ selector naming labels that exist."""
 
 from __future__ import annotations
 
-from configurator.repository import Entry
+from configurator.repository import Entry, Repository
 from configurator.rules.report import Reporter
+from configurator.stages import Placement, SelectorError, assign_stages, parse_selector
 from configurator.types import Fleet, RolloutPolicy, is_robot_id
 from configurator.waves import assign_waves, failure_budget
 
@@ -153,3 +154,74 @@ def _check_selectors(fleet: Entry[Fleet], policy: RolloutPolicy, report: Reporte
                     known[key],
                 )
     return ok
+
+
+def check_stages(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> None:
+    """The promotion ladder: each stage says which robots it takes (environments, or a
+    selector), every robot is on one, and a rollout is there to verify a revision on them."""
+    stages = fleet.model.stages
+    if not stages:
+        return
+    if fleet.model.rollout is None:
+        report.add(
+            fleet,
+            ["stages"],
+            "RC707",
+            "stages promote a revision once a rollout verified it: add a rollout: policy "
+            "(with verify: to judge what the robots achieve)",
+            key=True,
+        )
+    known_environments = {name: e.model.type for name, e in repo.environments.items()}
+    words = set(known_environments) | set(known_environments.values())
+    seen: dict[str, int] = {}
+    for index, stage in enumerate(stages):
+        loc: list[str | int] = ["stages", index]
+        if not is_robot_id(stage.name):
+            report.add(fleet, [*loc, "name"], "RC707", f"stage name {stage.name!r}: {_ID_RULE}")
+        elif stage.name in seen:
+            report.add(fleet, [*loc, "name"], "RC707", f"stage '{stage.name}' is named twice")
+        seen.setdefault(stage.name, index)
+        if bool(stage.environments) == (stage.selector is not None):
+            report.add(
+                fleet,
+                loc,
+                "RC707",
+                f"stage '{stage.name}' needs environments (names or types) or a selector "
+                '("key=value"), one of the two',
+            )
+        if stage.selector is not None:
+            try:
+                parse_selector(stage.selector)
+            except SelectorError as exc:
+                report.add(fleet, [*loc, "selector"], "RC707", f"stage '{stage.name}': {exc}")
+        for at, word in enumerate(stage.environments):
+            if word not in words:
+                report.unknown(
+                    fleet,
+                    [*loc, "environments", at],
+                    "RC707",
+                    f"stage '{stage.name}' names environment '{word}', which is neither an "
+                    "environment's name nor its type",
+                    word,
+                    words,
+                )
+    placements: dict[str, Placement] = {}
+    for robot_id, assignment in fleet.model.robots.items():
+        scenario = repo.scenarios.get(assignment.scenario)
+        environment = scenario.model.environment if scenario is not None else None
+        placements[robot_id] = Placement(
+            assignment.labels, environment, known_environments.get(environment or "")
+        )
+    left = sorted(set(placements) - set(assign_stages(placements, stages)))
+    if left:
+        shown = ", ".join(left[:_SHOWN]) + (
+            f", ... ({len(left)} in all)" if len(left) > _SHOWN else ""
+        )
+        report.add(
+            fleet,
+            ["stages"],
+            "RC708",
+            f"no stage takes robot(s) {shown}, so no revision would be promoted to them; add "
+            "their environment to a stage, or a last stage that selects them",
+            key=True,
+        )
