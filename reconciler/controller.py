@@ -99,6 +99,8 @@ class Step:
     seconds: float  # how long the step took, report included
     # The status the broker held when this reconciler started (a previous one's), if any.
     found: ReconcilerStatus | None = None
+    # The rollout verdicts this step reached (as kept in git notes): metrics count each once.
+    verdicts: tuple[VerdictNote, ...] = ()
 
 
 class Outcome(enum.Enum):
@@ -187,6 +189,7 @@ class Controller:
         self._evidence = EvidenceCounter(ledger) if ledger is not None else None
         self.notes = NotesStore(source.root)
         self._notes_failed = False
+        self._verdicts: tuple[VerdictNote, ...] = ()  # reached by the current step
 
     def _launch_view(self, no_local: bool) -> RetainedView:
         """The retained launch topics and the reconciler's own, mirrored. Statuses are not:
@@ -286,6 +289,7 @@ class Controller:
         None when the step raised (a bug: logged with its traceback, reported, retried)."""
         started = time.monotonic()
         outcome: Outcome | None
+        self._verdicts = ()  # a step that raised reached none
         try:
             outcome, condition, actions = self.reconcile_once(fetch=resync)
         except Exception as exc:
@@ -317,6 +321,7 @@ class Controller:
                     len(actions.clear) if actions else 0,
                     seconds,
                     self._found,
+                    self._verdicts,
                 )
             )
         except Exception:
@@ -353,6 +358,7 @@ class Controller:
         decision = decide(seen)
         self._keep_wave_record(decision.wave_record)
         self._keep_verdicts(decision.verdicts)
+        self._verdicts = decision.verdicts
         condition = decision.condition
         if decision.changes:
             condition = self._apply(decision)

@@ -94,6 +94,10 @@ class Telemetry:
                 cleared=step.cleared,
                 error=step.reason.value if state_of(step.reason) == "Stalled" else None,
             )
+            # Here, not in `_look`: each step's verdicts are counted, though `_look` may see
+            # only the last of several steps.
+            rollout = step.status.rollout if step.status is not None else None
+            self.metrics.rollout(rollout, step.verdicts)
         with self._lock:
             if not self._resumed:
                 # The first step's: a later step may be all `_look` sees.
