@@ -12,11 +12,12 @@ before each crash, and that is no recovery), a robot once as its brain's hold fi
 from __future__ import annotations
 
 import enum
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from configurator.drift import Drift
+from contract.notes import VerdictNote
 from contract.textsafe import chat_text
 from contract.wire import (
     AgentState,
@@ -107,6 +108,9 @@ class Seen:
     running_since: Mapping[str, float] = field(default_factory=dict)
     # robot -> its drift against its desired request (None: interfaces not known yet)
     drift: Mapping[str, Drift] | None = None
+    # wave run -> the operator who resumed it, from the verdicts the steps reached (`resumers`):
+    # the status shows the name only while the rollout is still at that wave, seldom after
+    resumed_by: Mapping[WaveRun, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -217,7 +221,7 @@ def transitions(
         events += refusal + recovery
     rollout = status.rollout if status is not None else None
     if rollout is not None:
-        told, rollout_events = _rollout_transitions(told, rollout, branch, at)
+        told, rollout_events = _rollout_transitions(told, rollout, branch, at, seen.resumed_by)
         events += rollout_events
     if seen.robots is not None:
         settled = {r for r, since in seen.running_since.items() if at - since >= settle}
@@ -233,15 +237,34 @@ def transitions(
 
 
 def _rollout_transitions(
-    told: Told, rollout: RolloutStatus, branch: str | None, at: float
+    told: Told,
+    rollout: RolloutStatus,
+    branch: str | None,
+    at: float,
+    resumed_by: Mapping[WaveRun, str],
 ) -> tuple[Told, list[Event]]:
     """A rollout's transitions, the cause before its effect: a wave's failed verification,
     a resumption, then the rollout halted, rolled back or paused."""
-    events: list[Event] = []
-    for judge in (_verification_failed, _resumption, _stopped, _pause):
-        told, found = judge(told, rollout, branch, at)
-        events += found
-    return told, events
+    told, failed = _verification_failed(told, rollout, branch, at)
+    told, resumption = _resumption(told, rollout, branch, at, resumed_by)
+    told, stopped = _stopped(told, rollout, branch, at)
+    told, paused = _pause(told, rollout, branch, at)
+    return told, failed + resumption + stopped + paused
+
+
+RESUMERS = 8  # wave runs whose resumer is kept: one rollout at a time, a few pauses each
+
+
+def resumers(known: Mapping[WaveRun, str], reached: Sequence[VerdictNote]) -> dict[WaveRun, str]:
+    """`known` with the operators of the wave runs resumed by hand among the verdicts a step
+    `reached` (a verification note naming who decided it), the last RESUMERS kept."""
+    found = dict(known)
+    for note in reached:
+        if note.kind == "verification" and note.by and note.wave is not None:
+            run = (note.revision, note.wave, note.started_at)
+            found.pop(run, None)  # the newest last: the oldest are dropped first
+            found[run] = note.by
+    return dict(list(found.items())[-RESUMERS:])
 
 
 def _stopped(
@@ -294,7 +317,11 @@ def _pause(
 
 
 def _resumption(
-    told: Told, rollout: RolloutStatus, branch: str | None, at: float
+    told: Told,
+    rollout: RolloutStatus,
+    branch: str | None,
+    at: float,
+    resumed_by: Mapping[WaveRun, str],
 ) -> tuple[Told, list[Event]]:
     """The rollout told paused goes on (Progressing, Complete, or paused at a later wave run)
     with the same revision: resumed, once. Another revision's rollout, or the same one halted
@@ -310,10 +337,12 @@ def _resumption(
     )
     if not going_on:
         return told, []
-    # The operator's name is on the resumed wave's verification; the status shows it only when
+    # The operator's name is on the resumed wave's verdict note; the status shows it only when
     # the rollout is still at that wave (it usually moves to the next one in the same step).
     verification = rollout.verification
-    by = verification.decided_by if verification is not None else None
+    by = resumed_by.get(pausing.run) or (
+        verification.decided_by if verification is not None else None
+    )
     who = f" by {by}" if by else ""
     message = (
         f"rollout of {short_rev(revision)} on {branch} resumed{who} after {pausing.wave}: "

@@ -3,8 +3,20 @@ verification; each told once per transition, never again at a resync, with bound
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+from contract.notes import VerdictNote
 from contract.wire import ReconcilerStatus, RolloutState, RolloutStatus, Verdict, WaveVerification
-from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, transitions
+from reconciler.events import (
+    REMEMBERED,
+    RESUMERS,
+    Event,
+    Kind,
+    Seen,
+    Told,
+    resumers,
+    transitions,
+)
 
 REV, NEXT = "b" * 40, "c" * 40
 INCONCLUSIVE = (
@@ -166,3 +178,38 @@ def test_the_memory_of_pauses_and_verifications_is_bounded() -> None:
         told, status("Paused", revision=told.pausing.run[0], found=verification("Failed")), 1.0
     )
     assert events == []
+
+
+def resume_note(by: str, *, wave: int = 0, started: float = 100.0) -> VerdictNote:
+    """The verdict a step notes when an operator's resume passes a wave run."""
+    return VerdictNote(
+        kind="verification",
+        revision=REV,
+        at=150.0,
+        wave=wave,
+        started_at=started,
+        verdict="Inconclusive",
+        by=by,
+    )
+
+
+def test_the_resumer_is_named_from_the_steps_verdicts_when_the_status_moved_on() -> None:
+    paused = status("Paused", found=verification("Inconclusive"), message=INCONCLUSIVE)
+    # The step that passed wave 0 published wave 1 at once: its status shows wave 1's evidence.
+    moved_on = status("Progressing", wave=1, started=200.0, found=verification(None))
+    known = resumers({}, [resume_note("grace")])
+    told, _ = transitions(Told(), paused, 1.0)
+    _, events = transitions(told, replace(moved_on, resumed_by=known), 2.0)
+    assert [e.kind for e in events] == [Kind.ROLLOUT_RESUMED]
+    assert "resumed by grace after wave 'canary' (1 of 3): now Progressing" in events[0].message
+
+
+def test_resumers_keep_the_newest_few_and_skip_verdicts_no_one_decided() -> None:
+    unnamed = resume_note("x").model_copy(update={"by": None})
+    known = resumers({}, [unnamed])
+    assert known == {}
+    for n in range(RESUMERS + 3):
+        known = resumers(known, [resume_note(f"op{n}", wave=n)])
+    assert len(known) == RESUMERS
+    assert known[(REV, RESUMERS + 2, 100.0)] == f"op{RESUMERS + 2}"
+    assert (REV, 0, 100.0) not in known
