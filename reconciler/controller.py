@@ -107,6 +107,8 @@ class Step:
     seconds: float  # how long the step took, report included
     # The status the broker held when this reconciler started (a previous one's), if any.
     found: ReconcilerStatus | None = None
+    # The rollout verdicts this step reached (as kept in git notes): metrics count each once.
+    verdicts: tuple[VerdictNote, ...] = ()
 
 
 class Outcome(enum.Enum):
@@ -202,6 +204,7 @@ class Controller:
         self._actions: collections.deque[bytes] = collections.deque(maxlen=MAX_WAITING_ACTIONS)
         self._actions_lock = threading.Lock()
         self._answer: OperatorAnswer | None = None
+        self._verdicts: tuple[VerdictNote, ...] = ()  # reached by the current step
 
     def _launch_view(self, no_local: bool) -> RetainedView:
         """The retained launch topics and the reconciler's own, mirrored. Statuses are not:
@@ -302,6 +305,7 @@ class Controller:
         None when the step raised (a bug: logged with its traceback, reported, retried)."""
         started = time.monotonic()
         outcome: Outcome | None
+        self._verdicts = ()  # a step that raised reached none
         try:
             outcome, condition, actions = self.reconcile_once(fetch=resync)
         except Exception as exc:
@@ -333,6 +337,7 @@ class Controller:
                     len(actions.clear) if actions else 0,
                     seconds,
                     self._found,
+                    self._verdicts,
                 )
             )
         except Exception:
@@ -425,6 +430,7 @@ class Controller:
         decision = decide(seen)
         self._keep_wave_record(decision.wave_record)
         self._keep_verdicts(decision.verdicts)
+        self._verdicts = decision.verdicts
         condition = self._answered(decision.condition)
         if decision.changes:
             condition = self._apply(decision)

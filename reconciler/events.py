@@ -2,22 +2,31 @@
 
 Each event is told once per transition, never per resync: a refused commit once per revision,
 the branch's recovery once after it (the next head that applies),
-a halted or rolled back rollout once per revision, a robot once as it drifts and once as it
-fits again, a robot once as it degrades or goes offline and once as it is back in sync
-(running the desired request for SETTLE seconds: a brain in a crash loop runs a moment before
-each crash, and that is no recovery), a robot once as its brain's hold file defers a stop.
+a halted or rolled back rollout once per revision, a paused rollout once per wave run and its
+resumption once after it, a wave's failed verification once per wave, a robot once as it drifts
+and once as it fits again, a robot once as it degrades or goes offline and once as it is back in
+sync (running the desired request for SETTLE seconds: a brain in a crash loop runs a moment
+before each crash, and that is no recovery), a robot once as its brain's hold file defers a stop.
 """
 
 from __future__ import annotations
 
 import enum
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from configurator.drift import Drift
+from contract.notes import VerdictNote
 from contract.textsafe import chat_text
-from contract.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, short_rev
+from contract.wire import (
+    AgentState,
+    AgentStatus,
+    ReconcilerReason,
+    ReconcilerStatus,
+    RolloutStatus,
+    short_rev,
+)
 
 SETTLE = 5.0  # seconds a robot told degraded or offline runs the desired request before in sync
 REMEMBERED = 64  # revisions remembered as told: a commit refused long ago is not told again
@@ -32,6 +41,9 @@ class Kind(str, enum.Enum):
     COMMIT_RECOVERED = "commit_recovered"
     ROLLOUT_HALTED = "rollout_halted"
     ROLLOUT_ROLLED_BACK = "rollout_rolled_back"
+    ROLLOUT_PAUSED = "rollout_paused"
+    ROLLOUT_RESUMED = "rollout_resumed"
+    VERIFICATION_FAILED = "verification_failed"
     ROBOT_DEGRADED = "robot_degraded"
     ROBOT_OFFLINE = "robot_offline"
     ROBOT_IN_SYNC = "robot_in_sync"
@@ -45,6 +57,11 @@ class Kind(str, enum.Enum):
 
 
 _ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLLED_BACK}
+# States of a rollout that goes on: one told paused and seen in them again was resumed.
+_GOING_ON = {"Progressing", "Complete"}
+# A wave run: (revision, wave, when the wave was published). A rollout paused, resumed and
+# paused again at its next wave is paused twice; a resync of the same pause is not.
+WaveRun = tuple[str, int, float | None]
 
 
 @dataclass(frozen=True)
@@ -91,6 +108,17 @@ class Seen:
     running_since: Mapping[str, float] = field(default_factory=dict)
     # robot -> its drift against its desired request (None: interfaces not known yet)
     drift: Mapping[str, Drift] | None = None
+    # wave run -> the operator who resumed it, from the verdicts the steps reached (`resumers`):
+    # the status shows the name only while the rollout is still at that wave, seldom after
+    resumed_by: Mapping[WaveRun, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PausedRun:
+    """A wave run told paused, and its wave as the events name it."""
+
+    run: WaveRun
+    wave: str
 
 
 @dataclass(frozen=True)
@@ -100,6 +128,9 @@ class Told:
     refused: tuple[str, ...] = ()  # revisions told refused, oldest first
     unrecovered: str | None = None  # the revision told refused last, until the branch applies
     rollouts: tuple[tuple[str, str], ...] = ()  # (revision, state) told, oldest first
+    paused: tuple[WaveRun, ...] = ()  # wave runs told paused, oldest first
+    pausing: PausedRun | None = None  # the wave run told paused last, until told resumed
+    verifications: tuple[tuple[str, int], ...] = ()  # (revision, wave) told failed verifying
     alerting: Mapping[str, Kind] = field(default_factory=dict)  # robot -> degraded or offline
     drifted: frozenset[str] = frozenset()  # robots told drifted, not yet told fitting again
     deferred: frozenset[str] = frozenset()  # robots told deferred, still deferred
@@ -189,22 +220,9 @@ def transitions(
         told, recovery = _recovery(told, status, at)
         events += refusal + recovery
     rollout = status.rollout if status is not None else None
-    if rollout is not None and rollout.state in _ROLLOUT_KINDS:
-        key = (rollout.revision, rollout.state)
-        if key not in told.rollouts:
-            told = replace(told, rollouts=_remember(told.rollouts, key))
-            events.append(
-                Event(
-                    _ROLLOUT_KINDS[rollout.state],
-                    f"rollout of {short_rev(rollout.revision)} on {branch} "
-                    f"{'halted' if rollout.state == 'Halted' else 'rolled back'}: "
-                    f"{rollout.message}",
-                    at,
-                    branch,
-                    rollout.revision,
-                    reason=rollout.state,
-                )
-            )
+    if rollout is not None:
+        told, rollout_events = _rollout_transitions(told, rollout, branch, at, seen.resumed_by)
+        events += rollout_events
     if seen.robots is not None:
         settled = {r for r, since in seen.running_since.items() if at - since >= settle}
         told, robot_events = _robot_transitions(told, seen, settled, branch, at)
@@ -216,6 +234,149 @@ def transitions(
         told, deferral_events = _deferral_transitions(told, seen.robots, branch, at)
         events += deferral_events
     return told, events
+
+
+def _rollout_transitions(
+    told: Told,
+    rollout: RolloutStatus,
+    branch: str | None,
+    at: float,
+    resumed_by: Mapping[WaveRun, str],
+) -> tuple[Told, list[Event]]:
+    """A rollout's transitions, the cause before its effect: a wave's failed verification,
+    a resumption, then the rollout halted, rolled back or paused."""
+    told, failed = _verification_failed(told, rollout, branch, at)
+    told, resumption = _resumption(told, rollout, branch, at, resumed_by)
+    told, stopped = _stopped(told, rollout, branch, at)
+    told, paused = _pause(told, rollout, branch, at)
+    return told, failed + resumption + stopped + paused
+
+
+RESUMERS = 8  # wave runs whose resumer is kept: one rollout at a time, a few pauses each
+
+
+def resumers(known: Mapping[WaveRun, str], reached: Sequence[VerdictNote]) -> dict[WaveRun, str]:
+    """`known` with the operators of the wave runs resumed by hand among the verdicts a step
+    `reached` (a verification note naming who decided it), the last RESUMERS kept."""
+    found = dict(known)
+    for note in reached:
+        if note.kind == "verification" and note.by and note.wave is not None:
+            run = (note.revision, note.wave, note.started_at)
+            found.pop(run, None)  # the newest last: the oldest are dropped first
+            found[run] = note.by
+    return dict(list(found.items())[-RESUMERS:])
+
+
+def _stopped(
+    told: Told, rollout: RolloutStatus, branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """Halted or rolled back, once per (revision, state)."""
+    if rollout.state not in _ROLLOUT_KINDS:
+        return told, []
+    key = (rollout.revision, rollout.state)
+    if key in told.rollouts:
+        return told, []
+    told = replace(told, rollouts=_remember(told.rollouts, key))
+    what = "halted" if rollout.state == "Halted" else "rolled back"
+    message = f"rollout of {short_rev(rollout.revision)} on {branch} {what}: {rollout.message}"
+    event = Event(
+        _ROLLOUT_KINDS[rollout.state], message, at, branch, rollout.revision, reason=rollout.state
+    )
+    return told, [event]
+
+
+def _wave_run(rollout: RolloutStatus) -> WaveRun:
+    return (rollout.revision, rollout.wave, rollout.wave_started_at)
+
+
+def _wave_named(rollout: RolloutStatus) -> str:
+    name = f"'{rollout.wave_name}' " if rollout.wave_name else ""
+    return f"wave {name}({rollout.wave + 1} of {rollout.waves})"
+
+
+def _pause(
+    told: Told, rollout: RolloutStatus, branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """Paused, once per wave run, whatever the cause: fleet.yaml's `rollout.paused`, or a wave
+    whose evidence was inconclusive. The rollout's message says which, and what resumes it."""
+    if rollout.state != "Paused":
+        return told, []
+    run = _wave_run(rollout)
+    if run in told.paused:
+        return told, []
+    told = replace(
+        told, paused=_remember(told.paused, run), pausing=PausedRun(run, _wave_named(rollout))
+    )
+    message = (
+        f"rollout of {short_rev(rollout.revision)} on {branch} paused at {_wave_named(rollout)}: "
+        f"{rollout.message}"
+    )
+    return told, [
+        Event(Kind.ROLLOUT_PAUSED, message, at, branch, rollout.revision, reason="Paused")
+    ]
+
+
+def _resumption(
+    told: Told,
+    rollout: RolloutStatus,
+    branch: str | None,
+    at: float,
+    resumed_by: Mapping[WaveRun, str],
+) -> tuple[Told, list[Event]]:
+    """The rollout told paused goes on (Progressing, Complete, or paused at a later wave run)
+    with the same revision: resumed, once. Another revision's rollout, or the same one halted
+    or rolled back (an abort, told as such), ends the pause without a word."""
+    pausing = told.pausing
+    if pausing is None:
+        return told, []
+    revision = pausing.run[0]
+    if rollout.revision != revision or rollout.state in _ROLLOUT_KINDS:
+        return replace(told, pausing=None), []
+    going_on = rollout.state in _GOING_ON or (
+        rollout.state == "Paused" and _wave_run(rollout) != pausing.run
+    )
+    if not going_on:
+        return told, []
+    # The operator's name is on the resumed wave's verdict note; the status shows it only when
+    # the rollout is still at that wave (it usually moves to the next one in the same step).
+    verification = rollout.verification
+    by = resumed_by.get(pausing.run) or (
+        verification.decided_by if verification is not None else None
+    )
+    who = f" by {by}" if by else ""
+    message = (
+        f"rollout of {short_rev(revision)} on {branch} resumed{who} after {pausing.wave}: "
+        f"now {rollout.state}" + (f" ({rollout.message})" if rollout.message else "")
+    )
+    event = Event(Kind.ROLLOUT_RESUMED, message, at, branch, revision, reason=rollout.state)
+    return replace(told, pausing=None), [event]
+
+
+def _verification_failed(
+    told: Told, rollout: RolloutStatus, branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """A wave's verification failed, once per (revision, wave); the evidence's message says
+    why. A gating failure also halts or rolls back the rollout, told on its own.
+
+    A dry run's failure is told too, its message saying it does not gate (and `reason`
+    `DryRun`): dry runs are how a lab tries criteria in shadow mode, and a failure it does not
+    hear about is a criterion it cannot tune. A receiver that wants only gating failures
+    filters on `reason` `Failed`."""
+    verification = rollout.verification
+    if verification is None or verification.verdict != "Failed":
+        return told, []
+    key = (rollout.revision, rollout.wave)
+    if key in told.verifications:
+        return told, []
+    told = replace(told, verifications=_remember(told.verifications, key))
+    shadow = " (dry run: not gating)" if verification.dry_run else ""
+    message = (
+        f"verification of {short_rev(rollout.revision)} on {branch} failed at "
+        f"{_wave_named(rollout)}{shadow}: {verification.message}"
+    )
+    reason = "DryRun" if verification.dry_run else "Failed"
+    event = Event(Kind.VERIFICATION_FAILED, message, at, branch, rollout.revision, reason=reason)
+    return told, [event]
 
 
 def _deferral_transitions(

@@ -8,7 +8,9 @@ ones that explain them are scraped.
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import get_args
 
 from prometheus_client import (
     CONTENT_TYPE_LATEST,
@@ -19,10 +21,14 @@ from prometheus_client import (
     Info,
     generate_latest,
 )
+from prometheus_client.core import GaugeMetricFamily
+from prometheus_client.registry import Collector
 
 from configurator.drift import Drift
 from contract.goals import OutcomeRecord
-from contract.wire import ReconcilerReason
+from contract.notes import VerdictNote
+from contract.wire import ReconcilerReason, RolloutStatus
+from contract.wire import Verdict as WaveVerdict
 from reconciler.decide import state_of
 from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
 from reconciler.notify import OUTCOMES
@@ -32,6 +38,10 @@ from reconciler.webhook import SERVERS, UNKNOWN, Outcome
 
 INTERFACES_VERDICTS = ("reported", "unknown", "error")
 LEDGER_RESULTS = ("kept", "duplicate", "refused")
+WAVE_VERDICTS: tuple[str, ...] = get_args(WaveVerdict)  # Successful, Failed, Inconclusive
+# Wave verdicts remembered as counted: a verdict noted again at each step of a pause (it is
+# noted while the wave waits) is counted once; one older than this many is long past.
+COUNTED = 64
 # A scrape is a GET without a body, one or two Prometheus servers at a time; an idle connection
 # costs only a file descriptor.
 LIMITS = Limits(connections=64, per_client=8, head=5.0, silence=5.0, deadline=10.0)
@@ -95,6 +105,7 @@ class Metrics:
             registry=r,
         )
         self._outcome_series()
+        self._rollout_series()
         self._known_series()
         self._applied: str | None = None
         self._lock = threading.Lock()
@@ -120,6 +131,24 @@ class Metrics:
         self._scenarios = BoundedLabels(MAX_LABEL_VALUES)
         self._tasks = BoundedLabels(MAX_LABEL_VALUES)
 
+    def _rollout_series(self) -> None:
+        """What a rollout's verification shows (`rollout.verify`): verdicts, pauses, evidence."""
+        self.wave_verdicts = Counter(
+            "robotconf_rollout_verifications",
+            "Wave verdicts of rollout.verify, each wave run's once: Successful, Failed, "
+            "Inconclusive; dry_run true when the verification does not gate",
+            ["verdict", "dry_run"],
+            registry=self.registry,
+        )
+        self.paused = Gauge(
+            "robotconf_rollout_paused",
+            "1 while the rollout is Paused (rollout.paused, or a wave's evidence inconclusive)",
+            registry=self.registry,
+        )
+        self._evidence = WaveEvidenceGauges()
+        self.registry.register(self._evidence)
+        self._counted: tuple[VerdictKey, ...] = ()
+
     def _known_series(self) -> None:
         """Every series whose labels are known at start exists from the first scrape, at 0:
         `rate()` and `increase()` see the first error, and an alert needs no `absent()`."""
@@ -131,6 +160,9 @@ class Metrics:
             self.publishes.labels(action)
         for result in LEDGER_RESULTS:
             self.ledger_records.labels(result)
+        for wave_verdict in WAVE_VERDICTS:
+            for dry_run in ("false", "true"):
+                self.wave_verdicts.labels(wave_verdict, dry_run)
         for reason in ReconcilerReason:
             if state_of(reason) == "Stalled":
                 self.errors.labels(reason.value)
@@ -223,6 +255,103 @@ class Metrics:
 
     def webhook(self, server: str, outcome: str) -> None:
         self.webhooks.labels(server, outcome).inc()
+
+    def rollout(self, rollout: RolloutStatus | None, reached: Sequence[VerdictNote]) -> None:
+        """A step's rollout: its state and current wave's evidence, and the verdicts reached.
+        Called from the reconcile loop only (one step at a time): `_counted` needs no lock."""
+        self._counted, fresh = count_verdicts(self._counted, reached)
+        for key in fresh:
+            self.wave_verdicts.labels(key.verdict, "true" if key.dry_run else "false").inc()
+        shown = RolloutGauges.of(rollout)
+        self.paused.set(shown.paused)
+        self._evidence.shown = shown
+
+
+@dataclass(frozen=True)
+class VerdictKey:
+    """A wave run's verdict, as counted: a run is (revision, wave, when it was published)."""
+
+    revision: str
+    wave: int | None
+    started_at: float | None
+    verdict: str
+    dry_run: bool
+
+
+def count_verdicts(
+    counted: tuple[VerdictKey, ...], reached: Sequence[VerdictNote]
+) -> tuple[tuple[VerdictKey, ...], list[VerdictKey]]:
+    """The verdicts of `reached` not counted yet, and the memory after counting them (the last
+    COUNTED). A step notes a paused wave's verdict again at each look, and an operator's resume
+    notes it once more with their name: each is one wave verdict, counted once."""
+    fresh: list[VerdictKey] = []
+    for note in reached:
+        if note.kind != "verification" or note.verdict is None:
+            continue  # a resume of evidence still gathering is a decision, not a verdict
+        key = VerdictKey(note.revision, note.wave, note.started_at, note.verdict, note.dry_run)
+        if key in counted or key in fresh:
+            continue
+        fresh.append(key)
+    return (*counted, *fresh)[-COUNTED:], fresh
+
+
+@dataclass(frozen=True)
+class RolloutGauges:
+    """The gauges of a rollout's current wave. No evidence (no rollout, no verification, no
+    rate yet) is no series rather than a 0 or a NaN: an alert on a low rate then fires on
+    evidence only, never on its absence."""
+
+    paused: int = 0
+    goals: int | None = None
+    rate: float | None = None
+
+    @classmethod
+    def of(cls, rollout: RolloutStatus | None) -> RolloutGauges:
+        if rollout is None:
+            return cls()
+        paused = 1 if rollout.state == "Paused" else 0
+        found = rollout.verification
+        if found is None:
+            return cls(paused)
+        return cls(paused, found.goals, found.rate)
+
+
+class WaveEvidenceGauges(Collector):
+    """robotconf_rollout_wave_goals and robotconf_rollout_wave_success_rate, each only while
+    there is a value to show (a `Gauge` would show 0 before any evidence, and keep showing the
+    last wave's after the rollout ends). No labels: one current wave at a time."""
+
+    GOALS = "robotconf_rollout_wave_goals"
+    RATE = "robotconf_rollout_wave_success_rate"
+
+    def __init__(self) -> None:
+        self.shown = RolloutGauges()  # replaced whole by the reconcile loop: a scrape reads one
+
+    def describe(self) -> Iterable[GaugeMetricFamily]:
+        return [self._goals(None), self._rate(None)]
+
+    def collect(self) -> Iterator[GaugeMetricFamily]:
+        shown = self.shown
+        if shown.goals is not None:
+            yield self._goals(shown.goals)
+        if shown.rate is not None:
+            yield self._rate(shown.rate)
+
+    def _goals(self, value: int | None) -> GaugeMetricFamily:
+        return GaugeMetricFamily(
+            self.GOALS,
+            "Goals the current wave's robots ended on the revision (rollout.verify), while a "
+            "wave is verified",
+            value=value,
+        )
+
+    def _rate(self, value: float | None) -> GaugeMetricFamily:
+        return GaugeMetricFamily(
+            self.RATE,
+            "The current wave's goal success rate, succeeded / (succeeded + failed), once it "
+            "has decided goals",
+            value=value,
+        )
 
 
 class _Scrapes:

@@ -20,7 +20,7 @@ from contract.topics import Role, subscriptions
 from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
-from reconciler.events import Seen, Told, resumed, transitions
+from reconciler.events import Seen, Told, WaveRun, resumed, resumers, transitions
 from reconciler.observed import ReadMemo, Retained, RobotSeen, parse_retained
 from reconciler.retained import RetainedView
 from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
@@ -52,6 +52,8 @@ class Telemetry:
         self._step: Step | None = None
         self._told = Told()
         self._resumed = False  # the status found at start is read into `_told` once
+        # wave run -> who resumed it: from each step's verdicts, which `_look` may not all see
+        self._resumers: dict[WaveRun, str] = {}
         # robot -> ((digest, the agent's since), first seen running it by our clock)
         self._running_since: dict[str, tuple[tuple[str, float], float]] = {}
         self._desired: tuple[str | None, dict[str, DesiredRobot]] = (None, {})
@@ -94,12 +96,18 @@ class Telemetry:
                 cleared=step.cleared,
                 error=step.reason.value if state_of(step.reason) == "Stalled" else None,
             )
+            # Here, not in `_look`: each step's verdicts are counted, though `_look` may see
+            # only the last of several steps.
+            rollout = step.status.rollout if step.status is not None else None
+            self.metrics.rollout(rollout, step.verdicts)
         with self._lock:
             if not self._resumed:
                 # The first step's: a later step may be all `_look` sees.
                 self._resumed = True
                 self._told = resumed(self._told, step.found)
             self._step = step
+            if step.verdicts:
+                self._resumers = resumers(self._resumers, step.verdicts)
         self._wake.set()
 
     def _run(self) -> None:
@@ -116,7 +124,7 @@ class Telemetry:
 
     def _look(self) -> None:
         with self._lock:
-            step = self._step
+            step, resumed_by = self._step, self._resumers
         if step is None:  # robots are judged against what the reconciler serves
             return
         now = time.time()  # events carry it, so unix time; runs settle by it too
@@ -128,7 +136,7 @@ class Telemetry:
             digests = {r: d.digest for r, d in desired.items() if not d.suspended}
             since = {r: seen for r, (_, seen) in self._running_since.items()}
             self._told, events = transitions(
-                self._told, Seen(step.status, robots, digests, since, drift), now
+                self._told, Seen(step.status, robots, digests, since, drift, resumed_by), now
             )
             self.notifier.tell(events)
         if self.metrics is not None and robots is not None and drift is not None:

@@ -390,6 +390,15 @@ def test_a_fresh_reconciler_scrapes_every_known_series_at_zero(
         assert value(metrics, "robotconf_robot_interfaces", interfaces=kind) is not None, kind
     for action in ("publish", "clear"):
         assert value(metrics, "robotconf_publishes_total", action=action) is not None, action
+    for wave_verdict in ("Successful", "Failed", "Inconclusive"):
+        for dry_run in ("false", "true"):
+            counted = value(
+                metrics, "robotconf_rollout_verifications_total", verdict=wave_verdict,
+                dry_run=dry_run,
+            )  # fmt: skip
+            assert counted == 0.0, (wave_verdict, dry_run)
+    assert value(metrics, "robotconf_rollout_paused") == 0.0
+    assert not any(name.startswith("robotconf_rollout_wave_") for name, _ in metrics)  # no rollout
 
 
 def scrape_or_none(port: int) -> dict[tuple[str, tuple[tuple[str, str], ...]], float] | None:
