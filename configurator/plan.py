@@ -9,7 +9,7 @@ from typing import Any, Literal
 from configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
-from configurator.types import RolloutPolicy
+from configurator.types import RolloutPolicy, Verify
 from configurator.waves import assign_waves
 from contract.interfaces import Reported as Report
 from contract.textsafe import markdown_code, markdown_text, printable_lines
@@ -50,6 +50,7 @@ class Plan:
     unchanged: int
     waves: list[str] | None = None  # the head's rollout waves in order; None: all at once
     offline: str | None = None  # the head's rollout.offline: what robots that are off do
+    verify: Verify | None = None  # the head's rollout.verify: what each wave's goals must show
     # robot -> its drift against the head's request, for the robots that would get a new one,
     # when the robots' interfaces were read (`plan --broker`); None: not read, nothing said
     drift: dict[str, Drift] | None = None
@@ -149,7 +150,9 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
         change.wave = None if index is None else names[index]
     # Removed robots (and any no wave takes) last: they are in no wave of the head.
     changes.sort(key=lambda c: (placed.get(c.robot_id, len(names)), c.robot_id))
-    return Plan(base.revision, head.revision, changes, unchanged, names, rollout.offline)
+    return Plan(
+        base.revision, head.revision, changes, unchanged, names, rollout.offline, rollout.verify
+    )
 
 
 Reported = Mapping[str, tuple[Report | None, str | None]]  # robot -> (report, error)
@@ -248,10 +251,32 @@ def _offline_text(plan: Plan) -> str:
     return f"; {_OFFLINE[plan.offline]}" if plan.offline in _OFFLINE else ""
 
 
+def verify_text(verify: Verify) -> str:
+    """What each wave's goal outcomes must show before the next wave starts, in words: 'at least
+    20 goals, success rate ≥ 90%, no worse than stable by more than 10%, critical: COLLISION;
+    inconclusive after 10m: pause'."""
+    if verify.min_goals == 0:
+        parts = ["no minimum of goals"]
+    else:
+        parts = [f"at least {verify.min_goals} goal{'' if verify.min_goals == 1 else 's'}"]
+    if verify.success_rate is not None:
+        parts.append(f"success rate ≥ {verify.success_rate:.0%}")
+    if verify.compare == "stable":
+        parts.append(f"no worse than stable by more than {verify.max_drop:.0%}")
+    if verify.critical:
+        parts.append(f"critical: {', '.join(verify.critical)}")
+    # The timeout as fleet.yaml wrote it: '10m' reads as the file does; a number is seconds.
+    timeout = verify.timeout if isinstance(verify.timeout, str) else f"{verify.timeout:g}s"
+    text = f"{', '.join(parts)}; inconclusive after {timeout}: {verify.inconclusive}"
+    return text + (" (dry run: judged, not gating)" if verify.dry_run else "")
+
+
 def format_plan_text(plan: Plan) -> str:
     lines = [f"plan {_short(plan.base)} -> {_short(plan.head)}: {_counts(plan)}"]
     if plan.waves is not None:
         lines.append(f"rollout in waves: {', '.join(plan.waves)}{_offline_text(plan)}")
+    if plan.waves is not None and plan.verify is not None:
+        lines.append(f"verified by: {verify_text(plan.verify)}")
     heading: str | None = None
     for c in plan.changes:
         if plan.waves is not None and _wave_heading(plan.waves, c.wave) != heading:
@@ -271,6 +296,8 @@ def format_plan_markdown(plan: Plan) -> str:
     if plan.waves is not None:
         waves_text = " → ".join(markdown_text(w) for w in plan.waves)
         lines += [f"Rollout in waves: {waves_text}{_offline_text(plan)}.", ""]
+    if plan.waves is not None and plan.verify is not None:
+        lines += [f"Each wave verified by: {markdown_text(verify_text(plan.verify))}.", ""]
     if not plan.changes:
         lines.append("No robot's Launch Request changes: no robot restarts.")
         return "\n".join(lines) + "\n"
@@ -322,11 +349,13 @@ def _change_json(c: RobotChange, waves: bool, drift: dict[str, Drift] | None) ->
 
 
 def plan_as_json(plan: Plan) -> dict[str, Any]:
-    """For scripts; `waves`, `offline` and each change's `wave` only when the head has a rollout
-    policy; each change's `interfaces` and `drift` only when the robots' interfaces were read."""
+    """For scripts; `waves`, `offline`, `verify` (none without rollout.verify) and each change's
+    `wave` only when the head has a rollout policy; each change's `interfaces` and `drift` only
+    when the robots' interfaces were read."""
     found: dict[str, Any] = {"base": plan.base, "head": plan.head, "unchanged": plan.unchanged}
     if plan.waves is not None:
         found["waves"] = plan.waves
         found["offline"] = plan.offline
+        found["verify"] = plan.verify.model_dump(mode="json") if plan.verify else None
     found["changes"] = [_change_json(c, plan.waves is not None, plan.drift) for c in plan.changes]
     return found

@@ -353,6 +353,11 @@ MAX_LISTED = 100  # robot ids a rollout status lists per kind; the counts say ho
 
 
 Verdict = Literal["Successful", "Failed", "Inconclusive"]
+# What an operator runs on a wave paused on inconclusive evidence: the reconciler's message,
+# the status line and the page name the same words.
+RESUME_COMMAND = "robotconf rollout resume"  # passes the wave
+ABORT_COMMAND = "robotconf rollout abort"  # fails it: rolled back or halted, as on_failure says
+VERIFY_COMMANDS = f"{RESUME_COMMAND} passes it, {ABORT_COMMAND} rolls back"
 
 
 class WaveVerification(_Message):

@@ -21,6 +21,7 @@ from configurator.waves import assign_waves, failure_budget
 from contract.notes import VerdictNote
 from contract.wire import (
     MAX_LISTED,
+    VERIFY_COMMANDS,
     AgentState,
     AgentStatus,
     RolloutState,
@@ -293,10 +294,7 @@ class _Rollout:
                 state, why = "Paused", "paused (rollout.paused): a commit setting it false resumes"
             elif held_for == "inconclusive" and verification is not None:
                 state = "Paused"
-                why = (
-                    f"wave '{name}' inconclusive ({verification.message}): "
-                    "robotconf rollout resume passes it, robotconf rollout abort rolls back"
-                )
+                why = f"wave '{name}' inconclusive ({verification.message}): {VERIFY_COMMANDS}"
                 self.noted.append(self._note(wave, started_at, verification))
             elif held_for == "gathering" and verification is not None:
                 why = f"wave '{name}' verifying: {verification.message}"

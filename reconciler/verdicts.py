@@ -27,7 +27,15 @@ from configurator.waves import assign_waves, matches
 from contract.interfaces import interfaces_verdict
 from contract.launch import template_mismatch
 from contract.textsafe import printable
-from contract.wire import ACTIVE_STATES, AgentState, ReconcilerStatus, RolloutStatus
+from contract.wire import (
+    ACTIVE_STATES,
+    RESUME_COMMAND,
+    VERIFY_COMMANDS,
+    AgentState,
+    ReconcilerStatus,
+    RolloutStatus,
+    WaveVerification,
+)
 from contract.wire import short_digest as _short_digest
 from contract.wire import short_rev as _short_rev
 from reconciler.observed import Retained, RobotSeen
@@ -396,8 +404,34 @@ def _offline_count(rollout: RolloutStatus) -> str:
     return f", {offline} offline" if offline else ""
 
 
+def evidence_words(found: WaveVerification) -> str:
+    """A wave's evidence in words: what was gathered against what `rollout.verify` asks, the
+    verdict, and who decided it by hand ('14 of 20 goals, 92% ≥ 90%: Successful')."""
+    # The reconciler words it as it judges (reconciler/evidence.py); a status without them
+    # (an older reconciler's) still says what was counted.
+    text = found.message or f"{found.goals} of {found.min_goals} goals"
+    if found.decided_by is not None:
+        how = "aborted" if found.verdict == "Failed" else "resumed"
+        text += f"; {how} by {found.decided_by}"
+    return clean(text)
+
+
+def paused_for_evidence(rollout: RolloutStatus) -> bool:
+    """Whether the rollout waits on an operator because its wave's evidence is inconclusive
+    (`rollout.verify.inconclusive: pause`): then resume or abort is theirs to run."""
+    found = rollout.verification
+    return (
+        rollout.state == "Paused"
+        and found is not None
+        and found.verdict == "Inconclusive"
+        and not found.dry_run  # a dry run does not gate: it pauses nothing
+        and found.decided_by is None
+    )
+
+
 def rollout_line(rollout: RolloutStatus) -> str:
-    """The rollout in one line: revision, state, where, who is healthy, failed, pending, why."""
+    """The rollout in one line: revision, state, where, who is healthy, failed, pending, the
+    wave's evidence when `rollout.verify` gathers it, why."""
     counts = rollout.counts
     line = (
         f"rollout: {short_rev(rollout.revision)} {clean(rollout.state)}, "
@@ -411,8 +445,14 @@ def rollout_line(rollout: RolloutStatus) -> str:
     if rollout.offline:
         more = ", ..." if counts.get("offline", 0) > 5 else ""
         line += f"; offline (get it when back): {clean(', '.join(rollout.offline[:5]))}{more}"
+    found = rollout.verification
+    # The reconciler's message quotes the evidence while the wave waits on it: said once.
+    if found is not None and not (found.message and found.message in rollout.message):
+        line += f"; evidence {evidence_words(found)}"
     if rollout.message:
         line += f" — {clean(rollout.message)}"
+    if paused_for_evidence(rollout) and RESUME_COMMAND not in rollout.message:
+        line += f" — {VERIFY_COMMANDS}"
     return line
 
 

@@ -6,18 +6,20 @@ from __future__ import annotations
 from collections.abc import Iterable
 from urllib.parse import quote, urlencode
 
+from contract.wire import ABORT_COMMAND, RESUME_COMMAND, WaveVerification
 from reconciler.verdicts import (
     Health,
     RobotRow,
     Verdict,
+    paused_for_evidence,
     reconciler_health,
     short_digest,
     short_rev,
 )
 from workstation.ui.auth import Identity
-from workstation.ui.goals_html import goals_cell, rates_box
+from workstation.ui.goals_html import goals_cell, percent, rates_box
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
-from workstation.ui.text import age, definitions, esc
+from workstation.ui.text import age, definitions, esc, when
 
 MAX_LISTED = 300  # items of one list on a robot page (interfaces, mappings); the rest counted
 DIAGNOSTICS = 50  # diagnostics listed; the rest counted
@@ -290,11 +292,79 @@ def rollout_box(snap: Snapshot) -> str:
         for name, ids, n in groups
     )
     message = f"<p>{esc(rollout.message)}</p>" if rollout.message else ""
+    evidence = (
+        evidence_html(rollout.verification, paused_for_evidence(rollout))
+        if rollout.verification is not None
+        else ""
+    )
     return (
         f'<section data-box="rollout" data-rollout-state="{esc(rollout.state, 20)}">'
         f"<h2>Rollout: {esc(rollout.state, 20)}</h2>{definitions(facts)}{restored}{message}"
-        f'<div class="groups">{lists}</div></section>'
+        f'{evidence}<div class="groups">{lists}</div></section>'
     )
+
+
+def evidence_html(found: WaveVerification, paused: bool) -> str:
+    """The wave's evidence against `rollout.verify`: the goals gathered against those needed,
+    the rate against its threshold and the stable robots', the verdict, and, `paused` on it,
+    the commands an operator decides it with."""
+    verdict = found.verdict or "Gathering"
+    facts = [
+        ("Verdict", f'<span class="verdict">{esc(verdict, 20)}</span>'),
+        ("Goals", _goals_text(found)),
+    ]
+    if found.rate is not None or found.success_rate is not None:
+        facts.append(("Success rate", _rate_text(found)))
+    if found.max_drop is not None:  # compare: stable
+        facts.append(("Stable revision", _stable_text(found)))
+    if found.critical:
+        facts.append(("Critical codes", esc(", ".join(found.critical))))
+    if found.verdict is None and found.deadline is not None:
+        facts.append(("Judged by", esc(when(found.deadline))))
+    if found.decided_by is not None:
+        how = "Aborted by" if found.verdict == "Failed" else "Resumed by"
+        facts.append((how, esc(found.decided_by, 80)))
+    # A dry run's verdict is shown, never acted on: said before anyone reads it as a gate.
+    shadow = (
+        "<p>Dry run: judged and shown, not gating; the wave goes on by its "
+        "robots' health alone.</p>"
+        if found.dry_run
+        else ""
+    )
+    commands = (
+        f"<p data-verify-commands>Inconclusive: an operator decides. <code>{RESUME_COMMAND}"
+        f"</code> passes the wave; <code>{ABORT_COMMAND}</code> fails it (rolled back, or halted "
+        "with on_failure: halt).</p>"
+        if paused
+        else ""
+    )
+    dry = " data-dry-run" if found.dry_run else ""
+    return (
+        f'<div class="evidence" data-evidence="{esc(verdict, 20)}"{dry}>'
+        f"<h3>Evidence: {esc(verdict, 20)}</h3>{shadow}{definitions(facts)}{commands}</div>"
+    )
+
+
+def _goals_text(found: WaveVerification) -> str:
+    """'14 of at least 20 (13 succeeded, 1 failed, 0 canceled) from 3 robots'."""
+    return (
+        f"{found.goals} of at least {found.min_goals} ({found.succeeded} succeeded, "
+        f"{found.failed} failed, {found.canceled} canceled) from {found.robots} "
+        f"robot{'' if found.robots == 1 else 's'}"
+    )
+
+
+def _rate_text(found: WaveVerification) -> str:
+    if found.success_rate is None:
+        return percent(found.rate)
+    return f"{percent(found.rate)} (at least {percent(found.success_rate)})"
+
+
+def _stable_text(found: WaveVerification) -> str:
+    drop = f"at most {percent(found.max_drop)} below it"
+    if found.stable_rate is None:
+        return f"no rate to compare with yet ({drop})"
+    return f"{percent(found.stable_rate)} over {found.stable_goals} goals ({drop})"
 
 
 def id_list(ids: list[str], count: int) -> str:

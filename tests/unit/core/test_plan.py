@@ -4,9 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.plan import Plan, format_plan_markdown, format_plan_text, make_plan, plan_as_json
+from configurator.plan import (
+    Plan,
+    format_plan_markdown,
+    format_plan_text,
+    make_plan,
+    plan_as_json,
+    verify_text,
+)
 from configurator.render import FleetRender, render_fleet
-from configurator.types import RolloutPolicy
+from configurator.types import RolloutPolicy, Verify
 from tests.support.lab import Lab
 
 FLEET = "configs/fleet.yaml"
@@ -153,3 +160,47 @@ def test_a_domain_change_is_a_restart(lab: Lab) -> None:
         "  ~ tb3-04  patrol-real: ros_domain_id [restart]",
         "  ~ tb3-07  patrol-real: ros_domain_id [restart]",
     ]
+
+
+def test_verify_says_what_each_wave_must_show() -> None:
+    verify = Verify(
+        min_goals=20, success_rate=0.9, compare="stable", max_drop=0.1, critical=["COLLISION"]
+    )
+    assert verify_text(verify) == (
+        "at least 20 goals, success rate ≥ 90%, no worse than stable by more than 10%, "
+        "critical: COLLISION; inconclusive after 10m: pause"
+    )
+    assert verify_text(Verify(timeout=90, inconclusive="fail", dry_run=True)) == (
+        "at least 1 goal; inconclusive after 90s: fail (dry run: judged, not gating)"
+    )
+    assert verify_text(Verify(min_goals=0, timeout="2h", inconclusive="pass")) == (
+        "no minimum of goals; inconclusive after 2h: pass"
+    )
+
+
+def test_the_head_s_verify_is_printed_under_its_waves(lab: Lab) -> None:
+    base, _ = fleet(lab)
+    enable_example_rollout(lab)
+    lab.replace(
+        FLEET,
+        "  offline: skip",
+        "  offline: skip\n  verify: {min_goals: 20, success_rate: 0.9, critical: [COLLISION]}",
+    )
+    edit(lab)
+    head, rollout = fleet(lab)
+    plan = make_plan(base, head, rollout)
+    words = (
+        "at least 20 goals, success rate ≥ 90%, critical: COLLISION; inconclusive after 10m: pause"
+    )
+    lines = format_plan_text(plan).splitlines()
+    assert lines[1].startswith("rollout in waves: canary, half, all;")
+    assert lines[2:4] == [f"verified by: {words}", "wave canary (1 of 3):"]
+    assert f"Each wave verified by: {words}." in format_plan_markdown(plan)
+    found = plan_as_json(plan)["verify"]
+    assert found["min_goals"] == 20 and found["critical"] == ["COLLISION"]
+    assert found["success_rate"] == 0.9 and found["inconclusive"] == "pause"
+
+
+def test_without_verify_nothing_is_said_of_it(plan: Plan) -> None:
+    assert "verified" not in format_plan_text(plan) + format_plan_markdown(plan)
+    assert plan_as_json(plan)["verify"] is None
