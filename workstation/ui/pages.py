@@ -334,7 +334,9 @@ def evidence_html(found: WaveVerification, paused: bool) -> str:
     commands = (
         f"<p data-verify-commands>Inconclusive: an operator decides. <code>{RESUME_COMMAND}"
         f"</code> passes the wave; <code>{ABORT_COMMAND}</code> fails it (rolled back, or halted "
-        "with on_failure: halt).</p>"
+        "with on_failure: halt). Here, operators: "
+        '<a data-action="rollout-resume" href="/rollout/resume">resume</a> or '
+        '<a data-action="rollout-abort" href="/rollout/abort">abort</a>.</p>'
         if paused
         else ""
     )
