@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from configurator.render import FleetRender
 from configurator.types import Stage
-from configurator.waves import matches
+from configurator.waves import assign_waves, matches
 
 
 class SelectorError(ValueError):
@@ -83,3 +83,52 @@ def fleet_stages(fleet: FleetRender) -> dict[str, int]:
     if not fleet.stages:
         return {}
     return assign_stages(fleet_placements(fleet), fleet.stages)
+
+
+@dataclass(frozen=True)
+class WaveSpec:
+    """One step of a rollout: a wave of the policy (within a stage, when there are stages), or
+    a stage's gate — no robots of its own; the whole stage's evidence, judged before the next
+    stage's first wave."""
+
+    name: str  # the wave's ("canary"), "sim/canary" within stage sim, "sim" for its gate
+    stage: int | None = None
+    gate: bool = False
+
+
+@dataclass(frozen=True)
+class WavePlan:
+    specs: tuple[WaveSpec, ...]
+    of: dict[str, int]  # robot id -> the index of its wave in `specs`
+    stage_of: dict[str, int]  # robot id -> its stage ({} without stages)
+
+    def first_of_stage(self, stage: int) -> int:
+        return next(i for i, spec in enumerate(self.specs) if spec.stage == stage)
+
+    def gate_of(self, stage: int) -> int:
+        return next(i for i, s in enumerate(self.specs) if s.stage == stage and s.gate)
+
+
+def plan_waves(fleet: FleetRender) -> WavePlan:
+    """The rollout's steps, in order. Without stages, the policy's waves. With stages, each
+    stage's robots go through the policy's waves (selectors and shares among that stage's
+    robots), then the stage's gate; the next stage starts after it. A robot no stage takes
+    (RC708 refuses such a commit) goes with the last stage."""
+    policy = fleet.rollout
+    assert policy is not None
+    if not fleet.stages:
+        plain = tuple(WaveSpec(wave.name) for wave in policy.waves)
+        return WavePlan(plain, assign_waves(fleet.labels, policy.waves), {})
+    stages = fleet_stages(fleet)
+    last = len(fleet.stages) - 1
+    stage_of = {robot: stages.get(robot, last) for robot in fleet.labels}
+    width = len(policy.waves) + 1
+    specs: list[WaveSpec] = []
+    of: dict[str, int] = {}
+    for index, stage in enumerate(fleet.stages):
+        specs.extend(WaveSpec(f"{stage.name}/{w.name}", index) for w in policy.waves)
+        specs.append(WaveSpec(stage.name, index, gate=True))
+        members = {r: fleet.labels[r] for r, s in stage_of.items() if s == index}
+        for robot, wave in assign_waves(members, policy.waves).items():
+            of[robot] = index * width + wave
+    return WavePlan(tuple(specs), of, stage_of)

@@ -398,6 +398,20 @@ class OperatorAnswer(_Message):
     message: str = ""
 
 
+StageWord = Literal["waiting", "rolling", "verifying", "verified", "failed"]
+
+
+class StageState(_Message):
+    """One stage of the promotion ladder (fleet.yaml `stages`) in a rollout: where the
+    revision stands on it, and the revision verified for its robots."""
+
+    name: str
+    state: StageWord
+    verified_revision: str | None = Field(
+        None, description="the last revision verified on this stage: what its robots keep"
+    )
+
+
 class RolloutStatus(_Message):
     """A rollout of `revision`, wave by wave, as the reconciler status carries it: where it is
     and why, and (stateless) what a restarted reconciler resumes from."""
@@ -425,6 +439,10 @@ class RolloutStatus(_Message):
     )
     verification: WaveVerification | None = Field(
         None, description="the wave's goal outcomes against rollout.verify, when it is set"
+    )
+    stage: str | None = Field(None, description="the stage the current wave is in")
+    stages: list[StageState] = Field(
+        default_factory=list, description="the promotion ladder, in order (fleet.yaml stages)"
     )
     answer: OperatorAnswer | None = Field(
         None, description="the answer to the last operator action about this rollout"

@@ -508,7 +508,8 @@ class Controller:
                 if not self._notes_failed:
                     log.warning("%s", exc)
                     self._notes_failed = True
-        if self._evidence is None or fleet.rollout.verify is None:
+        judged = fleet.rollout.verify is not None or any(s.soak for s in fleet.stages)
+        if self._evidence is None or not judged:
             return None, {}, notes
         stable = self.serving.fleet if self.serving is not None else None
         counted = self._evidence.count(fleet, stable, rollout)

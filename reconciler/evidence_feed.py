@@ -15,10 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from configurator.render import FleetRender
+from configurator.stages import plan_waves
 from contract.wire import RolloutStatus
 from reconciler.evidence import Counts, EvidenceKey, WaveEvidence, new_evidence
 from reconciler.ledger import Ledger, LedgerError
-from reconciler.rollout import wave_roles
+from reconciler.rollout import criteria, wave_roles
 
 log = logging.getLogger("robotconf.reconciler")
 
@@ -37,6 +38,7 @@ class EvidenceCounter:
         self._ledger: Ledger | None = None
         self._identity: tuple[int, int] | None = None
         self._evidence: WaveEvidence | None = None
+        self._without: EvidenceKey | None = None  # the last key with nothing to judge by
         self._baseline: tuple[str, dict[str, Counts]] | None = None
         self._complained = False
 
@@ -48,12 +50,11 @@ class EvidenceCounter:
     def count(
         self, head: FleetRender, stable: FleetRender | None, rollout: RolloutStatus | None
     ) -> Counted:
-        """The evidence of the wave `rollout` stands in (when it is the head's, verified, and
-        under way), counted up to what the ledger holds now."""
-        policy = head.rollout
+        """The evidence of the wave `rollout` stands in (when it is the head's, under way, and
+        judged by criteria: `rollout.verify`, or a stage's soak), counted up to what the ledger
+        holds now."""
         if (
-            policy is None
-            or policy.verify is None
+            head.rollout is None
             or rollout is None
             or rollout.revision != head.revision
             or rollout.state not in ("Progressing", "Paused")
@@ -62,11 +63,22 @@ class EvidenceCounter:
             self._evidence = None
             return Counted(None, {})
         key = EvidenceKey(head.revision, rollout.wave, rollout.wave_started_at)
-        ledger = self._open()
+        if key == self._without:
+            return Counted(None, {})  # a step judged by health alone
         if self._evidence is None or self._evidence.key != key:
+            plan = plan_waves(head)
+            verify = (
+                criteria(head, plan.specs[rollout.wave])
+                if 0 <= rollout.wave < len(plan.specs)
+                else None
+            )
+            if verify is None:
+                self._evidence, self._without = None, key
+                return Counted(None, {})
             roles = wave_roles(head, stable, rollout.wave)
-            self._evidence = new_evidence(key, roles, policy.verify)
+            self._evidence = new_evidence(key, roles, verify)
         evidence = self._evidence
+        ledger = self._open()
         if ledger is not None:
             try:
                 self._read(ledger, evidence)

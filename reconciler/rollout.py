@@ -16,8 +16,9 @@ from enum import Enum
 
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
-from configurator.types import RolloutPolicy
-from configurator.waves import assign_waves, failure_budget
+from configurator.stages import WavePlan, WaveSpec, plan_waves
+from configurator.types import RolloutPolicy, Verify
+from configurator.waves import failure_budget
 from contract.notes import VerdictNote
 from contract.wire import (
     MAX_LISTED,
@@ -26,6 +27,8 @@ from contract.wire import (
     AgentStatus,
     RolloutState,
     RolloutStatus,
+    StageState,
+    StageWord,
     WaveVerification,
     is_online,
     short_rev,
@@ -116,11 +119,11 @@ def roll_out(seen: RolloutInput) -> RolloutStep:
     head, stable, previous = seen.head, seen.stable, seen.previous
     policy = head.rollout
     assert policy is not None
-    waves = assign_waves(head.labels, policy.waves)
+    plan = plan_waves(head)
     stable_requests = stable.requests if stable is not None else {}
     changed = _changed(head, stable_requests)
     same = previous is not None and previous.revision == head.revision
-    base = _Rollout(seen, policy, waves, changed, stable_requests)
+    base = _Rollout(seen, policy, plan, changed, stable_requests)
     if not changed or (same and previous is not None and previous.state == "Complete"):
         return base.everyone()  # nothing to move (paused or not), or moved already
     if same and previous is not None and previous.state == "RolledBack":
@@ -146,18 +149,45 @@ def _changed(head: FleetRender, stable_requests: Mapping[str, RenderedRequest]) 
     }
 
 
+def criteria(head: FleetRender, spec: WaveSpec) -> Verify | None:
+    """What a step's evidence is judged by: `rollout.verify` for a wave; for a stage's gate,
+    its soak (that many goals more, ended by the whole stage after its last wave, judged by
+    the same criteria), or nothing (a stage whose waves all passed is verified)."""
+    verify = head.rollout.verify if head.rollout is not None else None
+    if not spec.gate:
+        return verify
+    soak = head.stages[spec.stage].soak if spec.stage is not None else None
+    if soak is None:
+        return None
+    base = verify if verify is not None else Verify()
+    return base.model_copy(update={"min_goals": max(base.min_goals, soak.goals)})
+
+
 def wave_roles(head: FleetRender, stable: FleetRender | None, wave: int) -> Roles:
     """Whose goal outcomes count toward `wave`'s verification: its moved robots on the head's
-    requests, and the robots no wave has moved yet on the stable ones (the comparison)."""
-    assert head.rollout is not None
+    requests (for a stage's gate, every moved robot of the stage), and the robots no wave has
+    moved yet on the stable ones (the comparison)."""
     stable_requests = stable.requests if stable is not None else {}
-    waves = assign_waves(head.labels, head.rollout.waves)
-    last = len(head.rollout.waves)
+    return _roles(plan_waves(head), head, _changed(head, stable_requests), stable_requests, wave)
+
+
+def _roles(
+    plan: WavePlan,
+    head: FleetRender,
+    changed: set[str],
+    stable_requests: Mapping[str, RenderedRequest],
+    wave: int,
+) -> Roles:
+    last = len(plan.specs)
+    spec = plan.specs[wave] if 0 <= wave < last else None
     new: dict[str, str] = {}
     kept: dict[str, str] = {}
-    for robot in _changed(head, stable_requests):
-        at = waves.get(robot, last)
-        if at == wave:
+    for robot in changed:
+        at = plan.of.get(robot, last)
+        ours = at == wave
+        if spec is not None and spec.gate:
+            ours = plan.stage_of.get(robot) == spec.stage and at < wave
+        if ours:
             new[robot] = head.requests[robot].digest
         elif at > wave and robot in stable_requests:
             kept[robot] = stable_requests[robot].digest
@@ -169,16 +199,18 @@ class _Rollout:
         self,
         seen: RolloutInput,
         policy: RolloutPolicy,
-        waves: dict[str, int],
+        plan: WavePlan,
         changed: set[str],
         stable_requests: Mapping[str, RenderedRequest],
     ) -> None:
         self.seen = seen
         self.policy = policy
-        self.waves = waves
+        self.plan = plan
+        self.specs = plan.specs
+        self.waves = plan.of
         self.changed = changed
         self.stable_requests = stable_requests
-        self.count = len(policy.waves)
+        self.count = len(plan.specs)
         self.noted: list[VerdictNote] = []  # verdicts reached in this step
 
     def _with_verdicts(self, step: RolloutStep) -> RolloutStep:
@@ -243,7 +275,7 @@ class _Rollout:
             budget = failure_budget(self.policy.max_failures, taking_part) or 0
             verification = self._verify(wave, started_at) if known else None
             by_hand = self._decision(wave, started_at)
-            name = self.policy.waves[wave].name
+            name = self.specs[wave].name
             if by_hand is not None and by_hand.kind == "abort":
                 why = f"aborted by {by_hand.by or 'an operator'} in wave '{name}'"
                 return self._failed(wave, started_at, judged, why, verification)
@@ -260,9 +292,10 @@ class _Rollout:
             held_for = ""  # why a wave healthy throughout is held: its evidence
             if done and gating and verification is not None:
                 verdict = verification.verdict
-                assert self.policy.verify is not None
-                inconclusive = self.policy.verify.inconclusive
-                if by_hand is not None and by_hand.kind == "resume":
+                rules = criteria(self.seen.head, self.specs[wave])
+                assert rules is not None  # a verification is made only by criteria
+                inconclusive = rules.inconclusive
+                if by_hand is not None and by_hand.kind in ("resume", "promote"):
                     verification = verification.model_copy(update={"decided_by": by_hand.by})
                 elif verdict == "Inconclusive" and inconclusive == "fail":
                     why = f"verification of wave '{name}' inconclusive: {verification.message}"
@@ -282,6 +315,10 @@ class _Rollout:
                 and (verification.verdict or verification.decided_by)
             ):
                 self.noted.append(self._note(wave, started_at, verification))
+            elif done and verification is None and self.specs[wave].gate:
+                # No soak: a stage whose every wave passed is verified; said in the notes.
+                passed = WaveVerification(verdict="Successful", message="every wave passed")
+                self.noted.append(self._note(wave, started_at, passed))
             if done and wave == self.count - 1:
                 return self._with_verdicts(self.everyone())
             if done and not self.policy.paused:
@@ -328,7 +365,7 @@ class _Rollout:
     ) -> RolloutStep:
         failed = sorted(r for r, h in judged.items() if h is Health.FAILED)
         why = reason or (
-            f"{len(failed)} robot(s) of wave '{self.policy.waves[wave].name}' failed "
+            f"{len(failed)} robot(s) of wave '{self.specs[wave].name}' failed "
             f"({', '.join(failed[:5])}{', ...' if len(failed) > 5 else ''}), over max_failures "
             f"{self.policy.max_failures}"
         )
@@ -354,22 +391,42 @@ class _Rollout:
         """The wave's verification by its goal outcomes (`rollout.verify`), None without one.
         Evidence counted for another wave, or none yet, is no evidence: this wave's counts
         start empty (the reconciler counts them from the ledger in the steps that follow)."""
-        verify = self.policy.verify
-        if verify is None:
-            return None
+        spec = self.specs[wave]
+        verify = criteria(self.seen.head, spec)
+        if verify is None or not self._judged_robots(wave):
+            return None  # nothing to judge by, or no robot whose goals would say anything
         key = EvidenceKey(self.seen.head.revision, wave, started_at)
         evidence = self.seen.evidence
         if evidence is None or evidence.key != key:
             evidence = new_evidence(key, Roles({}, {}), verify)
         return judge(verify, evidence, self.seen.now, self.seen.baseline)
 
+    def _judged_robots(self, wave: int) -> bool:
+        """Whether the step moved any robot to judge: its own, or (a gate) its stage's."""
+        spec = self.specs[wave]
+        if not spec.gate:
+            return any(self.waves.get(r) == wave for r in self.changed)
+        return any(
+            self.plan.stage_of.get(r) == spec.stage and self.waves.get(r, self.count) < wave
+            for r in self.changed
+        )
+
     def _decision(self, wave: int, started_at: float) -> VerdictNote | None:
-        """An operator's resume or abort of this very wave run, the latest, from the notes."""
+        """An operator's resume or abort of this very wave run, or a promotion of the head to
+        a later stage (which passes the evidence of every wave before that stage): the
+        latest, from the notes."""
+        head = self.seen.head
+        stages = {stage.name: index for index, stage in enumerate(head.stages)}
         found = [
             note
             for note in self.seen.notes
-            if note.kind in ("resume", "abort")
-            and note.about(self.seen.head.revision, wave, started_at)
+            if (note.kind in ("resume", "abort") and note.about(head.revision, wave, started_at))
+            or (
+                note.kind == "promote"
+                and note.revision == head.revision
+                and note.stage in stages
+                and wave < self.plan.first_of_stage(stages[note.stage])
+            )
         ]
         return max(found, key=lambda note: note.at) if found else None
 
@@ -379,8 +436,9 @@ class _Rollout:
             revision=self.seen.head.revision,
             at=self.seen.now,
             wave=wave,
-            wave_name=self.policy.waves[wave].name,
+            wave_name=self.specs[wave].name,
             started_at=started_at,
+            stage=self._stage_name(wave),
             verdict=found.verdict,
             dry_run=found.dry_run,
             goals=found.goals,
@@ -392,6 +450,10 @@ class _Rollout:
             by=found.decided_by,
             message=found.message,
         )
+
+    def _stage_name(self, wave: int) -> str | None:
+        stage = self.specs[wave].stage if 0 <= wave < self.count else None
+        return self.seen.head.stages[stage].name if stage is not None else None
 
     # ------------------------------------------------------------------ health
 
@@ -540,7 +602,7 @@ class _Rollout:
             state=state,
             wave=index,
             waves=self.count,
-            wave_name=self.policy.waves[index].name,
+            wave_name=self.specs[index].name,
             wave_started_at=started_at,
             healthy=healthy[:MAX_LISTED],
             failed=failed[:MAX_LISTED],
@@ -548,8 +610,33 @@ class _Rollout:
             offline=offline[:MAX_LISTED],
             counts={**counts, "offline": len(offline)} if offline else counts,
             verification=verification,
+            stage=self._stage_name(index),
+            stages=self._stages(state, index),
             message=message,
         )
+
+    def _stages(self, state: RolloutState, wave: int) -> list[StageState]:
+        """Each stage's standing: stages before the current wave's are verified on the head;
+        the current one rolls, verifies (at its gate) or failed; later ones wait, keeping the
+        stable revision."""
+        head, stable = self.seen.head, self._stable_revision()
+        current = self.specs[wave].stage if 0 <= wave < self.count else None
+        found: list[StageState] = []
+        for index, stage in enumerate(head.stages):
+            word: StageWord
+            verified: str | None
+            if state == "Complete" or (current is not None and index < current):
+                word, verified = "verified", head.revision
+            elif index == current:
+                if state in ("RolledBack", "Halted"):
+                    word = "failed"
+                else:
+                    word = "verifying" if self.specs[wave].gate else "rolling"
+                verified = stable
+            else:
+                word, verified = "waiting", stable
+            found.append(StageState(name=stage.name, state=word, verified_revision=verified))
+        return found
 
 
 def deferral_deadline(

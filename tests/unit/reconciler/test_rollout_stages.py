@@ -1,0 +1,195 @@
+"""Staged rollouts, pure: the promotion ladder (fleet.yaml `stages`) runs each stage's robots
+through the waves, then the stage's gate (its soak, counted in goals); the next stage's robots
+keep the stable revision until the gate passes, or until an operator promotes the revision."""
+
+from __future__ import annotations
+
+import yaml
+
+from configurator.render import FleetRender, render_fleet
+from configurator.stages import plan_waves
+from contract.notes import VerdictNote
+from contract.wire import AgentState, AgentStatus
+from reconciler.evidence import EvidenceKey, Row, WaveEvidence, new_evidence
+from reconciler.rollout import RolloutInput, RolloutStep, criteria, roll_out, wave_roles
+from tests.support.lab import Lab
+
+T0 = 1_000_000.0
+FLEET = "configs/fleet.yaml"
+SIM = ["tb3-01", "tb3-02", "tb3-03", "tb3-05"]  # Gazebo
+REAL = ["tb3-04", "tb3-07"]  # the robotics lab
+POLICY = """\
+rollout:
+  waves: [{name: canary, selector: {ring: canary}}, {name: all}]
+  healthy_after: 10
+  wave_timeout: 100
+  verify: {min_goals: 1, timeout: 600}
+stages:
+  - {name: sim, environments: [Gazebo], soak: {goals: 5}}
+  - {name: real, environments: [Real]}
+"""
+
+
+def build(lab: Lab, version: str, policy: str = POLICY) -> FleetRender:
+    robots = yaml.safe_load(lab.read(FLEET))["robots"]
+    for assignment in robots.values():
+        assignment["name"] = f"{assignment['name']} {version}"
+    lab.write(FLEET, yaml.safe_dump({"robots": robots}, sort_keys=True) + policy)
+    checked = lab.check()
+    assert checked.ok, checked.errors
+    rendered = render_fleet(checked.repo)
+    rendered.revision = version * 40
+    return rendered
+
+
+class Run:
+    def __init__(self, lab: Lab, policy: str = POLICY) -> None:
+        self.stable, self.head = build(lab, "a", policy), build(lab, "b", policy)
+        self.last: RolloutStep | None = None
+        self.evidence: WaveEvidence | None = None
+        self.notes: list[VerdictNote] = []
+        self.next_id = 0
+
+    def launches(self) -> dict[str, str | None]:
+        held: dict[str, str | None] = {r: q.digest for r, q in self.stable.requests.items()}
+        if self.last is not None and self.last.serve_stable:
+            return held  # rolled back: the stable requests everywhere
+        if self.last is not None:  # what the step publishes; robots it keeps stay as they are
+            held.update(
+                {r: q.digest for r, q in self.last.requests.items() if r not in self.last.keep}
+            )
+        return held
+
+    def step(self, now: float) -> RolloutStep:
+        launches = self.launches()
+        statuses = {
+            r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=d, since=T0)
+            for r, d in launches.items()
+        }
+        self.last = roll_out(
+            RolloutInput(
+                self.head,
+                self.stable,
+                self.last.status if self.last is not None else None,
+                launches,
+                statuses,
+                {r: T0 for r in launches},
+                now,
+                self.last.record if self.last is not None else None,
+                evidence=self.evidence,
+                notes=self.notes,
+            )
+        )
+        return self.last
+
+    def report(self, robots: list[str], outcome: str, each: int = 1) -> None:
+        """Outcomes of `robots` on what they hold, counted for the wave the rollout stands in
+        (as the reconciler counts them: roles and criteria of that step)."""
+        status = self.last.status if self.last is not None else None
+        assert status is not None and status.wave_started_at is not None
+        key = EvidenceKey(self.head.revision, status.wave, status.wave_started_at)
+        if self.evidence is None or self.evidence.key != key:
+            verify = criteria(self.head, plan_waves(self.head).specs[status.wave])
+            assert verify is not None
+            roles = wave_roles(self.head, self.stable, status.wave)
+            self.evidence = new_evidence(key, roles, verify)
+        rows = []
+        for robot in robots:
+            for _ in range(each):
+                self.next_id += 1
+                digest = self.launches()[robot]
+                rows.append(
+                    Row(self.next_id, robot, digest, "s", outcome, None, key.started_at + 1)
+                )
+        self.evidence.add(rows)
+
+    def moved(self) -> list[str]:
+        held = self.launches()
+        return sorted(r for r, d in held.items() if d == self.head.requests[r].digest)
+
+
+def test_each_stage_goes_through_the_waves_then_its_gate(lab: Lab) -> None:
+    plan = plan_waves(build(lab, "b"))
+    assert [s.name for s in plan.specs] == [
+        "sim/canary",
+        "sim/all",
+        "sim",
+        "real/canary",
+        "real/all",
+        "real",
+    ]
+    assert [s.gate for s in plan.specs] == [False, False, True, False, False, True]
+    assert {r: plan.of[r] for r in SIM + REAL} == {
+        "tb3-01": 0,
+        "tb3-03": 0,
+        "tb3-02": 1,
+        "tb3-05": 1,
+        "tb3-04": 4,  # no real robot is a canary: real/canary takes none
+        "tb3-07": 4,
+    }
+
+
+def test_the_real_robots_keep_the_stable_revision_until_sim_is_soaked(lab: Lab) -> None:
+    run = Run(lab)
+    run.step(T0)
+    run.report(["tb3-01"], "succeeded")
+    run.step(T0 + 20)  # sim/canary verified: on to sim/all
+    run.report(["tb3-02"], "succeeded")
+    gate = run.step(T0 + 40)  # sim/all verified: the gate soaks 5 goals of the whole stage
+    assert gate.status is not None and gate.status.wave_name == "sim"
+    assert gate.status.stage == "sim" and gate.status.state == "Progressing"
+    assert [(s.name, s.state, s.verified_revision) for s in gate.status.stages] == [
+        ("sim", "verifying", "a" * 40),
+        ("real", "waiting", "a" * 40),
+    ]
+    assert run.moved() == SIM  # the real robots are not touched
+    run.report(SIM, "succeeded")  # 4 of 5
+    assert run.step(T0 + 50).status.wave_name == "sim"  # type: ignore[union-attr]
+    run.report(["tb3-05"], "succeeded")
+    promoted = run.step(T0 + 60)
+    assert promoted.status is not None and promoted.status.stage == "real"
+    assert [(s.name, s.state) for s in promoted.status.stages] == [
+        ("sim", "verified"),
+        ("real", "rolling"),
+    ]
+    assert run.moved() == sorted(SIM + REAL)
+    gates = [(n.wave_name, n.stage, n.verdict, n.goals) for n in promoted.verdicts]
+    assert ("sim", "sim", "Successful", 5) in gates
+
+
+def test_sim_failing_its_soak_never_reaches_the_real_robots(lab: Lab) -> None:
+    run = Run(lab, POLICY.replace("min_goals: 1,", "min_goals: 1, success_rate: 0.8,"))
+    run.step(T0)
+    run.report(["tb3-01"], "succeeded")
+    run.step(T0 + 20)
+    run.report(["tb3-02"], "succeeded")
+    assert run.step(T0 + 40).status.wave_name == "sim"  # type: ignore[union-attr]
+    run.report(SIM[:2], "failed")  # 2 of the soak's 5 failed: 80% is out of reach
+    stopped = run.step(T0 + 50)
+    assert stopped.status is not None and stopped.status.state == "RolledBack"
+    assert stopped.serve_stable
+    assert [(s.name, s.state) for s in stopped.status.stages] == [
+        ("sim", "failed"),
+        ("real", "waiting"),
+    ]
+    assert [(n.stage, n.verdict) for n in stopped.verdicts] == [("sim", "Failed")]
+    assert "verification of wave 'sim' failed" in stopped.status.message
+
+
+def test_an_operator_promotes_the_revision_to_a_stage_by_hand(lab: Lab) -> None:
+    run = Run(lab)
+    run.step(T0)
+    run.notes = [
+        VerdictNote(kind="promote", revision=run.head.revision, at=T0 + 1, stage="real", by="ada")
+    ]
+    # Each healthy wave before real passes without evidence; health is still waited for.
+    noted = []
+    for at in range(20, 120, 20):
+        jumped = run.step(T0 + at)
+        noted += jumped.verdicts
+        if jumped.status is not None and jumped.status.stage == "real":
+            break
+    assert jumped.status is not None and jumped.status.stage == "real"
+    assert run.moved() == sorted(SIM + REAL)
+    assert {n.wave_name for n in noted} == {"sim/canary", "sim/all", "sim"}
+    assert all(n.by == "ada" for n in noted)
