@@ -174,15 +174,19 @@ class RestartRequest(_Published):
 
 class RolloutAction(_Published):
     """An operator's decision about a rollout, from the desk (`robotconf rollout resume`,
-    `robotconf rollout abort`) or the browser view, to the reconciler. It names the wave run
-    it is about (revision, wave, wave_started_at): one about a run that has moved on is refused,
-    never applied to the next. Signed with the launch requests' key when the lab signs; the
-    reconciler keeps each one it carries out as a git note on the revision (who, when)."""
+    `robotconf rollout abort`, `robotconf promote`) or the browser view, to the reconciler. A
+    resume or abort names the wave run it is about (revision, wave, wave_started_at): one about
+    a run that has moved on is refused, never applied to the next. Signed with the launch
+    requests' key when the lab signs; the reconciler keeps each one it carries out as a git
+    note on the revision (who, when)."""
 
     apiVersion: Literal["robotconf/v1"] = "robotconf/v1"
     kind: Literal["RolloutAction"] = "RolloutAction"
-    action: Literal["resume", "abort"]
+    action: Literal["resume", "abort", "promote"]
     revision: str = Field(pattern=r"^[0-9a-f]{40}$", description="the commit rolled out")
+    stage: str | None = Field(
+        None, max_length=64, description="promote: the stage (fleet.yaml stages) it goes to"
+    )
     wave: int = Field(ge=0, le=10_000, description="the wave it is about (0-based)")
     wave_started_at: float = Field(description="when that wave was published")
     requested_by: str = Field(pattern=REQUESTER_PATTERN, description="who asked")

@@ -84,17 +84,28 @@ def judge_action(
     if why is not None:
         return refuse(why)
     assert rollout is not None
-    verb = "resumed" if action.action == "resume" else "aborted"
-    note = VerdictNote(
-        kind=action.action,
-        revision=action.revision,
-        at=now,
-        wave=action.wave,
-        wave_name=rollout.wave_name,
-        started_at=action.wave_started_at,
-        by=action.requested_by,
-        message=f"wave '{rollout.wave_name}' {verb} by {action.requested_by}",
-    )
+    if action.action == "promote":
+        note = VerdictNote(
+            kind="promote",
+            revision=action.revision,
+            at=now,
+            stage=action.stage,
+            by=action.requested_by,
+            message=f"{short_rev(action.revision)} promoted to stage '{action.stage}' "
+            f"by {action.requested_by}",
+        )
+    else:
+        verb = "resumed" if action.action == "resume" else "aborted"
+        note = VerdictNote(
+            kind=action.action,
+            revision=action.revision,
+            at=now,
+            wave=action.wave,
+            wave_name=rollout.wave_name,
+            started_at=action.wave_started_at,
+            by=action.requested_by,
+            message=f"wave '{rollout.wave_name}' {verb} by {action.requested_by}",
+        )
     answer = OperatorAnswer(
         action=action.action,
         requested_by=action.requested_by,
@@ -110,6 +121,8 @@ def _why_not(action: RolloutAction, rollout: RolloutStatus | None) -> str | None
         return "no rollout: fleet.yaml has no rollout policy, or nothing was rolled out yet"
     if rollout.revision != action.revision:
         return f"the rollout is of {short_rev(rollout.revision)}, not {short_rev(action.revision)}"
+    if action.action == "promote":
+        return _why_not_promoted(action, rollout)
     if rollout.state not in ("Progressing", "Paused"):
         what = f"the rollout of {short_rev(rollout.revision)} is {rollout.state}"
         return f"{what}: nothing to {action.action}"
@@ -123,4 +136,20 @@ def _why_not(action: RolloutAction, rollout: RolloutStatus | None) -> str | None
             return "the rollout is not paused: nothing to resume"
         if rollout.verification is None or rollout.verification.verdict != "Inconclusive":
             return "paused by fleet.yaml (rollout.paused): a commit setting it false resumes it"
+    return None
+
+
+def _why_not_promoted(action: RolloutAction, rollout: RolloutStatus) -> str | None:
+    """A promotion names a stage of the rollout under way that its revision has not reached."""
+    if rollout.state not in ("Progressing", "Paused"):
+        what = f"the rollout of {short_rev(rollout.revision)} is {rollout.state}"
+        return f"{what}: only a revision being rolled out is promoted (commit it again)"
+    names = [stage.name for stage in rollout.stages]
+    if action.stage not in names:
+        known = ", ".join(names) if names else "none: fleet.yaml has no stages"
+        return f"no stage {printable(action.stage or '')!r} (stages: {known})"
+    standing = next(stage for stage in rollout.stages if stage.name == action.stage)
+    if standing.state != "waiting":
+        where = f"stage '{standing.name}' ({standing.state})"
+        return f"{short_rev(rollout.revision)} is already on {where}"
     return None

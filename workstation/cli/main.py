@@ -68,6 +68,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "workstation.cli.rollout:rollout",
         "resume a paused rollout's wave, or abort the rollout, from the desk",
     ),
+    "promote": (
+        "workstation.cli.rollout:promote",
+        "promote the revision under way to a stage by hand (fleet.yaml stages)",
+    ),
     "up": (
         "workstation.cli.up:up",
         "the whole loop on this machine: broker, reconciler, agents, status",

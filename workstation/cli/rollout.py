@@ -26,7 +26,7 @@ from workstation.cli.restart import private_key, requester, signing_key_option
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
-Action = Literal["resume", "abort"]
+Action = Literal["resume", "abort", "promote"]
 
 
 class ReconcilerDesk:
@@ -102,6 +102,7 @@ def send_action(
     key: Ed25519PrivateKey | None,
     wait: float,
     revision: str | None = None,
+    stage: str | None = None,
 ) -> tuple[RolloutStatus, OperatorAnswer]:
     """Sends `action` about the rollout's current wave run and waits for the reconciler's
     answer: the one way the desk and the browser view resume or abort. CliError says why it
@@ -127,6 +128,7 @@ def send_action(
             wave_started_at=rollout.wave_started_at,
             requested_by=by,
             issued_at=issued_at,
+            stage=stage,
         )
         if key is not None:
             from contract.signing import sign
@@ -157,6 +159,11 @@ def rollout() -> None:
     --notes=robotconf`) and shows it in its status."""
 
 
+_REVISION = click.option(
+    "--revision", default=None, help="only if the rollout is of this commit (a prefix)"
+)
+
+
 def _options(command: F) -> F:
     for option in reversed(
         [
@@ -164,9 +171,6 @@ def _options(command: F) -> F:
             desk_broker_options,
             signing_key_option,
             click.option("--as", "as_name", default=None, help="who decides (default: $USER)"),
-            click.option(
-                "--revision", default=None, help="only if the rollout is of this commit (a prefix)"
-            ),
             click.option(
                 "--wait",
                 type=click.FloatRange(min=0.1),
@@ -200,6 +204,7 @@ def _run(
 
 @rollout.command("resume")
 @_options
+@_REVISION
 def resume(
     repo: Path,
     mqtt: BrokerOptions,
@@ -217,6 +222,7 @@ def resume(
 
 @rollout.command("abort")
 @_options
+@_REVISION
 def abort(
     repo: Path,
     mqtt: BrokerOptions,
@@ -229,3 +235,33 @@ def abort(
     fully rolled out (rollout.on_failure: halt keeps them where they are). Exit 0 when the
     reconciler carried it out, 1 when it refused, 2 when the broker cannot be reached."""
     return _run("abort", mqtt, signing_key, as_name, revision, wait)
+
+
+@click.command("promote")
+@click.argument("revision", metavar="REV")
+@click.option("--to", "stage", required=True, help="the stage (fleet.yaml stages) it goes to")
+@_options
+def promote(
+    revision: str,
+    stage: str,
+    repo: Path,
+    mqtt: BrokerOptions,
+    signing_key: Path | None,
+    as_name: str | None,
+    wait: float,
+) -> ExitCode:
+    """Promote REV (the revision being rolled out, a commit id or a prefix of it) to STAGE by
+    hand, as Kargo allows: every wave and stage gate before that stage passes without waiting
+    for its evidence (its robots' health is still waited for). The reconciler keeps the
+    promotion, with who asked, as a git note on the revision. Exit 0 when the reconciler
+    carried it out, 1 when it refused (another revision under way, no such stage, the revision
+    there already), 2 when the broker cannot be reached."""
+    by = requester(as_name, mqtt.username)
+    key = private_key(signing_key or mqtt.signing_key)
+    before, answer = send_action(
+        mqtt.connection(), mqtt.prefix, "promote", by, key, wait, revision, stage
+    )
+    print(
+        f"{short_rev(before.revision)} to stage '{printable(stage)}': {printable(answer.message)}"
+    )
+    return ExitCode.OK

@@ -9,7 +9,7 @@ import pytest
 
 from contract.launch import RolloutAction
 from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import RolloutStatus, WaveVerification
+from contract.wire import RolloutStatus, StageState, WaveVerification
 from reconciler.operator_actions import MAX_ACTION_BYTES, RECENT, Refused, Taken, judge_action
 
 REV = "b" * 40
@@ -109,3 +109,39 @@ def test_where_the_lab_signs_only_a_signed_unaltered_action_is_taken(tmp_path: P
     altered = signed.model_copy(update={"action": "abort"})
     found = judge_action(altered.payload(), PAUSED, T0, public)
     assert isinstance(found, Refused) and "altered" in found.why
+
+
+STAGED = PAUSED.model_copy(
+    update={
+        "state": "Progressing",
+        "verification": None,
+        "stage": "sim",
+        "stages": [
+            StageState(name="sim", state="rolling", verified_revision="a" * 40),
+            StageState(name="real", state="waiting", verified_revision="a" * 40),
+        ],
+    }
+)
+
+
+@pytest.mark.parametrize(
+    ("stage", "rollout", "why"),
+    [
+        ("real", STAGED, None),
+        ("sim", STAGED, "already on stage 'sim' (rolling)"),
+        ("moon", STAGED, "no stage 'moon' (stages: sim, real)"),
+        ("real", STAGED.model_copy(update={"stages": []}), "fleet.yaml has no stages"),
+        ("real", STAGED.model_copy(update={"state": "Complete"}), "is Complete"),
+        ("real", STAGED.model_copy(update={"revision": "c" * 40}), "not bbbbbbbbbbbb"),
+    ],
+)
+def test_a_promotion_names_a_stage_the_revision_under_way_has_not_reached(
+    stage: str, rollout: RolloutStatus, why: str | None
+) -> None:
+    found = judge_action(action("promote", stage=stage).payload(), rollout, T0, None)
+    if why is None:
+        assert isinstance(found, Taken)
+        assert (found.note.kind, found.note.stage, found.note.by) == ("promote", "real", "ada")
+        assert found.answer.message == "bbbbbbbbbbbb promoted to stage 'real' by ada"
+    else:
+        assert isinstance(found, Refused) and why in found.why
