@@ -241,3 +241,95 @@ def test_a_paused_rollout_stays_paused_across_a_restart(fleet: Fleet) -> None:
     assert launched(fleet, "tb3-06") == []
     assert desk(fleet, "resume").returncode == 0
     fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "all"), "the next wave")
+
+
+# ------------------------------------------------------------------ stages: sim, then real
+
+REAL = ["tb3-04", "tb3-07"]
+STAGES = (
+    "rollout:\n  waves: [{name: all}]\n  healthy_after: 0.5\n  max_failures: 0\n"
+    "  wave_timeout: 60\n  on_failure: rollback\n"
+    "  verify: {min_goals: 3, success_rate: 0.8, timeout: 120}\n"
+    "stages:\n  - {name: sim, environments: [Gazebo], soak: {goals: 6}}\n"
+    "  - {name: real, environments: [Real]}\n"
+)
+
+
+def staged(fleet: Fleet, rate: float, suffix: str) -> str:
+    """A commit that changes every robot's request, its delivery brains succeeding at `rate`."""
+    rename_all(fleet, suffix)
+    return brains(fleet, rate, f"brains at {rate} ({suffix})")
+
+
+def test_a_revision_whose_brains_fail_is_stopped_in_sim_and_never_reaches_the_real_robots(
+    fleet: Fleet,
+) -> None:
+    stable = with_policy(fleet, STAGES)
+    fleet.watch.live_launches.clear()
+    bad = staged(fleet, 0.0, "v2")
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, bad), "the rollback in sim")
+    assert status.rollout is not None
+    assert [(s.name, s.state) for s in status.rollout.stages] == [
+        ("sim", "failed"),
+        ("real", "waiting"),
+    ]
+    assert all(launched(fleet, robot) == [] for robot in REAL)  # never sent anything
+    fleet.watch.wait_running(fleet.requests(stable))
+    assert [(n["stage"], n["verdict"]) for n in notes(fleet, bad)] == [("sim", "Failed")]
+
+
+def test_a_good_revision_is_verified_and_soaked_in_sim_then_reaches_the_real_robots(
+    fleet: Fleet,
+) -> None:
+    with_policy(fleet, STAGES)
+    good = staged(fleet, 1.0, "v2")
+    status = fleet.watch.wait_reconciler(lambda s: complete(s, good), "the rollout complete")
+    assert status.rollout is not None
+    assert [(s.name, s.state, s.verified_revision) for s in status.rollout.stages] == [
+        ("sim", "verified", good),
+        ("real", "verified", good),
+    ]
+    fleet.watch.wait_running(fleet.requests(good))
+    kept = [(n["wave_name"], n["verdict"]) for n in notes(fleet, good)]
+    assert kept == [
+        ("sim/all", "Successful"),
+        ("sim", "Successful"),  # the soak: 6 goals of the whole stage after its last wave
+        ("real/all", "Successful"),
+        ("real", "Successful"),
+    ]
+    soak = next(n for n in notes(fleet, good) if n["wave_name"] == "sim")
+    assert isinstance(soak["goals"], int) and soak["goals"] >= 6
+
+
+def test_an_operator_promotes_a_revision_to_the_real_robots_by_hand(fleet: Fleet) -> None:
+    with_policy(fleet, STAGES.replace("min_goals: 3", "min_goals: 100000"))
+    head = staged(fleet, 1.0, "v2")
+    fleet.watch.wait_reconciler(
+        lambda s: s.rollout is not None and s.rollout.revision == head, "the rollout under way"
+    )
+    refused = desk_promote(fleet, head[:10], "moon")
+    assert refused.returncode == 1 and "no stage 'moon'" in refused.stderr
+    done = desk_promote(fleet, head[:10], "real")
+    assert done.returncode == 0, done.stderr
+    assert "promoted to stage 'real' by ada" in done.stdout
+    status = fleet.watch.wait_reconciler(
+        lambda s: s.rollout is not None and s.rollout.stage == "real", "the real stage"
+    )
+    assert status.rollout is not None and status.rollout.stages[0].state == "verified"
+    fleet.watch.wait_running({r: q for r, q in fleet.requests(head).items() if r in REAL})
+    assert ("promote", "real", "ada") in [
+        (n["kind"], n.get("stage"), n.get("by")) for n in notes(fleet, head)
+    ]
+
+
+def desk_promote(fleet: Fleet, revision: str, stage: str) -> subprocess.CompletedProcess[str]:
+    done = subprocess.run(
+        robotconf_argv(
+            "promote", revision, "--to", stage, "--broker", fleet.broker.url, "--as", "ada"
+        ),
+        capture_output=True,
+        text=True,
+        timeout=90,
+    )
+    assert "Traceback" not in done.stdout + done.stderr, done.stderr
+    return done
