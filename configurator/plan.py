@@ -9,7 +9,8 @@ from typing import Any, Literal
 from configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
 from configurator.render import FleetRender
 from configurator.rendered import RenderedRequest
-from configurator.types import RolloutPolicy, Verify
+from configurator.stages import plan_waves
+from configurator.types import RolloutPolicy, Stage, Verify
 from configurator.waves import assign_waves
 from contract.interfaces import Reported as Report
 from contract.textsafe import markdown_code, markdown_text, printable_lines
@@ -51,6 +52,7 @@ class Plan:
     waves: list[str] | None = None  # the head's rollout waves in order; None: all at once
     offline: str | None = None  # the head's rollout.offline: what robots that are off do
     verify: Verify | None = None  # the head's rollout.verify: what each wave's goals must show
+    stages: list[str] = field(default_factory=list)  # the promotion ladder, in words
     # robot -> its drift against the head's request, for the robots that would get a new one,
     # when the robots' interfaces were read (`plan --broker`); None: not read, nothing said
     drift: dict[str, Drift] | None = None
@@ -145,14 +147,31 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
         return Plan(base.revision, head.revision, changes, unchanged)
     names = [wave.name for wave in rollout.waves]
     placed = assign_waves(head.labels, rollout.waves)
+    if head.stages and head.rollout is not None:  # each stage's robots through the waves
+        staged = plan_waves(head)
+        names, placed = [spec.name for spec in staged.specs], staged.of
     for change in changes:
         index = placed.get(change.robot_id)
         change.wave = None if index is None else names[index]
     # Removed robots (and any no wave takes) last: they are in no wave of the head.
     changes.sort(key=lambda c: (placed.get(c.robot_id, len(names)), c.robot_id))
     return Plan(
-        base.revision, head.revision, changes, unchanged, names, rollout.offline, rollout.verify
+        base.revision,
+        head.revision,
+        changes,
+        unchanged,
+        names,
+        rollout.offline,
+        rollout.verify,
+        [stage_text(stage) for stage in head.stages],
     )
+
+
+def stage_text(stage: Stage) -> str:
+    """'sim (Gazebo; soak 6 goals)': a stage, what takes its robots, and its soak."""
+    takes = ", ".join(stage.environments) if stage.environments else stage.selector or ""
+    soak = f"; soak {stage.soak.goals} goals" if stage.soak is not None else ""
+    return f"{stage.name} ({takes}{soak})"
 
 
 Reported = Mapping[str, tuple[Report | None, str | None]]  # robot -> (report, error)
@@ -277,6 +296,8 @@ def format_plan_text(plan: Plan) -> str:
         lines.append(f"rollout in waves: {', '.join(plan.waves)}{_offline_text(plan)}")
     if plan.waves is not None and plan.verify is not None:
         lines.append(f"verified by: {verify_text(plan.verify)}")
+    if plan.stages:
+        lines.append(f"stages (each verified before the next): {' → '.join(plan.stages)}")
     heading: str | None = None
     for c in plan.changes:
         if plan.waves is not None and _wave_heading(plan.waves, c.wave) != heading:
@@ -298,6 +319,9 @@ def format_plan_markdown(plan: Plan) -> str:
         lines += [f"Rollout in waves: {waves_text}{_offline_text(plan)}.", ""]
     if plan.waves is not None and plan.verify is not None:
         lines += [f"Each wave verified by: {markdown_text(verify_text(plan.verify))}.", ""]
+    if plan.stages:
+        ladder = " → ".join(markdown_text(stage) for stage in plan.stages)
+        lines += [f"Stages, each verified before the next: {ladder}.", ""]
     if not plan.changes:
         lines.append("No robot's Launch Request changes: no robot restarts.")
         return "\n".join(lines) + "\n"
@@ -349,7 +373,8 @@ def _change_json(c: RobotChange, waves: bool, drift: dict[str, Drift] | None) ->
 
 
 def plan_as_json(plan: Plan) -> dict[str, Any]:
-    """For scripts; `waves`, `offline`, `verify` (none without rollout.verify) and each change's
+    """For scripts; `waves`, `offline`, `verify` (none without rollout.verify), `stages` (in
+    words, [] without) and each change's
     `wave` only when the head has a rollout policy; each change's `interfaces` and `drift` only
     when the robots' interfaces were read."""
     found: dict[str, Any] = {"base": plan.base, "head": plan.head, "unchanged": plan.unchanged}
@@ -357,5 +382,6 @@ def plan_as_json(plan: Plan) -> dict[str, Any]:
         found["waves"] = plan.waves
         found["offline"] = plan.offline
         found["verify"] = plan.verify.model_dump(mode="json") if plan.verify else None
+        found["stages"] = plan.stages
     found["changes"] = [_change_json(c, plan.waves is not None, plan.drift) for c in plan.changes]
     return found

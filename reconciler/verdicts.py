@@ -429,6 +429,16 @@ def paused_for_evidence(rollout: RolloutStatus) -> bool:
     )
 
 
+def stages_words(rollout: RolloutStatus) -> str:
+    """The promotion ladder in a few words: 'sim verified a3f… > real waiting (keeps 8be…)'."""
+    parts = []
+    for stage in rollout.stages:
+        kept = short_rev(stage.verified_revision)
+        tail = f" {kept}" if stage.state == "verified" else f" (keeps {kept})"
+        parts.append(f"{clean(stage.name)} {clean(stage.state)}{tail}")
+    return " > ".join(parts)
+
+
 def rollout_line(rollout: RolloutStatus) -> str:
     """The rollout in one line: revision, state, where, who is healthy, failed, pending, the
     wave's evidence when `rollout.verify` gathers it, why."""
@@ -440,6 +450,8 @@ def rollout_line(rollout: RolloutStatus) -> str:
         f"{counts.get('pending', 0)} pending{_offline_count(rollout)}; "
         f"stable {short_rev(rollout.stable_revision)}"
     )
+    if rollout.stages:
+        line += "; stages " + stages_words(rollout)
     if rollout.failed:
         line += f"; failed: {clean(', '.join(rollout.failed[:5]))}"
     if rollout.offline:

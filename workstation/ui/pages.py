@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from urllib.parse import quote, urlencode
 
-from contract.wire import ABORT_COMMAND, RESUME_COMMAND, WaveVerification
+from contract.wire import ABORT_COMMAND, RESUME_COMMAND, RolloutStatus, WaveVerification
 from reconciler.verdicts import (
     Health,
     RobotRow,
@@ -254,6 +254,17 @@ def diagnostics(found: Iterable[object], more: int) -> str:
     )
 
 
+def stages_html(rollout: RolloutStatus) -> str:
+    """The promotion ladder: each stage's standing (`data-stage`, its state as the value) and
+    the revision verified for its robots."""
+    items = "".join(
+        f'<li data-stage="{esc(stage.state, 20)}">{esc(stage.name, 64)}: {esc(stage.state, 20)} '
+        f"(verified here: <code>{esc(short_rev(stage.verified_revision))}</code>)</li>"
+        for stage in rollout.stages
+    )
+    return f'<ol class="stages">{items}</ol>'
+
+
 def rollout_box(snap: Snapshot) -> str:
     """The rollout wave by wave: its robots by how they fare, and what a rollback restored."""
     fleet = snap.fleet
@@ -279,6 +290,8 @@ def rollout_box(snap: Snapshot) -> str:
         ("Wave since", age(rollout.wave_started_at)),
         ("Stable", f"<code>{esc(short_rev(rollout.stable_revision))}</code>"),
     ]
+    if rollout.stages:
+        facts.append(("Stages", stages_html(rollout)))
     restored = (
         f"<p data-rolled-back>Rolled back: the moved robots run "
         f"<code>{esc(short_rev(rollout.stable_revision))}</code> again, the last revision that "

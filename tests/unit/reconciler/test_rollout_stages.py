@@ -193,3 +193,32 @@ def test_an_operator_promotes_the_revision_to_a_stage_by_hand(lab: Lab) -> None:
     assert run.moved() == sorted(SIM + REAL)
     assert {n.wave_name for n in noted} == {"sim/canary", "sim/all", "sim"}
     assert all(n.by == "ada" for n in noted)
+
+
+def test_status_and_the_browser_view_show_each_stage_and_its_verified_revision(lab: Lab) -> None:
+    from reconciler.verdicts import rollout_line
+    from workstation.ui.pages import stages_html
+
+    run = Run(lab)
+    status = run.step(T0).status
+    assert status is not None
+    assert "stages sim rolling (keeps aaaaaaaaaaaa) > real waiting (keeps aaaaaaaaaaaa)" in (
+        rollout_line(status)
+    )
+    html = stages_html(status)
+    assert '<li data-stage="rolling">sim: rolling (verified here: <code>aaaaaaaaaaaa' in html
+    assert '<li data-stage="waiting">real: waiting' in html
+
+
+def test_plan_lists_the_stages_and_each_robots_stage_wave(lab: Lab) -> None:
+    from configurator.plan import format_plan_text, make_plan
+
+    base, head = build(lab, "a"), build(lab, "b")
+    plan = make_plan(base, head, head.rollout)
+    assert plan.stages == ["sim (Gazebo; soak 5 goals)", "real (Real)"]
+    waves = {change.robot_id: change.wave for change in plan.changes}
+    assert waves["tb3-01"] == "sim/canary" and waves["tb3-04"] == "real/all"
+    text = format_plan_text(plan)
+    assert (
+        "stages (each verified before the next): sim (Gazebo; soak 5 goals) → real (Real)" in text
+    )
