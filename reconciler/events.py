@@ -44,6 +44,7 @@ class Kind(str, enum.Enum):
     ROLLOUT_PAUSED = "rollout_paused"
     ROLLOUT_RESUMED = "rollout_resumed"
     VERIFICATION_FAILED = "verification_failed"
+    STAGE_PROMOTED = "stage_promoted"
     ROBOT_DEGRADED = "robot_degraded"
     ROBOT_OFFLINE = "robot_offline"
     ROBOT_IN_SYNC = "robot_in_sync"
@@ -131,6 +132,7 @@ class Told:
     paused: tuple[WaveRun, ...] = ()  # wave runs told paused, oldest first
     pausing: PausedRun | None = None  # the wave run told paused last, until told resumed
     verifications: tuple[tuple[str, int], ...] = ()  # (revision, wave) told failed verifying
+    promotions: tuple[tuple[str, str], ...] = ()  # (revision, stage) told promoted to
     alerting: Mapping[str, Kind] = field(default_factory=dict)  # robot -> degraded or offline
     drifted: frozenset[str] = frozenset()  # robots told drifted, not yet told fitting again
     deferred: frozenset[str] = frozenset()  # robots told deferred, still deferred
@@ -249,7 +251,31 @@ def _rollout_transitions(
     told, resumption = _resumption(told, rollout, branch, at, resumed_by)
     told, stopped = _stopped(told, rollout, branch, at)
     told, paused = _pause(told, rollout, branch, at)
-    return told, failed + resumption + stopped + paused
+    told, promoted = _promotion(told, rollout, branch, at)
+    return told, failed + resumption + stopped + paused + promoted
+
+
+def _promotion(
+    told: Told, rollout: RolloutStatus, branch: str | None, at: float
+) -> tuple[Told, list[Event]]:
+    """A revision that reached a stage after the first (fleet.yaml stages): verified on the
+    stage before it, or promoted by hand; once per (revision, stage)."""
+    names = [stage.name for stage in rollout.stages]
+    if rollout.stage is None or rollout.stage not in names[1:]:
+        return told, []
+    if rollout.state not in ("Progressing", "Paused", "Complete"):
+        return told, []
+    key = (rollout.revision, rollout.stage)
+    if key in told.promotions:
+        return told, []
+    told = replace(told, promotions=_remember(told.promotions, key))
+    before = names[names.index(rollout.stage) - 1]
+    message = (
+        f"{short_rev(rollout.revision)} on {branch} promoted to stage '{rollout.stage}' "
+        f"(verified on '{before}', or promoted by hand)"
+    )
+    event = Event(Kind.STAGE_PROMOTED, message, at, branch, rollout.revision, reason="Promoted")
+    return told, [event]
 
 
 RESUMERS = 8  # wave runs whose resumer is kept: one rollout at a time, a few pauses each

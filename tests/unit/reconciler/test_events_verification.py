@@ -6,7 +6,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 from contract.notes import VerdictNote
-from contract.wire import ReconcilerStatus, RolloutState, RolloutStatus, Verdict, WaveVerification
+from contract.wire import (
+    ReconcilerStatus,
+    RolloutState,
+    RolloutStatus,
+    StageState,
+    Verdict,
+    WaveVerification,
+)
 from reconciler.events import (
     REMEMBERED,
     RESUMERS,
@@ -213,3 +220,36 @@ def test_resumers_keep_the_newest_few_and_skip_verdicts_no_one_decided() -> None
     assert len(known) == RESUMERS
     assert known[(REV, RESUMERS + 2, 100.0)] == f"op{RESUMERS + 2}"
     assert (REV, 0, 100.0) not in known
+
+
+def staged(stage: str, state: RolloutState = "Progressing", revision: str = REV) -> Seen:
+    seen = status(state, revision=revision)
+    assert seen.status is not None and seen.status.rollout is not None
+    rollout = seen.status.rollout.model_copy(
+        update={
+            "stage": stage,
+            "stages": [
+                StageState(name="sim", state="verified"),
+                StageState(name="real", state="rolling"),
+            ],
+        }
+    )
+    return replace(seen, status=seen.status.model_copy(update={"rollout": rollout}))
+
+
+def test_a_revision_reaching_a_later_stage_is_told_promoted_once() -> None:
+    _, steps = run(
+        [
+            staged("sim"),
+            staged("real"),
+            staged("real"),
+            staged("real", "Complete"),
+            staged("real", revision=NEXT),
+            staged("real", "RolledBack", revision="d" * 40),
+        ]
+    )
+    assert kinds(steps)[:5] == [[], [Kind.STAGE_PROMOTED], [], [], [Kind.STAGE_PROMOTED]]
+    assert Kind.STAGE_PROMOTED not in kinds(steps)[5]
+    told = steps[1][0]
+    assert told.reason == "Promoted" and "promoted to stage 'real'" in told.message
+    assert "verified on 'sim'" in told.message
