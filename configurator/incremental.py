@@ -563,6 +563,7 @@ class BuildCache:
             allow_empty=before.allow_empty,
             rollout=before.rollout,
             stages=before.stages,
+            groups=before.groups,
             drift=before.drift,
         )
         used: dict[int, ScenarioRequests] = {}

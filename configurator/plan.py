@@ -36,6 +36,7 @@ class RobotChange:
     scenario_after: str | None
     fields: list[str] = field(default_factory=list)
     wave: str | None = None  # the head's rollout wave it falls in; None: no policy, or removed
+    group: str | None = None  # the group it moves with (fleet.yaml groups), if any
     # What its agent will do: start, stop, restart the brain, or reload it (the capability is
     # unchanged: an agent with `reload:` signals the running brain, any other restarts it).
     action: Action = "none"
@@ -147,12 +148,14 @@ def make_plan(base: FleetRender, head: FleetRender, rollout: RolloutPolicy | Non
         return Plan(base.revision, head.revision, changes, unchanged)
     names = [wave.name for wave in rollout.waves]
     placed = assign_waves(head.labels, rollout.waves)
-    if head.stages and head.rollout is not None:  # each stage's robots through the waves
+    group_of: dict[str, str] = {}
+    if head.rollout is not None:  # stages and groups: as the reconciler will move them
         staged = plan_waves(head)
-        names, placed = [spec.name for spec in staged.specs], staged.of
+        names, placed, group_of = [s.name for s in staged.specs], staged.of, staged.group_of
     for change in changes:
         index = placed.get(change.robot_id)
         change.wave = None if index is None else names[index]
+        change.group = group_of.get(change.robot_id)
     # Removed robots (and any no wave takes) last: they are in no wave of the head.
     changes.sort(key=lambda c: (placed.get(c.robot_id, len(names)), c.robot_id))
     return Plan(
@@ -239,6 +242,8 @@ def _change_line(c: RobotChange) -> str:
             detail += " (suspended: left as it is)"
         else:
             detail += f" [{c.action}]"
+    if c.group is not None:
+        detail += f" (group {c.group})"
     return f"  {_SIGN[c.kind]} {c.robot_id}  {detail}"
 
 
@@ -361,6 +366,7 @@ def _change_json(c: RobotChange, waves: bool, drift: dict[str, Drift] | None) ->
     }
     if waves:
         found["wave"] = c.wave
+        found["group"] = c.group
     if c.logics:
         found["logics"] = {
             a: {"before": before, "after": after} for a, (before, after) in c.logics.items()

@@ -47,6 +47,7 @@ class FleetRender:
     allow_empty: bool = False
     rollout: RolloutPolicy | None = None  # None: every robot at once
     stages: list[Stage] = field(default_factory=list)  # the promotion ladder; [] none
+    groups: dict[str, list[str] | str] = field(default_factory=dict)  # fleet.yaml's groups
     drift: str = "warn"  # fleet.yaml's drift policy: warn or hold
     # capability -> mapping -> the selected logics that need it (drift messages name them)
     needed_by: dict[str, dict[str, tuple[str, ...]]] = field(default_factory=dict)
@@ -202,6 +203,7 @@ def _render_fleet(
         allow_empty=fleet.allow_empty,
         rollout=fleet.rollout,
         stages=fleet.stages,
+        groups=fleet.groups,
         drift=fleet.drift,
     )
     scenarios: dict[str, ScenarioRequests] = {}

@@ -4,7 +4,7 @@ for validation, `plan`, the reconciler and `status`."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from configurator.render import FleetRender
 from configurator.types import Stage
@@ -101,6 +101,7 @@ class WavePlan:
     specs: tuple[WaveSpec, ...]
     of: dict[str, int]  # robot id -> the index of its wave in `specs`
     stage_of: dict[str, int]  # robot id -> its stage ({} without stages)
+    group_of: dict[str, str] = field(default_factory=dict)  # robot id -> its group, if any
 
     def first_of_stage(self, stage: int) -> int:
         return next(i for i, spec in enumerate(self.specs) if spec.stage == stage)
@@ -118,7 +119,7 @@ def plan_waves(fleet: FleetRender) -> WavePlan:
     assert policy is not None
     if not fleet.stages:
         plain = tuple(WaveSpec(wave.name) for wave in policy.waves)
-        return WavePlan(plain, assign_waves(fleet.labels, policy.waves), {})
+        return _together(WavePlan(plain, assign_waves(fleet.labels, policy.waves), {}), fleet)
     stages = fleet_stages(fleet)
     last = len(fleet.stages) - 1
     stage_of = {robot: stages.get(robot, last) for robot in fleet.labels}
@@ -131,4 +132,51 @@ def plan_waves(fleet: FleetRender) -> WavePlan:
         members = {r: fleet.labels[r] for r, s in stage_of.items() if s == index}
         for robot, wave in assign_waves(members, policy.waves).items():
             of[robot] = index * width + wave
-    return WavePlan(tuple(specs), of, stage_of)
+    return _together(WavePlan(tuple(specs), of, stage_of), fleet)
+
+
+def _together(plan: WavePlan, fleet: FleetRender) -> WavePlan:
+    """A wave never splits a group: its robots all go in the earliest wave any of them is in."""
+    group_of = fleet_groups(fleet)
+    if not group_of:
+        return plan
+    first: dict[str, int] = {}
+    for robot, group in group_of.items():
+        if robot in plan.of:
+            first[group] = min(first.get(group, plan.of[robot]), plan.of[robot])
+    of = dict(plan.of)
+    for robot, group in group_of.items():
+        if group in first:
+            of[robot] = first[group]
+    return WavePlan(plan.specs, of, plan.stage_of, group_of)
+
+
+def fleet_groups(fleet: FleetRender) -> dict[str, str]:
+    """robot id -> the group it moves with (fleet.yaml `groups`, and with `rollout.groups:
+    scenario` every scenario's robots); robots alone are absent. Groups that share a robot are
+    one group (validation refuses it, RC709; here nothing is split)."""
+    members: dict[str, set[str]] = {}
+    robots = set(fleet.labels)
+    for name, chosen in fleet.groups.items():
+        if isinstance(chosen, str):
+            try:
+                wanted = parse_selector(chosen)
+            except SelectorError:
+                continue  # RC709 says so; here it takes no robot
+            members[name] = {r for r in robots if matches(fleet.labels[r], wanted)}
+        else:
+            members[name] = {r for r in chosen if r in robots}
+    if fleet.rollout is not None and fleet.rollout.groups == "scenario":
+        for robot, scenario in fleet.scenario_of.items():
+            members.setdefault(f"scenario:{scenario}", set()).add(robot)
+    found: dict[str, str] = {}
+    for name in sorted(members):  # a robot in two groups joins them: the first name stays
+        together = set(members[name])
+        known = {found[r] for r in together if r in found}
+        for other in known:
+            together |= {r for r, g in found.items() if g == other}
+        label = min(known | {name})
+        if len(together) > 1:
+            for robot in together:
+                found[robot] = label
+    return found

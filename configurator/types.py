@@ -360,6 +360,11 @@ class RolloutPolicy(StrictModel):
     verify: Verify | None = Field(
         None, description="gate each wave on its robots' goal outcomes, not only their health"
     )
+    groups: Literal["scenario"] | None = Field(
+        None,
+        description="scenario: the robots of each scenario move together as a group, as "
+        "fleet.yaml's groups do",
+    )
 
 
 class Soak(StrictModel):
@@ -398,6 +403,12 @@ class Fleet(StrictModel):
     allow_empty: bool = Field(False, description="allow a commit that unassigns every robot")
     rollout: RolloutPolicy | None = Field(
         None, description="roll out in health-gated waves; absent: every robot at once"
+    )
+    groups: dict[str, list[str] | str] = Field(
+        default_factory=_new_dict,
+        description="robots that work together and move as one: name -> robot ids, or labels "
+        '"key=value" (several: "k=v,k2=v2"); a wave never splits a group, and one member '
+        "failing fails them all",
     )
     stages: list[Stage] = Field(
         default_factory=_new_list,

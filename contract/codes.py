@@ -315,6 +315,13 @@ RULES: dict[str, Rule] = {
             ROLLOUT,
         ),
         Rule(
+            "RC709",
+            Severity.ERROR,
+            "groups: a name not written like a robot id, a robot that is not assigned (did you "
+            "mean), a bad selector, a robot in two groups, or a group across stages",
+            ROLLOUT,
+        ),
+        Rule(
             "RC801",
             Severity.ERROR,
             "`.robotconf.yaml`: an unknown rule code (did you mean), a severity other than "

@@ -515,7 +515,18 @@ class _Rollout:
             if health in (Health.PENDING, Health.ABSENT) and now < deadline:
                 soon(deadline)
             judged[robot] = health
+        self._fail_groups(judged, memory)
         return judged, recheck, deadline, memory
+
+    def _fail_groups(self, judged: dict[str, Health], memory: WaveMemory) -> None:
+        """A group moves as one: a member that failed fails the others of the wave too (the
+        thesis' cooperation: a delivery robot without its guide has not done its work)."""
+        group_of = self.plan.group_of
+        failing = {group_of[r] for r, h in judged.items() if h is Health.FAILED and r in group_of}
+        for robot, health in judged.items():
+            if health is not Health.FAILED and group_of.get(robot) in failing:
+                judged[robot] = Health.FAILED
+                memory.failed.add(robot)
 
     def _offline(self, robot: str, lasted: bool, memory: WaveMemory) -> Health:
         """A robot never seen online since its wave published its request, dark now: what

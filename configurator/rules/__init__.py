@@ -23,7 +23,7 @@ from configurator.rules.catalogue import (
 from configurator.rules.configs import check_capability, check_fleet, check_scenario
 from configurator.rules.namespaces import ScenarioNames, check_namespaces, scenario_names
 from configurator.rules.report import Reporter
-from configurator.rules.rollout import check_labels, check_rollout, check_stages
+from configurator.rules.rollout import check_groups, check_labels, check_rollout, check_stages
 from contract.diagnostics import Diagnostic
 
 # Values worked out from the repository once per name and argument (a scenario's ROS names),
@@ -145,6 +145,7 @@ def _fleet(repo: Repository, report: Reporter, derive: Derive) -> None:
     check_labels(fleet, report)
     check_rollout(fleet, report)
     check_stages(repo, fleet, report)
+    check_groups(repo, fleet, report)
 
 
 def _namespaces(repo: Repository, report: Reporter, derive: Derive) -> None:

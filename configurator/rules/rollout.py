@@ -156,6 +156,17 @@ def _check_selectors(fleet: Entry[Fleet], policy: RolloutPolicy, report: Reporte
     return ok
 
 
+def _placements(repo: Repository, fleet: Entry[Fleet]) -> dict[str, Placement]:
+    """Each assigned robot's labels and its scenario's environment (name and type)."""
+    types = {name: e.model.type for name, e in repo.environments.items()}
+    found: dict[str, Placement] = {}
+    for robot_id, assignment in fleet.model.robots.items():
+        scenario = repo.scenarios.get(assignment.scenario)
+        environment = scenario.model.environment if scenario is not None else None
+        found[robot_id] = Placement(assignment.labels, environment, types.get(environment or ""))
+    return found
+
+
 def check_stages(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> None:
     """The promotion ladder: each stage says which robots it takes (environments, or a
     selector), every robot is on one, and a rollout is there to verify a revision on them."""
@@ -205,13 +216,7 @@ def check_stages(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> Non
                     word,
                     words,
                 )
-    placements: dict[str, Placement] = {}
-    for robot_id, assignment in fleet.model.robots.items():
-        scenario = repo.scenarios.get(assignment.scenario)
-        environment = scenario.model.environment if scenario is not None else None
-        placements[robot_id] = Placement(
-            assignment.labels, environment, known_environments.get(environment or "")
-        )
+    placements = _placements(repo, fleet)
     left = sorted(set(placements) - set(assign_stages(placements, stages)))
     if left:
         shown = ", ".join(left[:_SHOWN]) + (
@@ -225,3 +230,64 @@ def check_stages(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> Non
             "their environment to a stage, or a last stage that selects them",
             key=True,
         )
+
+
+def check_groups(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> None:
+    """Groups name assigned robots (or labels), each robot in one group, each group on one
+    stage: a group moves as one, and a ladder would have to split it."""
+    robots = fleet.model.robots
+    owner: dict[str, str] = {}
+    for name, chosen in fleet.model.groups.items():
+        loc: list[str | int] = ["groups", name]
+        if not is_robot_id(name):
+            report.add(fleet, loc, "RC709", f"group name {name!r}: {_ID_RULE}", key=True)
+        if isinstance(chosen, str):
+            try:
+                wanted = parse_selector(chosen)
+            except SelectorError as exc:
+                report.add(fleet, loc, "RC709", f"group '{name}': {exc}")
+                continue
+            members = [
+                r for r, a in robots.items() if all(a.labels.get(k) == v for k, v in wanted.items())
+            ]
+        else:
+            members = []
+            for at, robot in enumerate(chosen):
+                if robot not in robots:
+                    report.unknown(
+                        fleet,
+                        [*loc, at],
+                        "RC709",
+                        f"group '{name}' names robot '{robot}', which is not assigned",
+                        robot,
+                        robots,
+                    )
+                else:
+                    members.append(robot)
+        for robot in members:
+            if robot in owner and owner[robot] != name:
+                report.add(
+                    fleet,
+                    loc,
+                    "RC709",
+                    f"robot '{robot}' is in groups '{owner[robot]}' and '{name}': a robot moves "
+                    "with one group",
+                )
+            owner.setdefault(robot, name)
+    if not fleet.model.stages:
+        return
+    placements = _placements(repo, fleet)
+    stage_of = assign_stages(placements, fleet.model.stages)
+    spans: dict[str, set[int]] = {}
+    for robot, name in owner.items():
+        if robot in stage_of:
+            spans.setdefault(name, set()).add(stage_of[robot])
+    for name, stages in sorted(spans.items()):
+        if len(stages) > 1:
+            report.add(
+                fleet,
+                ["groups", name],
+                "RC709",
+                f"group '{name}' has robots on {len(stages)} stages: a group moves as one, a "
+                "ladder would split it",
+            )
