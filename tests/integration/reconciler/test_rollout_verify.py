@@ -333,3 +333,25 @@ def desk_promote(fleet: Fleet, revision: str, stage: str) -> subprocess.Complete
     )
     assert "Traceback" not in done.stdout + done.stderr, done.stderr
     return done
+
+
+def test_a_reconciler_killed_during_a_stages_soak_promotes_nothing_unverified(
+    fleet: Fleet,
+) -> None:
+    stable = with_policy(fleet, STAGES.replace("soak: {goals: 6}", "soak: {goals: 60}"))
+    fleet.watch.live_launches.clear()
+    good = staged(fleet, 1.0, "v2")
+    fleet.watch.wait_reconciler(
+        lambda s: s.rollout is not None and s.rollout.wave_name == "sim", "the sim gate's soak"
+    )
+    kill_reconciler(fleet)
+    time.sleep(2)  # goals keep coming, queued for the ledger
+    assert all(launched(fleet, robot) == [] for robot in REAL)
+    fleet.start_reconciler("--interval", "5")
+    status = fleet.watch.wait_reconciler(lambda s: complete(s, good), "the rollout complete")
+    assert status.rollout is not None
+    assert [s.state for s in status.rollout.stages] == ["verified", "verified"]
+    never_rolled_back(fleet, fleet.requests(stable))
+    gates = [n for n in notes(fleet, good) if n["wave_name"] == "sim"]
+    assert len(gates) == 1 and gates[0]["verdict"] == "Successful"
+    assert isinstance(gates[0]["goals"], int) and gates[0]["goals"] >= 60
