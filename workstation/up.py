@@ -44,10 +44,11 @@ from contract.wire import (
 )
 from reconciler.controller import Controller
 from reconciler.desired import DesiredBuilder
+from reconciler.ledger import ledger_path
 from reconciler.lifecycle import log_to_file, on_stop_signals
 from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
-from reconciler.signer import make_signer
+from reconciler.signer import make_signer, make_verifier
 from reconciler.source import LocalBranch, open_repo
 from reconciler.verdicts import (
     FleetStatus,
@@ -506,6 +507,10 @@ def _serve(
         on_reconciled=lambda status: changed.set(),
         signer=signer,
         builder=setup.builder,
+        # rollout.verify counts the ledger's outcomes; operators' rollout actions are checked
+        # against the key the requests are signed with.
+        ledger=ledger_path(setup.state_dir),
+        verifier=make_verifier(private_key),
     )
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
     view = open_view(logins.reconciler, prefix, changed.set)

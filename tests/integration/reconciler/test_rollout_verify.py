@@ -6,6 +6,7 @@ Every verdict is a git note on the revision."""
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -27,8 +28,10 @@ from tests.integration.reconciler.test_rollout_deaths import (
     never_rolled_back,
     rolled_back,
 )
-from tests.support.fleet import robotconf_argv
-from tests.support.watch import wait_for
+from tests.integration.reconciler.test_up import start_up
+from tests.support.fleet import GitLab, robotconf_argv
+from tests.support.mosquitto import Mosquitto
+from tests.support.watch import FleetWatch, wait_for
 
 SCENARIO = "configs/scenarios/delivery-gazebo.yaml"  # tb3-01 (the canary) and tb3-06 run it
 KNOWLEDGE = 'knowledge: {TARGET: {GOAL_ID: "2"}}'
@@ -355,3 +358,53 @@ def test_a_reconciler_killed_during_a_stages_soak_promotes_nothing_unverified(
     gates = [n for n in notes(fleet, good) if n["wave_name"] == "sim"]
     assert len(gates) == 1 and gates[0]["verdict"] == "Successful"
     assert isinstance(gates[0]["goals"], int) and gates[0]["goals"] >= 60
+
+
+# ------------------------------------------------------------------ `robotconf up`, the demo
+
+
+def test_up_stops_a_revision_whose_brains_fail_in_sim(tmp_path: Path, mosquitto: Mosquitto) -> None:
+    """The rollout guide's walk-through: the example fleet's rollout, verify and stages lines
+    uncommented (quicker numbers for a demo), then a commit that lowers the delivery brains'
+    success rate and renames every robot: stopped in sim, never on the real robots."""
+    lab = GitLab(tmp_path / "lab")
+    watch = FleetWatch(mosquitto.url)
+    up = start_up(lab, tmp_path, "--broker", mosquitto.url)
+    try:
+        wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
+        text = lab.read("configs/fleet.yaml")
+        text = text.replace("\n# rollout:\n", "\nrollout:\n").replace("\n#   ", "\n  ")
+        text = text.replace("\n# stages:", "\nstages:").replace("\n#  ", "\n  ")
+        text = text.replace("healthy_after: 30", "healthy_after: 1")
+        text = text.replace("min_goals: 20", "min_goals: 3").replace("timeout: 30m", "timeout: 2m")
+        lab.write("configs/fleet.yaml", text)
+        stable = lab.commit("roll out in stages, verified by goals")  # no request changes
+        watch.wait_reconciler(lambda s: complete(s, stable), "the policy applied")
+        before = lab.requests(stable)
+        for name in ("Delivery bot", "Guide bot", "Bluetooth delivery bot", "Lab patrol"):
+            lab.replace("configs/fleet.yaml", f"name: {name}", f"name: {name} v2")
+        lab.replace(
+            SCENARIO,
+            KNOWLEDGE,
+            'knowledge: {TARGET: {GOAL_ID: "2"}, STANDIN_GOAL_SECONDS: 0.2, '
+            "STANDIN_SUCCESS_RATE: 0}",
+        )
+        bad = lab.commit("delivery brains that fail")
+        status = watch.wait_reconciler(lambda s: rolled_back(s, bad), "stopped in sim")
+        assert status.rollout is not None
+        assert [(s.name, s.state) for s in status.rollout.stages] == [
+            ("sim", "failed"),
+            ("real", "waiting"),
+        ]
+        wait_for(lambda: "stages sim failed" in up.output(), "up to show it")
+        assert lab.requests(bad)["tb3-04"].digest != before["tb3-04"].digest  # it would change
+        watch.wait_running({r: q for r, q in before.items()})  # every robot on the stable
+        # The real robots never ran the bad revision's request, not for a moment.
+        bad_digest = lab.requests(bad)["tb3-04"].digest  # tb3-07 is not renamed: no change
+        assert watch.history("tb3-04") and all(
+            s.digest != bad_digest for s in watch.history("tb3-04")
+        )
+    finally:
+        code = up.stop(signal.SIGINT, timeout=60)
+        watch.close()
+    assert code == 0, up.output()

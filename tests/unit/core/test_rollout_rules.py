@@ -32,11 +32,16 @@ def column_of(lab: Lab, line: int, needle: str) -> int:
 def test_the_commented_example_policy_is_valid_when_uncommented(lab: Lab) -> None:
     text = lab.read(FLEET)
     assert "\n# rollout:\n" in text
-    lab.write(FLEET, text.replace("\n# rollout:\n", "\nrollout:\n").replace("\n#   ", "\n  "))
+    rollout = text.replace("\n# rollout:\n", "\nrollout:\n").replace("\n#   ", "\n  ")
+    # Verification and stages are commented a column apart: uncommented with them alone.
+    lab.write(FLEET, rollout.replace("\n# stages:", "\nstages:").replace("\n#  ", "\n  "))
     checked = lab.check()
     assert checked.diagnostics == []
-    rollout = checked.repo.fleet.model.rollout if checked.repo.fleet else None
+    fleet = checked.repo.fleet.model if checked.repo.fleet else None
+    rollout = fleet.rollout if fleet else None
     assert rollout is not None and [w.name for w in rollout.waves] == ["canary", "half", "all"]
+    assert rollout.verify is not None and rollout.verify.success_rate == 0.9
+    assert fleet is not None and [s.name for s in fleet.stages] == ["sim", "real"]
 
 
 # ------------------------------------------------------------------ labels
