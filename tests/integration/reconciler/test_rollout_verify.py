@@ -11,6 +11,7 @@ import subprocess
 import time
 from pathlib import Path
 
+from contract.launch import RolloutAction
 from contract.notes import NOTES_REF, read_notes
 from contract.wire import ReconcilerStatus
 from tests.integration.agent.test_ui_operator import FORM, TOKEN, UiProc
@@ -29,6 +30,7 @@ from tests.integration.reconciler.test_rollout_deaths import (
     rolled_back,
 )
 from tests.integration.reconciler.test_up import start_up
+from tests.support.agents import publish
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
@@ -408,3 +410,49 @@ def test_up_stops_a_revision_whose_brains_fail_in_sim(tmp_path: Path, mosquitto:
         code = up.stop(signal.SIGINT, timeout=60)
         watch.close()
     assert code == 0, up.output()
+
+
+def test_garbage_and_floods_on_the_requests_topic_stop_nothing(fleet: Fleet) -> None:
+    """Whatever anyone allowed on the broker publishes to the reconciler's requests topic —
+    garbage, deep JSON, a huge payload, forged, stale or replayed actions, a flood, a retained
+    one — the reconciler counts it, answers what it can, and goes on; a good resume still
+    works after it."""
+    with_policy(fleet, policy("min_goals: 100000, timeout: 3, inconclusive: pause"))
+    head = rename_all(fleet, "v2")
+    paused = fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "canary"), "paused")
+    assert paused.rollout is not None and paused.rollout.wave_started_at is not None
+    topic = fleet.watch.topics.rollout_request
+    real = RolloutAction(
+        action="resume",
+        revision=head,
+        wave=0,
+        wave_started_at=paused.rollout.wave_started_at,
+        requested_by="mallory",
+        issued_at=time.time(),
+    )
+    hostile = [
+        b"",
+        b"\xff\xfe not json",
+        b"[" * 5000 + b"]" * 5000,
+        b"x" * 300_000,
+        json.dumps({"kind": "RolloutAction", "action": "resume"}).encode(),
+        real.model_copy(update={"issued_at": time.time() - 3600}).payload(),  # stale
+        real.model_copy(update={"wave": 1}).payload(),  # not the run that stands
+        real.model_copy(update={"revision": "f" * 40}).payload(),
+    ]
+    for payload in hostile:
+        publish(fleet.broker.url, topic, payload, retain=False)
+    for _ in range(50):  # a flood: at most 16 wait for the loop, the rest are dropped
+        publish(fleet.broker.url, topic, b"{}", retain=False)
+    publish(fleet.broker.url, topic, b"{garbage", retain=True)  # a retained one comes at each start
+    status = fleet.watch.wait_reconciler(
+        lambda s: s.ignored_payloads.get("rollout-action", 0) >= 5, "the garbage counted"
+    )
+    assert status.rollout is not None and status.rollout.state == "Paused"  # nothing resumed
+    answer = status.rollout.answer
+    assert answer is None or not answer.accepted
+    assert fleet.reconciler is not None and fleet.reconciler.alive()
+    done = desk(fleet, "resume")
+    assert done.returncode == 0, done.stderr
+    fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "all"), "resumed after all that")
+    publish(fleet.broker.url, topic, b"", retain=True)  # clear the retained one
