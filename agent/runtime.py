@@ -59,6 +59,7 @@ log = logging.getLogger("robotconf.agent")
 _acting_for: ContextVar[str | None] = ContextVar("robotconf_agent_robot", default=None)
 
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
+BUSY_LOOK = 1.0  # seconds between looks at the brain's hold file, for the status's `busy`
 
 
 def policy_of(config: AgentConfig) -> Policy:
@@ -97,6 +98,7 @@ class Agent:
         self.seq = SeqStore(workdir / SEQ_FILE)
         self.issued = IssuedStore(workdir / ISSUED_FILE)
         self.hold_file = workdir / HOLD_FILE
+        self._busy_look = 0.0  # monotonic time of the next look at it (`supervisor.look_busy`)
         self.supervisor = Supervisor(
             config.robot_id, policy_of(config), held=lambda: hold_exists(self.hold_file)
         )
@@ -194,6 +196,9 @@ class Agent:
             handled = True
         if self.interfaces is not None and (probe_ready or now >= self.interfaces.due()):
             handled |= self.interfaces.read(probe_ready, now, self.status.connected)
+        if now >= self._busy_look:
+            self._busy_look = now + BUSY_LOOK
+            handled |= self.supervisor.look_busy()
         self.runner.rotate_log_if_due(now)
         if self.status.connected:
             self.desk.send_logs(now)
@@ -234,6 +239,8 @@ class Agent:
         due = now + IDLE_WAKEUP
         if self.supervisor.deadline is not None:
             due = min(due, self.supervisor.deadline)
+        if self.supervisor.pid is not None and self.supervisor.policy.max_defer > 0:
+            due = min(due, self._busy_look)
         log_check = self.runner.log_check_due()
         if log_check is not None:
             due = min(due, log_check)

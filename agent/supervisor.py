@@ -105,6 +105,7 @@ class Supervisor:
         # Whether the brain's hold file exists: like the wall clock, the one look at the world
         # this state machine takes, and only when a running brain would be stopped or reloaded.
         self._held = held
+        self.busy = False  # the hold file seen at the last look (`look_busy`), while running
         self.phase = AgentState.IDLE
         self.desired: _Assignment | None = None  # the accepted request, if any
         self.brain: _Assignment | None = None  # the request the brain runs / last ran
@@ -175,8 +176,22 @@ class Supervisor:
             restart_requested_by=self.restart_requested_by,
             restart_requested_at=self.restart_requested_at,
             deferred_since=self._deferred_since,
-            max_defer=self.policy.max_defer if self._deferred_since is not None else None,
+            max_defer=(
+                self.policy.max_defer if self._deferred_since is not None or self.busy else None
+            ),
+            busy=self.busy,
         )
+
+    def look_busy(self) -> bool:
+        """Looks at the hold file while a brain runs and holds may defer (max_defer > 0);
+        True when what the status says about it changed."""
+        running = self.pid is not None and not self.shutting_down
+        busy = running and self.policy.max_defer > 0 and self._held()
+        if busy == self.busy:
+            return False
+        self.busy = busy
+        self._touch()
+        return True
 
     # ------------------------------------------------------------ events
 

@@ -249,6 +249,10 @@ class AgentStatus(_Message):
     # (agent.yaml `max_defer`, seconds) before it proceeds anyway.
     deferred_since: float | None = None
     max_defer: float | None = None
+    # Its brain's hold file exists now: a stop, restart or reload would be deferred (for up to
+    # `max_defer`, given with it). The reconciler holds a whole group's restart while one of
+    # its robots is busy (fleet.yaml groups), so that a group never runs two revisions.
+    busy: bool = False
 
 
 def is_online(status: AgentStatus | None) -> bool:

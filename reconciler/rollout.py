@@ -212,6 +212,8 @@ class _Rollout:
         self.stable_requests = stable_requests
         self.count = len(plan.specs)
         self.noted: list[VerdictNote] = []  # verdicts reached in this step
+        self.busy_held: set[str] = set()  # robots whose group waits for a busy member
+        self.busy_why = ""  # which group waits for whom, for the status
 
     def _with_verdicts(self, step: RolloutStep) -> RolloutStep:
         step.verdicts = self.noted
@@ -228,7 +230,10 @@ class _Rollout:
             if robot in head.suspended:
                 step.requests[robot] = request  # the diff leaves suspended robots as they are
                 continue
-            if robot not in self.changed or self.waves.get(robot, self.count) <= started:
+            waiting = robot in self.busy_held  # its group waits for a busy member
+            if not waiting and (
+                robot not in self.changed or self.waves.get(robot, self.count) <= started
+            ):
                 step.requests[robot] = request
             elif self.seen.launches.get(robot) is not None:
                 step.keep.add(robot)
@@ -335,6 +340,8 @@ class _Rollout:
                 self.noted.append(self._note(wave, started_at, verification))
             elif held_for == "gathering" and verification is not None:
                 why = f"wave '{name}' verifying: {verification.message}"
+            if self.busy_why and state == "Progressing":
+                why = f"{why}; {self.busy_why}" if why else self.busy_why
             step.status = self._status(state, wave, started_at, judged, why, verification)
             step.recheck_at = recheck
             step.record = memory.record() if memory is not None else None
@@ -474,6 +481,7 @@ class _Rollout:
         # what it could not see.
         deadline = max(started_at, memory.watching_since) + policy.wave_timeout
         deadline = deferral_deadline(memory, members, statuses, now, deadline, policy)
+        deadline, held_until = self._hold_busy_groups(members, statuses, memory, deadline)
         judged: dict[str, Health] = {}
         recheck: float | None = None
 
@@ -516,7 +524,67 @@ class _Rollout:
                 soon(deadline)
             judged[robot] = health
         self._fail_groups(judged, memory)
+        if held_until is not None:
+            soon(held_until)  # the group goes at its max_defer at the latest
         return judged, recheck, deadline, memory
+
+    def _hold_busy_groups(
+        self,
+        members: list[str],
+        statuses: Mapping[str, AgentStatus],
+        memory: WaveMemory,
+        deadline: float,
+    ) -> tuple[float, float | None]:
+        """A group changes restart-class content only when all its robots can: while one of
+        the wave's groups has a busy robot (its brain's hold file) and the change restarts a
+        brain of it, none of the group is sent its request — for the robots' `max_defer` at
+        most, from the first look that held it (kept in the wave's record); then they are sent
+        it and each agent defers as usual. The wave's deadline gives them wave_timeout after.
+        Returns the deadline and when the hold ends (None: nothing held)."""
+        group_of, now = self.plan.group_of, self.seen.now
+        self.busy_held, self.busy_why = set(), ""
+        if not group_of:
+            return deadline, None
+        groups: dict[str, list[str]] = {}
+        for robot in members:
+            if robot in group_of:
+                groups.setdefault(group_of[robot], []).append(robot)
+        waiting: dict[str, tuple[str, float]] = {}  # group -> (a busy robot, its max_defer)
+        for group, robots in groups.items():
+            restarts = any(self._restarts(r) for r in robots)
+            if not restarts or all(self.seen.launches.get(r) == self._digest(r) for r in robots):
+                continue  # nothing to restart, or already sent
+            for robot in robots:
+                status = statuses.get(robot)
+                if status is not None and status.busy and is_online(status):
+                    waiting[group] = (robot, status.max_defer or 0.0)
+                    break
+        if not waiting:
+            return deadline, None
+        if memory.held_since is None:
+            memory.held_since = now
+        until = memory.held_since + max(defer for _, defer in waiting.values())
+        if now >= until:
+            return deadline, None  # held for max_defer: sent now, each agent defers as usual
+        for group in waiting:
+            self.busy_held.update(groups[group])
+        self.busy_why = (
+            "; ".join(
+                f"group '{group}' waits while {robot} is busy"
+                for group, (robot, _) in waiting.items()
+            )
+            + f" (until {until - now:.0f} s from now at most)"
+        )
+        return max(deadline, until + self.policy.wave_timeout), until
+
+    def _restarts(self, robot: str) -> bool:
+        """Whether the head's request restarts the robot's brain (not a reload)."""
+        old = self.stable_requests.get(robot)
+        new = self.seen.head.requests[robot]
+        return old is None or old.restart_digest != new.restart_digest
+
+    def _digest(self, robot: str) -> str:
+        return self.seen.head.requests[robot].digest
 
     def _fail_groups(self, judged: dict[str, Health], memory: WaveMemory) -> None:
         """A group moves as one: a member that failed fails the others of the wave too (the

@@ -39,6 +39,9 @@ class WaveRecord(BaseModel):
     rejecting: str = Field("", description="rejected a request already as the wave began")
     doubted: str = Field("", description="seen, then dark when the statuses were learned anew")
     deferring: str = Field("", description="seen deferring (its brain's hold file) at last look")
+    held_since: float | None = Field(
+        None, description="when a group of the wave was first held for a busy robot of it"
+    )
     deferred_at: float | None = Field(
         None, description="when a robot was last seen deferring, or done deferring"
     )
@@ -60,6 +63,7 @@ class WaveMemory:
     doubted: set[str] = field(default_factory=set)
     deferring: set[str] = field(default_factory=set)
     deferred_at: float | None = None
+    held_since: float | None = None
 
     def record(self) -> WaveRecord:
         members = self.members
@@ -76,6 +80,7 @@ class WaveMemory:
             doubted=_bits(members, self.doubted),
             deferring=_bits(members, self.deferring),
             deferred_at=self.deferred_at,
+            held_since=self.held_since,
         )
 
 
@@ -114,6 +119,7 @@ def memory_of(
             doubted=_members(members, record.doubted),
             deferring=_members(members, record.deferring),
             deferred_at=record.deferred_at,
+            held_since=record.held_since,
         )
     except ValueError:
         return None

@@ -154,3 +154,19 @@ def test_a_restart_from_the_desk_is_taken_deferred_then_carried_out(
     )
     agent.note_brain(second.pid)
     assert second.digest == request.digest
+
+
+def test_the_status_says_busy_while_the_hold_file_exists(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    """Before any request would wait for it: the reconciler holds a group's restart while one
+    of its robots says it is busy."""
+    agent, marker = busy_agent(make_agent, tmp_path, max_defer=45)
+    request = make_request()
+    first = run_held(agent, watch, mosquitto, request.payload(), request.digest)
+    busy = watch.wait_for(ROBOT, lambda s: s.busy, "the status saying busy", agent=agent)
+    assert busy.state is AgentState.RUNNING and busy.max_defer == 45
+    assert busy.pid == first.pid
+    marker.unlink()  # the brain lets go of its hold file
+    free = watch.wait_for(ROBOT, lambda s: not s.busy, "busy no more", agent=agent)
+    assert free.state is AgentState.RUNNING and free.max_defer is None

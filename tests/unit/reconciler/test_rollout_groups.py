@@ -25,10 +25,14 @@ rollout:
 """
 
 
-def build(lab: Lab, version: str, extra: str) -> FleetRender:
+def build(lab: Lab, version: str, extra: str, restart: bool = False) -> FleetRender:
+    """The lab's fleet, renamed for `version` (reloaded in place); with `restart`, its
+    namespaces moved too (a restart)."""
     robots = yaml.safe_load(lab.read(FLEET))["robots"]
     for assignment in robots.values():
         assignment["name"] = f"{assignment['name']} {version}"
+        if restart and "namespace" in assignment:
+            assignment["namespace"] = f"{assignment['namespace']}_{version}"
     lab.write(FLEET, yaml.safe_dump({"robots": robots}, sort_keys=True) + POLICY + extra)
     checked = lab.check()
     assert checked.ok, checked.errors
@@ -116,3 +120,68 @@ def test_a_group_across_stages_is_refused(lab: Lab) -> None:
     )
     found = [d.message for d in lab.check().diagnostics if d.code == "RC709"]
     assert any("group 'mixed' has robots on 2 stages" in m for m in found), found
+
+
+def test_a_busy_member_holds_its_whole_groups_restart_up_to_its_max_defer(lab: Lab) -> None:
+    extra = "groups:\n  delivery: [tb3-01, tb3-03]\n"
+    stable, head = build(lab, "a", extra), build(lab, "b", extra, restart=True)
+    launches: dict[str, str | None] = {r: q.digest for r, q in stable.requests.items()}
+
+    def statuses(busy: bool) -> dict[str, AgentStatus]:
+        found = {
+            r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=d, since=T0)
+            for r, d in launches.items()
+        }
+        found["tb3-03"] = found["tb3-03"].model_copy(update={"busy": busy, "max_defer": 30.0})
+        return found
+
+    def sent(step_: object) -> list[str]:
+        from reconciler.rollout import RolloutStep
+
+        assert isinstance(step_, RolloutStep)
+        return sorted(
+            r
+            for r, q in step_.requests.items()
+            if r not in step_.keep
+            and q.digest == head.requests[r].digest
+            and launches[r] != q.digest
+        )
+
+    held = roll_out(RolloutInput(head, stable, None, launches, statuses(True), {}, T0))
+    assert sent(held) == []  # neither of the group: tb3-03's brain is busy
+    assert held.status is not None and "group 'delivery' waits while tb3-03 is busy" in (
+        held.status.message
+    )
+    assert held.recheck_at is not None and held.recheck_at <= T0 + 30
+    still = roll_out(
+        RolloutInput(head, stable, held.status, launches, statuses(True), {}, T0 + 10, held.record)
+    )
+    assert sent(still) == []
+    free = roll_out(
+        RolloutInput(
+            head, stable, still.status, launches, statuses(False), {}, T0 + 12, still.record
+        )
+    )
+    assert sent(free) == ["tb3-01", "tb3-03"]  # together, once nobody is busy
+    late = roll_out(
+        RolloutInput(
+            head, stable, still.status, launches, statuses(True), {}, T0 + 31, still.record
+        )
+    )
+    assert sent(late) == ["tb3-01", "tb3-03"]  # max_defer passed: sent, each agent defers
+
+
+def test_a_change_reloaded_in_place_is_not_held_for_a_busy_member(lab: Lab) -> None:
+    extra = "groups:\n  delivery: [tb3-01, tb3-03]\n"
+    stable, head = build(lab, "a", extra), build(lab, "b", extra)  # names only: a reload
+    launches: dict[str, str | None] = {r: q.digest for r, q in stable.requests.items()}
+    statuses = {
+        r: AgentStatus(
+            robot_id=r, state=AgentState.RUNNING, digest=d, since=T0, busy=True, max_defer=30.0
+        )
+        for r, d in launches.items()
+    }
+    step = roll_out(RolloutInput(head, stable, None, launches, statuses, {}, T0))
+    assert step.status is not None and "waits while" not in step.status.message
+    moved = [r for r in ("tb3-01", "tb3-03") if r not in step.keep]
+    assert moved == ["tb3-01", "tb3-03"]
