@@ -15,7 +15,7 @@ from contract.launch import RolloutAction
 from contract.notes import NOTES_REF, read_notes
 from contract.wire import ReconcilerStatus
 from tests.integration.agent.test_ui_operator import FORM, TOKEN, UiProc
-from tests.integration.reconciler.conftest import Fleet
+from tests.integration.reconciler.conftest import Fleet, fleet_on
 from tests.integration.reconciler.test_rollout import (
     CANARY,
     complete,
@@ -456,3 +456,26 @@ def test_garbage_and_floods_on_the_requests_topic_stop_nothing(fleet: Fleet) -> 
     assert done.returncode == 0, done.stderr
     fleet.watch.wait_reconciler(lambda s: paused_in(s, head, "all"), "resumed after all that")
     publish(fleet.broker.url, topic, b"", retain=True)  # clear the retained one
+
+
+def test_a_broker_restarted_while_a_wave_is_verified_rolls_nothing_back(tmp_path: Path) -> None:
+    """A persistent Mosquitto restarted while the canary's evidence is gathered: the robots'
+    outcomes wait in their agents and in the ledger's session; the verdict is reached after,
+    the rollout completes, and the canary is never rolled back for the restart."""
+    broker = Mosquitto(tmp_path / "broker", persistence=True)
+    (tmp_path / "broker").mkdir()
+    broker.start()
+    try:
+        with fleet_on(tmp_path, broker) as fleet:
+            stable = with_policy(fleet, policy("min_goals: 10, success_rate: 0.9, timeout: 120"))
+            fleet.watch.live_launches.clear()
+            good = brains(fleet, 1.0, "faster brains")
+            new = fleet.requests(good)
+            wait_for(lambda: running_digest(fleet, CANARY, new[CANARY]), "the canary on it")
+            broker.restart()
+            fleet.watch.wait_reconciler(lambda s: complete(s, good), "the rollout complete")
+            never_rolled_back(fleet, fleet.requests(stable))
+            kept = [(n["wave_name"], n["verdict"]) for n in notes(fleet, good)]
+            assert kept == [("canary", "Successful"), ("all", "Successful")]
+    finally:
+        broker.kill()
