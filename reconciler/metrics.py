@@ -148,6 +148,13 @@ class Metrics:
         self._evidence = WaveEvidenceGauges()
         self.registry.register(self._evidence)
         self._counted: tuple[VerdictKey, ...] = ()
+        self.stage_verified = Gauge(
+            "robotconf_rollout_stage_verified",
+            "1 when the revision rolled out is verified on the stage (fleet.yaml stages), "
+            "else 0; the first 16 stages",
+            ["stage"],
+            registry=self.registry,
+        )
 
     def _known_series(self) -> None:
         """Every series whose labels are known at start exists from the first scrape, at 0:
@@ -265,6 +272,11 @@ class Metrics:
         shown = RolloutGauges.of(rollout)
         self.paused.set(shown.paused)
         self._evidence.shown = shown
+        for stage in (rollout.stages if rollout is not None else [])[:MAX_STAGES]:
+            self.stage_verified.labels(stage.name).set(1 if stage.state == "verified" else 0)
+
+
+MAX_STAGES = 16  # stage labels kept: a ladder is a few rungs, a label set stays bounded
 
 
 @dataclass(frozen=True)

@@ -104,3 +104,22 @@ def test_the_pause_gauge_and_the_current_waves_evidence() -> None:
     assert value("robotconf_rollout_wave_success_rate") is None
     metrics.rollout(None, [])
     assert RolloutGauges.of(None) == RolloutGauges()
+
+
+def test_each_stage_says_whether_the_revision_is_verified_on_it() -> None:
+    from contract.wire import StageState
+
+    metrics = Metrics()
+    staged = RolloutStatus(
+        revision=REV,
+        state="Progressing",
+        stage="real",
+        stages=[
+            StageState(name="sim", state="verified"),
+            StageState(name="real", state="rolling"),
+        ],
+    )
+    metrics.rollout(staged, [])
+    text = generate_latest(metrics.registry).decode()
+    assert 'robotconf_rollout_stage_verified{stage="sim"} 1.0' in text
+    assert 'robotconf_rollout_stage_verified{stage="real"} 0.0' in text
