@@ -9,12 +9,9 @@ import yaml
 from configurator.render import FleetRender, render_fleet
 from configurator.stages import plan_waves
 from contract.notes import VerdictNote
-from contract.wire import AgentState, AgentStatus
-from reconciler.evidence import EvidenceKey, Row, WaveEvidence, new_evidence
-from reconciler.rollout import RolloutInput, RolloutStep, criteria, roll_out, wave_roles
 from tests.support.lab import Lab
+from tests.support.rollout_run import T0, RolloutRun
 
-T0 = 1_000_000.0
 FLEET = "configs/fleet.yaml"
 SIM = ["tb3-01", "tb3-02", "tb3-03", "tb3-05"]  # Gazebo
 REAL = ["tb3-04", "tb3-07"]  # the robotics lab
@@ -42,70 +39,9 @@ def build(lab: Lab, version: str, policy: str = POLICY) -> FleetRender:
     return rendered
 
 
-class Run:
+class Run(RolloutRun):
     def __init__(self, lab: Lab, policy: str = POLICY) -> None:
-        self.stable, self.head = build(lab, "a", policy), build(lab, "b", policy)
-        self.last: RolloutStep | None = None
-        self.evidence: WaveEvidence | None = None
-        self.notes: list[VerdictNote] = []
-        self.next_id = 0
-
-    def launches(self) -> dict[str, str | None]:
-        held: dict[str, str | None] = {r: q.digest for r, q in self.stable.requests.items()}
-        if self.last is not None and self.last.serve_stable:
-            return held  # rolled back: the stable requests everywhere
-        if self.last is not None:  # what the step publishes; robots it keeps stay as they are
-            held.update(
-                {r: q.digest for r, q in self.last.requests.items() if r not in self.last.keep}
-            )
-        return held
-
-    def step(self, now: float) -> RolloutStep:
-        launches = self.launches()
-        statuses = {
-            r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=d, since=T0)
-            for r, d in launches.items()
-        }
-        self.last = roll_out(
-            RolloutInput(
-                self.head,
-                self.stable,
-                self.last.status if self.last is not None else None,
-                launches,
-                statuses,
-                {r: T0 for r in launches},
-                now,
-                self.last.record if self.last is not None else None,
-                evidence=self.evidence,
-                notes=self.notes,
-            )
-        )
-        return self.last
-
-    def report(self, robots: list[str], outcome: str, each: int = 1) -> None:
-        """Outcomes of `robots` on what they hold, counted for the wave the rollout stands in
-        (as the reconciler counts them: roles and criteria of that step)."""
-        status = self.last.status if self.last is not None else None
-        assert status is not None and status.wave_started_at is not None
-        key = EvidenceKey(self.head.revision, status.wave, status.wave_started_at)
-        if self.evidence is None or self.evidence.key != key:
-            verify = criteria(self.head, plan_waves(self.head).specs[status.wave])
-            assert verify is not None
-            roles = wave_roles(self.head, self.stable, status.wave)
-            self.evidence = new_evidence(key, roles, verify)
-        rows = []
-        for robot in robots:
-            for _ in range(each):
-                self.next_id += 1
-                digest = self.launches()[robot]
-                rows.append(
-                    Row(self.next_id, robot, digest, "s", outcome, None, key.started_at + 1)
-                )
-        self.evidence.add(rows)
-
-    def moved(self) -> list[str]:
-        held = self.launches()
-        return sorted(r for r, d in held.items() if d == self.head.requests[r].digest)
+        super().__init__(build(lab, "a", policy), build(lab, "b", policy))
 
 
 def test_each_stage_goes_through_the_waves_then_its_gate(lab: Lab) -> None:

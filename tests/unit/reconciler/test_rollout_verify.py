@@ -8,13 +8,12 @@ import pytest
 
 from configurator.render import FleetRender, render_fleet
 from contract.notes import VerdictNote
-from contract.wire import AgentState, AgentStatus
-from reconciler.evidence import EvidenceKey, Row, WaveEvidence, new_evidence
-from reconciler.rollout import VERIFY_POLL, RolloutInput, RolloutStep, roll_out, wave_roles
+from reconciler.evidence import EvidenceKey
+from reconciler.rollout import VERIFY_POLL, RolloutStep
 from tests.support.lab import Lab
+from tests.support.rollout_run import T0, RolloutRun
 
 ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04"]
-T0 = 1_000_000.0
 POLICY = """\
 rollout:
   waves: [{name: canary, selector: {ring: canary}}, {name: all}]
@@ -40,64 +39,16 @@ def fleet(lab: Lab, version: str, verify: str) -> FleetRender:
     return rendered
 
 
-class Run:
-    """One rollout of `head` over `stable`, stepped with the robots running what they hold."""
+class Run(RolloutRun):
+    """One rollout of `head` over `stable` (the policy's `verify` fields given)."""
 
     def __init__(self, lab: Lab, verify: str) -> None:
-        self.stable, self.head = fleet(lab, "a", verify), fleet(lab, "b", verify)
-        self.last: RolloutStep | None = None
-        self.next_id = 0
-        self.evidence: WaveEvidence | None = None
-        self.notes: list[VerdictNote] = []
+        super().__init__(fleet(lab, "a", verify), fleet(lab, "b", verify))
 
-    def launches(self) -> dict[str, str | None]:
-        held: dict[str, str | None] = {r: self.stable.requests[r].digest for r in ROBOTS}
-        if self.last is not None:
-            held.update({r: q.digest for r, q in self.last.requests.items()})
-        return held
-
-    def step(self, now: float) -> RolloutStep:
-        launches = self.launches()
-        statuses = {
-            r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=d, since=T0)
-            for r, d in launches.items()
-        }
-        previous = self.last.status if self.last is not None else None
-        self.last = roll_out(
-            RolloutInput(
-                self.head,
-                self.stable,
-                previous,
-                launches,
-                statuses,
-                {r: T0 for r in ROBOTS},
-                now,
-                self.last.record if self.last is not None else None,
-                evidence=self.evidence,
-                notes=self.notes,
-            )
-        )
-        return self.last
-
-    def report(self, robot: str, outcome: str, n: int = 1, code: str | None = None) -> None:
-        """Outcomes of `robot` on what it holds now, received just after the wave began."""
-        status = self.last.status if self.last is not None else None
-        assert status is not None and status.wave_started_at is not None
-        key = EvidenceKey(self.head.revision, status.wave, status.wave_started_at)
-        verify = self.head.rollout.verify if self.head.rollout is not None else None
-        assert verify is not None
-        if self.evidence is None or self.evidence.key != key:
-            self.evidence = new_evidence(
-                key, wave_roles(self.head, self.stable, status.wave), verify
-            )
-        digest = self.launches()[robot]
-        rows = []
-        for _ in range(n):
-            self.next_id += 1
-            rows.append(
-                Row(self.next_id, robot, digest, "delivery-gazebo", outcome, code, key.started_at)
-            )
-        self.evidence.add(rows)
+    def report(  # type: ignore[override]
+        self, robot: str, outcome: str, n: int = 1, code: str | None = None
+    ) -> None:
+        super().report([robot], outcome, n, code)
 
 
 def wave_of(result: RolloutStep) -> tuple[str, int]:
@@ -179,7 +130,7 @@ def test_a_dry_run_judges_and_shows_but_gates_on_health_alone(lab: Lab) -> None:
     run.step(T0)
     run.report("tb3-01", "failed", 3)
     shadow = run.step(T0 + 20)
-    assert wave_of(shadow) == ("Complete", 1)  # healthy: on through every wave
+    assert wave_of(shadow) == ("Progressing", 1)  # healthy: on to the next wave
     assert [(n.verdict, n.dry_run) for n in shadow.verdicts] == [("Failed", True)]
 
 

@@ -1,0 +1,84 @@
+"""A rollout stepped by hand, pure: `roll_out` called step after step with the robots running
+whatever the last step left them holding, and goal outcomes counted as the reconciler counts
+them (the roles and criteria of the step the rollout stands in)."""
+
+from __future__ import annotations
+
+from configurator.render import FleetRender
+from configurator.stages import plan_waves
+from contract.notes import VerdictNote
+from contract.wire import AgentState, AgentStatus
+from reconciler.evidence import EvidenceKey, Row, WaveEvidence, new_evidence
+from reconciler.rollout import RolloutInput, RolloutStep, criteria, roll_out, wave_roles
+
+T0 = 1_000_000.0
+
+
+class RolloutRun:
+    """One rollout of `head` over `stable`; `notes` are the head's (decisions by hand)."""
+
+    def __init__(self, stable: FleetRender, head: FleetRender) -> None:
+        self.stable, self.head = stable, head
+        self.last: RolloutStep | None = None
+        self.evidence: WaveEvidence | None = None
+        self.notes: list[VerdictNote] = []
+        self.next_id = 0
+
+    def launches(self) -> dict[str, str | None]:
+        """What each robot holds after the last step: the stable request, or what the step
+        published (a robot it keeps stays as it is; rolled back, the stable everywhere)."""
+        held: dict[str, str | None] = {r: q.digest for r, q in self.stable.requests.items()}
+        last = self.last
+        if last is not None and not last.serve_stable:
+            held.update({r: q.digest for r, q in last.requests.items() if r not in last.keep})
+        return held
+
+    def step(self, now: float) -> RolloutStep:
+        launches = self.launches()
+        statuses = {
+            r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=d, since=T0)
+            for r, d in launches.items()
+        }
+        self.last = roll_out(
+            RolloutInput(
+                self.head,
+                self.stable,
+                self.last.status if self.last is not None else None,
+                launches,
+                statuses,
+                {r: T0 for r in launches},
+                now,
+                self.last.record if self.last is not None else None,
+                evidence=self.evidence,
+                notes=self.notes,
+            )
+        )
+        return self.last
+
+    def report(
+        self, robots: list[str], outcome: str, each: int = 1, code: str | None = None
+    ) -> None:
+        """Goals of `robots` ended on what they hold, received just after the current step
+        began, counted for it."""
+        status = self.last.status if self.last is not None else None
+        assert status is not None and status.wave_started_at is not None
+        key = EvidenceKey(self.head.revision, status.wave, status.wave_started_at)
+        if self.evidence is None or self.evidence.key != key:
+            verify = criteria(self.head, plan_waves(self.head).specs[status.wave])
+            assert verify is not None, "this step is judged by health alone"
+            roles = wave_roles(self.head, self.stable, status.wave)
+            self.evidence = new_evidence(key, roles, verify)
+        held = self.launches()
+        rows = []
+        for robot in robots:
+            for _ in range(each):
+                self.next_id += 1
+                rows.append(
+                    Row(self.next_id, robot, held[robot], "s", outcome, code, key.started_at + 1)
+                )
+        self.evidence.add(rows)
+
+    def moved(self) -> list[str]:
+        """The robots holding the head's request."""
+        held = self.launches()
+        return sorted(r for r, d in held.items() if d == self.head.requests[r].digest)
