@@ -1,5 +1,7 @@
-"""Which stage of the promotion ladder (fleet.yaml `stages`) each robot is on: pure, the same
-for validation, `plan`, the reconciler and `status`."""
+"""How a rollout moves the fleet beyond its waves, pure, the same for validation, `plan`, the
+reconciler and `status`: which stage of the promotion ladder (fleet.yaml `stages`) each robot
+is on, which group it moves with (fleet.yaml `groups`, `rollout.groups`), and the rollout's
+steps in order (each stage's waves, then its gate; no group split)."""
 
 from __future__ import annotations
 
