@@ -7,10 +7,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-from configurator.render import FleetRender
 from configurator.types import Stage
 from configurator.waves import assign_waves, matches
+
+if TYPE_CHECKING:  # validate places robots without the rendering's models
+    from configurator.render import FleetRender
 
 
 class SelectorError(ValueError):

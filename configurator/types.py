@@ -11,7 +11,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
 from contract.durations import parse_duration
-from contract.goals import CODE_PATTERN
+from contract.models import CODE_PATTERN
 from contract.models import MAX_ROS_DOMAIN_ID as MAX_ROS_DOMAIN_ID
 from contract.models import ROBOT_ID_PATTERN as ROBOT_ID_PATTERN
 from contract.models import ROS_DOMAIN_DESCRIPTION as ROS_DOMAIN_DESCRIPTION

@@ -20,13 +20,13 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from contract.models import CODE_PATTERN as CODE_PATTERN
 from contract.wire import now
 
 WIRE_VERSION = 1
 MAX_LINE_BYTES = 4096  # one JSON line from a brain; a longer one is cut off and counted
 MAX_TEXT = 200  # characters of a note, a message or a vital's text kept (longer: cut, with …)
 MAX_CODE = 64
-CODE_PATTERN = r"^[A-Za-z0-9_.:-]{1,64}$"  # a failure code: NAV2_TIMEOUT, nav2:104, E_BLOCKED
 GOAL_ID_PATTERN = r"^[A-Za-z0-9_.:-]{1,64}$"  # the brain's own id of one goal in its run
 TASK_PATTERN = r"^[A-Za-z0-9_.:/-]{1,128}$"  # a task's name, as the models write them
 MAX_VITALS = 16  # named vitals a robot reports at once; more are refused

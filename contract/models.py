@@ -11,6 +11,11 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+# A goal's failure code, as brains report them and rollout.verify's `critical` names them:
+# NAV2_TIMEOUT, nav2:104, E_BLOCKED. Here, beside the documents' models: validate reads
+# fleet.yaml without the wire's models.
+CODE_PATTERN = r"^[A-Za-z0-9_.:-]{1,64}$"
+
 # `$` ends the text in pydantic's and JSON Schema's regexes; Python's `re` also lets it match
 # before a final newline, so Python code matches robot ids in full with `is_robot_id`.
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"

@@ -193,13 +193,16 @@ class Controller:
         self._sizes = RequestSizes()
         self._health_memo = ReadMemo()
         self._crashed: set[str] = set()  # revisions whose build raised: retried at each resync
-        # rollout.verify: the outcome ledger's rows counted into the current wave's evidence,
-        # and the verdicts kept as git notes on the commits rolled out.
+        self._verification_state(ledger, verifier)
+
+    def _verification_state(self, ledger: Path | None, verifier: Ed25519PublicKey | None) -> None:
+        """What a rollout's evidence and decisions need: the outcome ledger's rows counted into
+        the current wave's evidence, the verdicts kept as git notes on the commits rolled out,
+        and operators' actions as they arrive (bounded: a flood is dropped, counted), judged
+        on the loop, the answer to the last one in the rollout's status."""
         self._evidence = EvidenceCounter(ledger) if ledger is not None else None
-        self.notes = NotesStore(source.root)
+        self.notes = NotesStore(self.source.root)
         self._notes_failed = False
-        # Operators' rollout actions as they arrive (bounded: a flood is dropped, counted),
-        # judged on the loop; the answer to the last one goes into the rollout's status.
         self._verifier = verifier
         self._actions: collections.deque[bytes] = collections.deque(maxlen=MAX_WAITING_ACTIONS)
         self._actions_lock = threading.Lock()

@@ -219,24 +219,7 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
     assert fleet is not None
     stable = seen.serving if seen.serving is not None and seen.serving.fleet else None
     waiting = held_back(fleet, fleet.requests, seen)
-    step = roll_out(
-        RolloutInput(
-            head=fleet,
-            stable=stable.fleet if stable is not None else None,
-            previous=seen.previous_rollout,
-            launches=seen.launches,
-            statuses=seen.statuses,
-            running_since=seen.running_since,
-            now=seen.now,
-            record=seen.wave_record,
-            watching_since=seen.watching_since,
-            dark_since=seen.dark_since,
-            held=frozenset(waiting),
-            evidence=seen.evidence,
-            baseline=seen.baseline,
-            notes=seen.notes,
-        )
-    )
+    step = roll_out(_rollout_input(seen, fleet, stable, frozenset(waiting)))
     if step.serve_stable and stable is not None and stable.fleet is not None:
         back = stable.fleet
         held = held_back(back, back.requests, seen)
@@ -274,6 +257,28 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
         recheck_at=step.recheck_at,
         wave_record=step.record,
         verdicts=tuple(step.verdicts),
+    )
+
+
+def _rollout_input(
+    seen: Observation, head: FleetRender, stable: Desired | None, held: frozenset[str]
+) -> RolloutInput:
+    """What the rollout of `head` sees at this step, from the observation."""
+    return RolloutInput(
+        head=head,
+        stable=stable.fleet if stable is not None else None,
+        previous=seen.previous_rollout,
+        launches=seen.launches,
+        statuses=seen.statuses,
+        running_since=seen.running_since,
+        now=seen.now,
+        record=seen.wave_record,
+        watching_since=seen.watching_since,
+        dark_since=seen.dark_since,
+        held=held,
+        evidence=seen.evidence,
+        baseline=seen.baseline,
+        notes=seen.notes,
     )
 
 

@@ -10,7 +10,7 @@ decision), so a replay inside the recency window changes nothing.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
@@ -48,6 +48,32 @@ def judge_action(
 ) -> Taken | Refused:
     """Whether the action in `payload` is carried out on `rollout` (the one in the reconciler's
     status now), and the note that does it."""
+    read = _read(payload)
+    if isinstance(read, Refused):
+        return read
+    data, action = read
+    why: str | None = None
+    if key is not None:
+        from contract.signing import verify_object
+
+        problem = verify_object(data, key)
+        why = problem.replace("this agent", "this reconciler") if problem else None
+    if why is None and abs(now - action.issued_at) > RECENT:
+        why = (
+            f"issued {abs(now - action.issued_at):.0f} s from the reconciler's clock: only "
+            f"actions within {RECENT:.0f} s are taken (clocks apart, or a replay)"
+        )
+    if why is None:
+        why = _why_not(action, rollout)
+    if why is not None or rollout is None:
+        why = why or "no rollout"
+        return Refused(why, _answer(action, False, why))
+    note = _note(action, rollout, now)
+    return Taken(note, _answer(action, True, note.message))
+
+
+def _read(payload: bytes) -> tuple[dict[str, Any], RolloutAction] | Refused:
+    """The payload bounded, parsed and typed; refused unanswered when it is not an action."""
     if len(payload) > MAX_ACTION_BYTES:
         return Refused(f"larger than {MAX_ACTION_BYTES} bytes", None)
     try:
@@ -55,37 +81,26 @@ def judge_action(
     except PayloadError as exc:
         return Refused(str(exc), None)
     try:
-        action = RolloutAction.model_validate(data)
+        return data, RolloutAction.model_validate(data)
     except ValidationError as exc:
         return Refused(f"not a rollout action: {printable(error_line(exc.errors()[0]))}", None)
 
-    def refuse(why: str) -> Refused:
-        answer = OperatorAnswer(
-            action=action.action,
-            requested_by=action.requested_by,
-            issued_at=action.issued_at,
-            accepted=False,
-            message=why,
-        )
-        return Refused(why, answer)
 
-    if key is not None:
-        from contract.signing import verify_object
+def _answer(action: RolloutAction, accepted: bool, message: str) -> OperatorAnswer:
+    return OperatorAnswer(
+        action=action.action,
+        requested_by=action.requested_by,
+        issued_at=action.issued_at,
+        accepted=accepted,
+        message=message,
+    )
 
-        problem = verify_object(data, key)
-        if problem is not None:
-            return refuse(problem.replace("this agent", "this reconciler"))
-    if abs(now - action.issued_at) > RECENT:
-        return refuse(
-            f"issued {abs(now - action.issued_at):.0f} s from the reconciler's clock: only "
-            f"actions within {RECENT:.0f} s are taken (clocks apart, or a replay)"
-        )
-    why = _why_not(action, rollout)
-    if why is not None:
-        return refuse(why)
-    assert rollout is not None
+
+def _note(action: RolloutAction, rollout: RolloutStatus, now: float) -> VerdictNote:
+    """The git note that carries out an action taken: a promotion is about the revision; a
+    resume or an abort, about the wave run that stands."""
     if action.action == "promote":
-        note = VerdictNote(
+        return VerdictNote(
             kind="promote",
             revision=action.revision,
             at=now,
@@ -94,26 +109,17 @@ def judge_action(
             message=f"{short_rev(action.revision)} promoted to stage '{action.stage}' "
             f"by {action.requested_by}",
         )
-    else:
-        verb = "resumed" if action.action == "resume" else "aborted"
-        note = VerdictNote(
-            kind=action.action,
-            revision=action.revision,
-            at=now,
-            wave=action.wave,
-            wave_name=rollout.wave_name,
-            started_at=action.wave_started_at,
-            by=action.requested_by,
-            message=f"wave '{rollout.wave_name}' {verb} by {action.requested_by}",
-        )
-    answer = OperatorAnswer(
-        action=action.action,
-        requested_by=action.requested_by,
-        issued_at=action.issued_at,
-        accepted=True,
-        message=note.message,
+    verb = "resumed" if action.action == "resume" else "aborted"
+    return VerdictNote(
+        kind=action.action,
+        revision=action.revision,
+        at=now,
+        wave=action.wave,
+        wave_name=rollout.wave_name,
+        started_at=action.wave_started_at,
+        by=action.requested_by,
+        message=f"wave '{rollout.wave_name}' {verb} by {action.requested_by}",
     )
-    return Taken(note, answer)
 
 
 def _why_not(action: RolloutAction, rollout: RolloutStatus | None) -> str | None:

@@ -10,7 +10,7 @@ healthy it has not seen so.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -194,6 +194,17 @@ def _roles(
     return Roles(new, kept)
 
 
+@dataclass
+class _Gate:
+    """A wave's evidence at one step: may it go on, is it held (why), or has it failed."""
+
+    done: bool
+    verification: WaveVerification | None
+    held_for: str = ""  # "inconclusive" (paused for an operator) or "gathering"
+    failed: str | None = None  # why the wave fails by its evidence
+    poll: float | None = None  # when to look at the evidence again
+
+
 class _Rollout:
     def __init__(
         self,
@@ -254,23 +265,16 @@ class _Rollout:
 
     def advance(self, wave: int, started_at: float | None) -> RolloutStep:
         """From `wave` (-1: none started yet), publish and judge waves as far as they are
-        healthy; stop on too many failures. No wave begins before the robots' statuses are
-        known: who was online when it was published is part of what it is judged on."""
+        healthy and verified; stop on too many failures or a failed verification. No wave
+        begins before the robots' statuses are known: who was online when it was published is
+        part of what it is judged on."""
         now = self.seen.now
         known = self.seen.statuses is not None
         if wave < 0 and not self.policy.paused and known:
             wave, started_at = 0, now
         while True:
             if wave < 0:
-                step = self.hold(-1)
-                why = (
-                    "paused before the first wave (rollout.paused)"
-                    if self.policy.paused
-                    else "waiting for the robots' statuses before the first wave"
-                )
-                state: RolloutState = "Paused" if self.policy.paused else "Progressing"
-                step.status = self._status(state, 0, None, {}, why)
-                return step
+                return self._before_first()
             begins = started_at is None or started_at == now
             started_at = now if started_at is None else started_at
             judged, recheck, deadline, memory = self._judge(wave, started_at, begins)
@@ -286,66 +290,96 @@ class _Rollout:
                 return self._failed(wave, started_at, judged, why, verification)
             if len(failed) > budget:
                 return self._failed(wave, started_at, judged, None, verification)
-            gating = verification is not None and not verification.dry_run
-            if gating and verification is not None and verification.verdict == "Failed":
-                why = f"verification of wave '{name}' failed: {verification.message}"
-                return self._failed(wave, started_at, judged, why, verification)
-            done = known and (
+            healthy = known and (
                 all(h in (Health.HEALTHY, Health.FAILED, Health.OFFLINE) for h in judged.values())
                 or (all(h is not Health.PENDING for h in judged.values()) and now >= deadline)
             )
-            held_for = ""  # why a wave healthy throughout is held: its evidence
-            if done and gating and verification is not None:
-                verdict = verification.verdict
-                rules = criteria(self.seen.head, self.specs[wave])
-                assert rules is not None  # a verification is made only by criteria
-                inconclusive = rules.inconclusive
-                if by_hand is not None and by_hand.kind in ("resume", "promote"):
-                    verification = verification.model_copy(update={"decided_by": by_hand.by})
-                elif verdict == "Inconclusive" and inconclusive == "fail":
-                    why = f"verification of wave '{name}' inconclusive: {verification.message}"
-                    return self._failed(wave, started_at, judged, why, verification)
-                elif verdict == "Inconclusive" and inconclusive == "pause":
-                    done, held_for = False, "inconclusive"
-                elif verdict is None:
-                    done, held_for = False, "gathering"
-                    soon = min(now + VERIFY_POLL, verification.deadline or math.inf)
-                    recheck = soon if recheck is None else min(recheck, soon)
-            elif verification is not None and verification.verdict is None:
-                soon = min(now + VERIFY_POLL, verification.deadline or math.inf)
-                recheck = soon if recheck is None else min(recheck, soon)  # shown as it grows
-            if (
-                done
-                and verification is not None
-                and (verification.verdict or verification.decided_by)
-            ):
-                self.noted.append(self._note(wave, started_at, verification))
-            elif done and verification is None and self.specs[wave].gate:
-                # No soak: a stage whose every wave passed is verified; said in the notes.
-                passed = WaveVerification(verdict="Successful", message="every wave passed")
-                self.noted.append(self._note(wave, started_at, passed))
-            if done and wave == self.count - 1:
+            gate = self._gate(wave, started_at, healthy, verification, by_hand)
+            if gate.failed is not None:
+                return self._failed(wave, started_at, judged, gate.failed, gate.verification)
+            if gate.poll is not None:
+                recheck = gate.poll if recheck is None else min(recheck, gate.poll)
+            if gate.done and wave == self.count - 1:
                 return self._with_verdicts(self.everyone())
-            if done and not self.policy.paused:
+            if gate.done and not self.policy.paused:
                 wave, started_at = wave + 1, now
                 continue
             step = self.hold(wave)
-            state = "Progressing"
-            why = ""
-            if done and self.policy.paused:
-                state, why = "Paused", "paused (rollout.paused): a commit setting it false resumes"
-            elif held_for == "inconclusive" and verification is not None:
-                state = "Paused"
-                why = f"wave '{name}' inconclusive ({verification.message}): {VERIFY_COMMANDS}"
-                self.noted.append(self._note(wave, started_at, verification))
-            elif held_for == "gathering" and verification is not None:
-                why = f"wave '{name}' verifying: {verification.message}"
-            if self.busy_why and state == "Progressing":
-                why = f"{why}; {self.busy_why}" if why else self.busy_why
-            step.status = self._status(state, wave, started_at, judged, why, verification)
+            state, why = self._standing(wave, started_at, gate)
+            step.status = self._status(state, wave, started_at, judged, why, gate.verification)
             step.recheck_at = recheck
             step.record = memory.record() if memory is not None else None
             return self._with_verdicts(step)
+
+    def _before_first(self) -> RolloutStep:
+        step = self.hold(-1)
+        why = (
+            "paused before the first wave (rollout.paused)"
+            if self.policy.paused
+            else "waiting for the robots' statuses before the first wave"
+        )
+        state: RolloutState = "Paused" if self.policy.paused else "Progressing"
+        step.status = self._status(state, 0, None, {}, why)
+        return step
+
+    def _gate(
+        self,
+        wave: int,
+        started_at: float,
+        healthy: bool,
+        verification: WaveVerification | None,
+        by_hand: VerdictNote | None,
+    ) -> _Gate:
+        """Whether a wave healthy throughout may go on by its evidence (`rollout.verify`, a
+        stage's soak): passed, failed (why), or held (paused, gathering); the verdicts reached
+        are noted. A dry run is judged and noted, never gating."""
+        name, now = self.specs[wave].name, self.seen.now
+        gate = _Gate(healthy, verification)
+        if verification is not None and verification.verdict is None:
+            gate.poll = min(now + VERIFY_POLL, verification.deadline or math.inf)
+        gating = verification is not None and not verification.dry_run
+        if gating and verification is not None and verification.verdict == "Failed":
+            gate.failed = f"verification of wave '{name}' failed: {verification.message}"
+            return gate
+        if healthy and gating and verification is not None:
+            rules = criteria(self.seen.head, self.specs[wave])
+            assert rules is not None  # a verification is made only by criteria
+            verdict = verification.verdict
+            if by_hand is not None and by_hand.kind in ("resume", "promote"):
+                gate.verification = verification.model_copy(update={"decided_by": by_hand.by})
+            elif verdict == "Inconclusive" and rules.inconclusive == "fail":
+                gate.failed = f"verification of wave '{name}' inconclusive: {verification.message}"
+                return gate
+            elif verdict == "Inconclusive" and rules.inconclusive == "pause":
+                gate.done, gate.held_for = False, "inconclusive"
+            elif verdict is None:
+                gate.done, gate.held_for = False, "gathering"
+        found = gate.verification
+        if gate.done and found is not None and (found.verdict or found.decided_by):
+            self.noted.append(self._note(wave, started_at, found))
+        elif gate.done and found is None and self.specs[wave].gate:
+            # No soak: a stage whose every wave passed is verified; said in the notes.
+            passed = WaveVerification(verdict="Successful", message="every wave passed")
+            self.noted.append(self._note(wave, started_at, passed))
+        return gate
+
+    def _standing(self, wave: int, started_at: float, gate: _Gate) -> tuple[RolloutState, str]:
+        """The state and why of a rollout held at `wave`: paused (by fleet.yaml, or for an
+        operator), verifying, or waiting for a busy member of a group."""
+        name, found = self.specs[wave].name, gate.verification
+        state: RolloutState = "Progressing"
+        why = ""
+        if gate.done and self.policy.paused:
+            state, why = "Paused", "paused (rollout.paused): a commit setting it false resumes"
+        elif gate.held_for == "inconclusive" and found is not None:
+            state = "Paused"
+            why = f"wave '{name}' inconclusive ({found.message}): {VERIFY_COMMANDS}"
+            self.noted.append(self._note(wave, started_at, found))
+        elif gate.held_for == "gathering" and found is not None:
+            why = f"wave '{name}' verifying: {found.message}"
+        if self.busy_why and state == "Progressing":
+            why = f"{why}; {self.busy_why}" if why else self.busy_why
+        return state, why
 
     def halted(self, previous: RolloutStatus) -> RolloutStep:
         wave = min(max(previous.wave, 0), self.count - 1)
@@ -483,50 +517,57 @@ class _Rollout:
         deadline = deferral_deadline(memory, members, statuses, now, deadline, policy)
         deadline, held_until = self._hold_busy_groups(members, statuses, memory, deadline)
         judged: dict[str, Health] = {}
-        recheck: float | None = None
-
-        def soon(at: float) -> None:
-            nonlocal recheck
-            recheck = at if recheck is None else min(recheck, at)
-
+        times: list[float] = []  # when a judgment changes with time
         for robot in members:
-            digest = head.requests[robot].digest
-            since = self.seen.running_since.get(robot)
-            dark_at = self.seen.dark_since.get(robot, memory.watching_since) + DARK_GRACE
-            health = (
-                Health.ABSENT
-                if robot in self.seen.held
-                else _health(
-                    robot,
-                    statuses.get(robot),
-                    digest,
-                    self.seen.launches.get(robot) == digest,
-                    since,
-                    now >= dark_at,
-                    now,
-                    policy.healthy_after,
-                    memory,
-                )
-            )
-            if health is Health.ABSENT and robot not in self.seen.held:
-                health = self._offline(robot, now >= dark_at, memory)
-                if health is Health.ABSENT and policy.offline != "wait":
-                    soon(dark_at)  # dark a moment ago (a reconnecting agent): offline once it lasts
-            dark = robot in memory.seen and not is_online(statuses.get(robot))
-            if health is Health.PENDING and dark and now < dark_at and robot not in memory.doubted:
-                soon(dark_at)  # dark a moment ago: gone once it has lasted
-            if health is Health.PENDING and since is not None:
-                soon(since + policy.healthy_after)
-            if health is Health.PENDING and now >= deadline:
-                health = Health.FAILED  # not healthy by wave_timeout
-                memory.failed.add(robot)
-            if health in (Health.PENDING, Health.ABSENT) and now < deadline:
-                soon(deadline)
-            judged[robot] = health
+            judged[robot] = self._judge_robot(robot, statuses, memory, deadline, times.append)
         self._fail_groups(judged, memory)
         if held_until is not None:
-            soon(held_until)  # the group goes at its max_defer at the latest
-        return judged, recheck, deadline, memory
+            times.append(held_until)  # the group goes at its max_defer at the latest
+        return judged, min(times, default=None), deadline, memory
+
+    def _judge_robot(
+        self,
+        robot: str,
+        statuses: Mapping[str, AgentStatus],
+        memory: WaveMemory,
+        deadline: float,
+        soon: Callable[[float], None],
+    ) -> Health:
+        """One robot of the wave, and (`soon`) when its judgment may change with time."""
+        policy, now = self.policy, self.seen.now
+        digest = self.seen.head.requests[robot].digest
+        since = self.seen.running_since.get(robot)
+        dark_at = self.seen.dark_since.get(robot, memory.watching_since) + DARK_GRACE
+        health = (
+            Health.ABSENT
+            if robot in self.seen.held
+            else _health(
+                robot,
+                statuses.get(robot),
+                digest,
+                self.seen.launches.get(robot) == digest,
+                since,
+                now >= dark_at,
+                now,
+                policy.healthy_after,
+                memory,
+            )
+        )
+        if health is Health.ABSENT and robot not in self.seen.held:
+            health = self._offline(robot, now >= dark_at, memory)
+            if health is Health.ABSENT and policy.offline != "wait":
+                soon(dark_at)  # dark a moment ago (a reconnecting agent): offline once it lasts
+        dark = robot in memory.seen and not is_online(statuses.get(robot))
+        if health is Health.PENDING and dark and now < dark_at and robot not in memory.doubted:
+            soon(dark_at)  # dark a moment ago: gone once it has lasted
+        if health is Health.PENDING and since is not None:
+            soon(since + policy.healthy_after)
+        if health is Health.PENDING and now >= deadline:
+            health = Health.FAILED  # not healthy by wave_timeout
+            memory.failed.add(robot)
+        if health in (Health.PENDING, Health.ABSENT) and now < deadline:
+            soon(deadline)
+        return health
 
     def _hold_busy_groups(
         self,

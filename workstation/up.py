@@ -499,19 +499,7 @@ def _serve(
 
     stop = threading.Event()
     changed = threading.Event()
-    controller = Controller(
-        LocalBranch(setup.root, setup.branch),
-        logins.reconciler,
-        prefix,
-        RESYNC_INTERVAL,
-        on_reconciled=lambda status: changed.set(),
-        signer=signer,
-        builder=setup.builder,
-        # rollout.verify counts the ledger's outcomes; operators' rollout actions are checked
-        # against the key the requests are signed with.
-        ledger=ledger_path(setup.state_dir),
-        verifier=make_verifier(private_key),
-    )
+    controller = _controller(setup, logins, prefix, changed, signer, private_key)
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
     view = open_view(logins.reconciler, prefix, changed.set)
     ledger = _start_ledger(setup, logins.reconciler, prefix, say)
@@ -553,6 +541,29 @@ def _serve(
         if ledger is not None:
             ledger.stop()
     return ExitCode.OK
+
+
+def _controller(
+    setup: UpSetup,
+    logins: Logins,
+    prefix: str,
+    changed: threading.Event,
+    signer: Any,
+    private_key: Path | None,
+) -> Controller:
+    """up's reconciler: its branch, its login, signing when asked; rollout.verify counts its
+    ledger's outcomes, and operators' rollout actions are checked against the signing key."""
+    return Controller(
+        LocalBranch(setup.root, setup.branch),
+        logins.reconciler,
+        prefix,
+        RESYNC_INTERVAL,
+        on_reconciled=lambda status: changed.set(),
+        signer=signer,
+        builder=setup.builder,
+        ledger=ledger_path(setup.state_dir),
+        verifier=make_verifier(private_key),
+    )
 
 
 def _signing(

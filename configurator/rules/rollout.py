@@ -6,7 +6,7 @@ from __future__ import annotations
 from configurator.repository import Entry, Repository
 from configurator.rules.report import Reporter
 from configurator.stages import Placement, SelectorError, assign_stages, parse_selector
-from configurator.types import Fleet, RolloutPolicy, is_robot_id
+from configurator.types import Fleet, RolloutPolicy, Stage, is_robot_id
 from configurator.waves import assign_waves, failure_budget
 
 # An error listing robots names this many, then how many more.
@@ -186,36 +186,7 @@ def check_stages(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> Non
     words = set(known_environments) | set(known_environments.values())
     seen: dict[str, int] = {}
     for index, stage in enumerate(stages):
-        loc: list[str | int] = ["stages", index]
-        if not is_robot_id(stage.name):
-            report.add(fleet, [*loc, "name"], "RC707", f"stage name {stage.name!r}: {_ID_RULE}")
-        elif stage.name in seen:
-            report.add(fleet, [*loc, "name"], "RC707", f"stage '{stage.name}' is named twice")
-        seen.setdefault(stage.name, index)
-        if bool(stage.environments) == (stage.selector is not None):
-            report.add(
-                fleet,
-                loc,
-                "RC707",
-                f"stage '{stage.name}' needs environments (names or types) or a selector "
-                '("key=value"), one of the two',
-            )
-        if stage.selector is not None:
-            try:
-                parse_selector(stage.selector)
-            except SelectorError as exc:
-                report.add(fleet, [*loc, "selector"], "RC707", f"stage '{stage.name}': {exc}")
-        for at, word in enumerate(stage.environments):
-            if word not in words:
-                report.unknown(
-                    fleet,
-                    [*loc, "environments", at],
-                    "RC707",
-                    f"stage '{stage.name}' names environment '{word}', which is neither an "
-                    "environment's name nor its type",
-                    word,
-                    words,
-                )
+        _check_stage(fleet, index, stage, words, seen, report)
     placements = _placements(repo, fleet)
     left = sorted(set(placements) - set(assign_stages(placements, stages)))
     if left:
@@ -230,6 +201,48 @@ def check_stages(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> Non
             "their environment to a stage, or a last stage that selects them",
             key=True,
         )
+
+
+def _check_stage(
+    fleet: Entry[Fleet],
+    index: int,
+    stage: Stage,
+    words: set[str],
+    seen: dict[str, int],
+    report: Reporter,
+) -> None:
+    """One stage: its name, and how it takes robots (environments known by name or type, or
+    a readable selector; one of the two)."""
+    loc: list[str | int] = ["stages", index]
+    if not is_robot_id(stage.name):
+        report.add(fleet, [*loc, "name"], "RC707", f"stage name {stage.name!r}: {_ID_RULE}")
+    elif stage.name in seen:
+        report.add(fleet, [*loc, "name"], "RC707", f"stage '{stage.name}' is named twice")
+    seen.setdefault(stage.name, index)
+    if bool(stage.environments) == (stage.selector is not None):
+        report.add(
+            fleet,
+            loc,
+            "RC707",
+            f"stage '{stage.name}' needs environments (names or types) or a selector "
+            '("key=value"), one of the two',
+        )
+    if stage.selector is not None:
+        try:
+            parse_selector(stage.selector)
+        except SelectorError as exc:
+            report.add(fleet, [*loc, "selector"], "RC707", f"stage '{stage.name}': {exc}")
+    for at, word in enumerate(stage.environments):
+        if word not in words:
+            report.unknown(
+                fleet,
+                [*loc, "environments", at],
+                "RC707",
+                f"stage '{stage.name}' names environment '{word}', which is neither an "
+                "environment's name nor its type",
+                word,
+                words,
+            )
 
 
 def check_groups(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> None:

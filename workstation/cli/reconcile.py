@@ -310,11 +310,7 @@ def reconcile(
     if interval <= 0:
         raise CliError("--interval must be a positive number of seconds")
     source = make_source(repo, branch, remote, cache_dir)  # a SourceError is one line, exit 2
-    try:
-        signer = make_signer(signing_key)
-        verifier = make_verifier(signing_key)
-    except SigningKeyError as exc:
-        raise CliError(str(exc)) from None
+    signer, verifier = _keys(signing_key)
     webhook = webhook_options(webhook_at, webhook_secret_file)
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
     kept = ledger_settings(mqtt.prefix, **ledger_options)
@@ -349,6 +345,15 @@ def reconcile(
     _say_started(source, connection, mqtt.prefix, no_local)
     _run(controller, telemetry, receiver, ui, ledger)
     return ExitCode.OK
+
+
+def _keys(signing_key: Path | None) -> tuple[Any, Any]:
+    """The signer of the requests and the key operators' actions are checked with (both None
+    when the lab does not sign); a key that cannot be read is one line."""
+    try:
+        return make_signer(signing_key), make_verifier(signing_key)
+    except SigningKeyError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _say_started(source: BranchSource, connection: Connection, prefix: str, no_local: bool) -> None:
