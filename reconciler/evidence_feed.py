@@ -75,7 +75,7 @@ class EvidenceCounter:
             if verify is None:
                 self._evidence, self._without = None, key
                 return Counted(None, {})
-            roles = wave_roles(head, stable, rollout.wave)
+            roles = wave_roles(head, stable, rollout.wave, plan)
             self._evidence = new_evidence(key, roles, verify)
         evidence = self._evidence
         ledger = self._open()
@@ -109,10 +109,14 @@ class EvidenceCounter:
         if self._baseline is not None and self._baseline[0] == stable.revision:
             return self._baseline[1]
         try:
-            counts = ledger.scenario_counts(stable.revision)
+            scenarios = ledger.report(stable.revision).scenarios  # the revision's own tallies
         except LedgerError as exc:
             self._say(f"wave evidence: {exc}")
             return {}
+        counts = {
+            name: Counts(found.tally.succeeded, found.tally.failed, found.tally.canceled)
+            for name, found in scenarios.items()
+        }
         self._baseline = (stable.revision, counts)
         return counts
 

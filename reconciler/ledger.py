@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from contract.goals import OutcomeRecord, OutcomeState
-from reconciler.evidence import Counts, Row
+from reconciler.evidence import Row
 from reconciler.outcomes import (
     NO_REVISION,
     NO_SCENARIO,
@@ -525,24 +525,6 @@ class Ledger:
                 list(args),
             )
         ]
-
-    def scenario_counts(self, revision: str) -> dict[str, Counts]:
-        """A revision's outcomes per scenario, all it kept (its tallies): the stable side of
-        a comparison when too few of its robots are left to compare over a wave's window."""
-        found: dict[str, Counts] = {}
-        for scenario, outcome, count in self._read(
-            "SELECT scenario, outcome, sum(count) FROM tallies WHERE revision = ? "
-            "GROUP BY scenario, outcome",
-            [revision],
-        ):
-            counts = found.setdefault(scenario, Counts())
-            if outcome == OutcomeState.SUCCEEDED.value:
-                counts.succeeded += count
-            elif outcome == OutcomeState.FAILED.value:
-                counts.failed += count
-            elif outcome == OutcomeState.CANCELED.value:
-                counts.canceled += count
-        return found
 
     def report(
         self, revision: str, *, robot: str | None = None, since: float | None = None

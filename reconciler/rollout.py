@@ -163,12 +163,15 @@ def criteria(head: FleetRender, spec: WaveSpec) -> Verify | None:
     return base.model_copy(update={"min_goals": max(base.min_goals, soak.goals)})
 
 
-def wave_roles(head: FleetRender, stable: FleetRender | None, wave: int) -> Roles:
+def wave_roles(
+    head: FleetRender, stable: FleetRender | None, wave: int, plan: WavePlan | None = None
+) -> Roles:
     """Whose goal outcomes count toward `wave`'s verification: its moved robots on the head's
     requests (for a stage's gate, every moved robot of the stage), and the robots no wave has
     moved yet on the stable ones (the comparison)."""
     stable_requests = stable.requests if stable is not None else {}
-    return _roles(plan_waves(head), head, _changed(head, stable_requests), stable_requests, wave)
+    plan = plan if plan is not None else plan_waves(head)
+    return _roles(plan, head, _changed(head, stable_requests), stable_requests, wave)
 
 
 def _roles(

@@ -7,7 +7,7 @@ from configurator.repository import Entry, Repository
 from configurator.rules.report import Reporter
 from configurator.stages import Placement, SelectorError, assign_stages, parse_selector
 from configurator.types import Fleet, RolloutPolicy, Stage, is_robot_id
-from configurator.waves import assign_waves, failure_budget
+from configurator.waves import assign_waves, failure_budget, matches
 
 # An error listing robots names this many, then how many more.
 _SHOWN = 5
@@ -260,9 +260,7 @@ def check_groups(repo: Repository, fleet: Entry[Fleet], report: Reporter) -> Non
             except SelectorError as exc:
                 report.add(fleet, loc, "RC709", f"group '{name}': {exc}")
                 continue
-            members = [
-                r for r, a in robots.items() if all(a.labels.get(k) == v for k, v in wanted.items())
-            ]
+            members = [r for r, a in robots.items() if matches(a.labels, wanted)]
         else:
             members = []
             for at, robot in enumerate(chosen):

@@ -232,3 +232,28 @@ def test_a_new_state_folder_is_the_reconciler_s_alone(tmp_path: Path) -> None:
     state = tmp_path / "made" / "state"
     Ledger.open_or_start(ledger_path(state)).close()
     assert state.stat().st_mode & 0o777 == 0o700
+
+
+def test_the_stable_revisions_own_counts_per_scenario_come_from_its_report(
+    tmp_path: Path,
+) -> None:
+    """compare: stable's fallback baseline, read by the loop's evidence counter from the
+    ledger's tallies (the same ones `history` reports)."""
+    from configurator.render import FleetRender
+    from reconciler.evidence import Counts
+    from reconciler.evidence_feed import EvidenceCounter
+
+    path = ledger_path(tmp_path)
+    with Ledger.open_or_start(path) as writer:
+        writer.add(
+            [record(i) for i in range(3)]
+            + [record(3, outcome=OutcomeState.FAILED), record(4, revision=B)]
+        )
+    counter = EvidenceCounter(path)
+    try:
+        ledger = counter._open()
+        assert ledger is not None
+        found = counter._stable_counts(ledger, FleetRender(A))
+        assert found == {"delivery": Counts(succeeded=3, failed=1)}
+    finally:
+        counter.close()
