@@ -402,7 +402,8 @@ class OperatorAnswer(_Message):
     message: str = ""
 
 
-StageWord = Literal["waiting", "rolling", "verifying", "verified", "failed"]
+# revoked: verified on the stage, then failed there while later stages rolled: rolled back.
+StageWord = Literal["waiting", "rolling", "verifying", "verified", "failed", "revoked"]
 
 
 class StageState(_Message):
@@ -413,6 +414,11 @@ class StageState(_Message):
     state: StageWord
     verified_revision: str | None = Field(
         None, description="the last revision verified on this stage: what its robots keep"
+    )
+    rollback_revision: str | None = Field(
+        None,
+        description="what this stage's robots go back to if the rollout fails on it: the "
+        "revision verified for them when the rollout began",
     )
 
 

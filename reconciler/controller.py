@@ -11,6 +11,7 @@ from __future__ import annotations
 import collections
 import enum
 import logging
+import re
 import threading
 import time
 from collections import OrderedDict
@@ -68,6 +69,7 @@ from reconciler.retained import (
     read_object,
     take_snapshot_said,
 )
+from reconciler.rollout import stage_bases
 from reconciler.source import BranchSource
 from reconciler.wave_memory import WaveRecord
 
@@ -85,6 +87,7 @@ SAMPLE_TIMEOUT = 10.0  # seconds to wait for a sample of the robots' statuses
 # an oversized message is dropped on arrival and would be republished at every pass. The
 # margin leaves room for the signature.
 MAX_REQUEST_BYTES = MAX_PAYLOAD_BYTES - 4096
+_COMMIT = re.compile(r"[0-9a-f]{40}")  # a revision read from the broker, before git sees it
 
 Builder = Callable[[Path, str], Desired]
 
@@ -200,6 +203,7 @@ class Controller:
         the current wave's evidence, the verdicts kept as git notes on the commits rolled out,
         and operators' actions as they arrive (bounded: a flood is dropped, counted), judged
         on the loop, the answer to the last one in the rollout's status."""
+        self._stage_built: dict[str, Desired] = {}  # revisions a stage keeps (_stage_builds)
         self._evidence = EvidenceCounter(ledger) if ledger is not None else None
         self.notes = NotesStore(self.source.root)
         self._notes_failed = False
@@ -471,7 +475,8 @@ class Controller:
         now = time.time()
         rollout = build.fleet is not None and build.fleet.rollout is not None
         previous = self.writer.status
-        evidence, baseline, notes = self._verification(build, previous, head)
+        stage_builds = self._stage_builds(build, previous)
+        evidence, baseline, notes = self._verification(build, previous, head, stage_builds)
         return Observation(
             head=head,
             build=build,
@@ -491,10 +496,43 @@ class Controller:
             evidence=evidence,
             baseline=baseline,
             notes=notes,
+            stage_builds=stage_builds,
         )
 
+    def _stage_builds(
+        self, build: Desired, previous: ReconcilerStatus | None
+    ) -> dict[str, FleetRender]:
+        """fleet.yaml stages: the builds of the revisions the stages' robots keep
+        (`stage_bases`, read from the retained rollout) other than the serving one; each built
+        once and kept while a stage keeps it. One that cannot be built is left out: its stage
+        keeps the serving revision."""
+        fleet, rollout = build.fleet, previous.rollout if previous is not None else None
+        if fleet is None or fleet.rollout is None or not fleet.stages or rollout is None:
+            self._stage_built.clear()
+            return {}
+        serving = self.serving.revision if self.serving is not None else None
+        wanted = {
+            base
+            for base in stage_bases(fleet, rollout, serving)
+            if base is not None and base != serving and _COMMIT.fullmatch(base)
+        }
+        for gone in self._stage_built.keys() - wanted:
+            del self._stage_built[gone]
+        found: dict[str, FleetRender] = {}
+        for revision in wanted:
+            made = build if revision == build.revision else self._stage_built.get(revision)
+            if made is None:
+                made = self._stage_built[revision] = self._build_safely(revision)
+            if made.fleet is not None:
+                found[revision] = made.fleet
+        return found
+
     def _verification(
-        self, build: Desired, previous: ReconcilerStatus | None, head: str | None
+        self,
+        build: Desired,
+        previous: ReconcilerStatus | None,
+        head: str | None,
+        stage_builds: dict[str, FleetRender],
     ) -> tuple[WaveEvidence | None, dict[str, Counts], list[VerdictNote]]:
         """What a rollout of the head is judged on beyond health: its wave's goal outcomes
         (rollout.verify) and the notes on its commit (an operator's resume or abort)."""
@@ -515,7 +553,7 @@ class Controller:
         if self._evidence is None or not judged:
             return None, {}, notes
         stable = self.serving.fleet if self.serving is not None else None
-        counted = self._evidence.count(fleet, stable, rollout)
+        counted = self._evidence.count(fleet, stable, rollout, stage_builds)
         return counted.evidence, counted.baseline, notes
 
     def _answered(self, condition: Condition) -> Condition:

@@ -75,6 +75,8 @@ class Observation:
     evidence: WaveEvidence | None = None
     baseline: Mapping[str, Counts] = field(default_factory=dict)
     notes: Sequence[VerdictNote] = ()
+    # fleet.yaml stages: builds of the revisions a stage's robots keep, when not the serving one.
+    stage_builds: Mapping[str, FleetRender] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -279,6 +281,7 @@ def _rollout_input(
         evidence=seen.evidence,
         baseline=seen.baseline,
         notes=seen.notes,
+        stage_builds=seen.stage_builds,
     )
 
 

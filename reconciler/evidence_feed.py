@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from configurator.stages import plan_waves
 from contract.wire import RolloutStatus
 from reconciler.evidence import Counts, EvidenceKey, WaveEvidence, new_evidence
 from reconciler.ledger import Ledger, LedgerError
-from reconciler.rollout import criteria, wave_roles
+from reconciler.rollout import criteria, kept_requests, stage_bases, wave_roles
 
 log = logging.getLogger("robotconf.reconciler")
 
@@ -48,11 +49,15 @@ class EvidenceCounter:
             self._ledger = None
 
     def count(
-        self, head: FleetRender, stable: FleetRender | None, rollout: RolloutStatus | None
+        self,
+        head: FleetRender,
+        stable: FleetRender | None,
+        rollout: RolloutStatus | None,
+        builds: Mapping[str, FleetRender] | None = None,
     ) -> Counted:
         """The evidence of the wave `rollout` stands in (when it is the head's, under way, and
         judged by criteria: `rollout.verify`, or a stage's soak), counted up to what the ledger
-        holds now."""
+        holds now. `builds`: the stages' kept revisions' builds (`RolloutInput.stage_builds`)."""
         if (
             head.rollout is None
             or rollout is None
@@ -75,7 +80,9 @@ class EvidenceCounter:
             if verify is None:
                 self._evidence, self._without = None, key
                 return Counted(None, {})
-            roles = wave_roles(head, stable, rollout.wave, plan)
+            bases = stage_bases(head, rollout, stable.revision if stable is not None else None)
+            kept = kept_requests(head, stable, bases, builds or {}, plan)
+            roles = wave_roles(head, stable, rollout.wave, plan, kept)
             self._evidence = new_evidence(key, roles, verify)
         evidence = self._evidence
         ledger = self._open()

@@ -84,6 +84,9 @@ class RolloutInput:
     evidence: WaveEvidence | None = None
     baseline: Mapping[str, Counts] = field(default_factory=dict)
     notes: Sequence[VerdictNote] = ()
+    # fleet.yaml stages: the builds of the revisions verified for a stage's robots when the
+    # rollout began (`stage_bases`) that are not the stable one, by revision.
+    stage_builds: Mapping[str, FleetRender] = field(default_factory=dict)
 
 
 @dataclass
@@ -114,16 +117,67 @@ def stable_revision_of(previous: RolloutStatus | None, applied: str | None) -> s
     return previous.stable_revision
 
 
+def stage_bases(
+    head: FleetRender, previous: RolloutStatus | None, stable: str | None
+) -> list[str | None]:
+    """Per stage of the head (fleet.yaml stages), the revision verified for its robots when
+    the rollout of the head began: what they keep until the head is verified on the stage
+    before, and go back to if it fails on theirs. Read from the retained rollout: its own
+    (a restart), or the one before it (a new head: what each stage verified last); a stage it
+    does not name has the stable revision."""
+    if not head.stages:
+        return []
+    same = previous is not None and previous.revision == head.revision
+    known = {stage.name: stage for stage in previous.stages} if previous is not None else {}
+    bases: list[str | None] = []
+    for stage in head.stages:
+        found = known.get(stage.name)
+        base = None
+        if found is not None:
+            base = found.rollback_revision if same else found.verified_revision
+        bases.append(base or stable)
+    return bases
+
+
+def kept_requests(
+    head: FleetRender,
+    stable: FleetRender | None,
+    bases: Sequence[str | None],
+    builds: Mapping[str, FleetRender],
+    plan: WavePlan,
+) -> Mapping[str, RenderedRequest]:
+    """What each robot keeps while the rollout has not moved it: the stable revision's
+    request, or (fleet.yaml stages) the one of the revision verified for its stage. A stage
+    whose revision could not be built keeps the stable one."""
+    requests: Mapping[str, RenderedRequest] = stable.requests if stable is not None else {}
+    revision = stable.revision if stable is not None else None
+    other = {
+        index: builds[base]
+        for index, base in enumerate(bases)
+        if base is not None and base != revision and base in builds
+    }
+    if not other:
+        return requests
+    merged = dict(requests)
+    for robot, stage in plan.stage_of.items():
+        build = other.get(stage)
+        request = build.requests.get(robot) if build is not None else None
+        if request is not None:
+            merged[robot] = request
+    return merged
+
+
 def roll_out(seen: RolloutInput) -> RolloutStep:
     """The next step of rolling `head` out; see the module docstring and docs/how-to/rollouts.md."""
     head, stable, previous = seen.head, seen.stable, seen.previous
     policy = head.rollout
     assert policy is not None
     plan = plan_waves(head)
-    stable_requests = stable.requests if stable is not None else {}
+    bases = stage_bases(head, previous, stable.revision if stable is not None else None)
+    stable_requests = kept_requests(head, stable, bases, seen.stage_builds, plan)
     changed = _changed(head, stable_requests)
     same = previous is not None and previous.revision == head.revision
-    base = _Rollout(seen, policy, plan, changed, stable_requests)
+    base = _Rollout(seen, policy, plan, changed, stable_requests, bases)
     if not changed or (same and previous is not None and previous.state == "Complete"):
         return base.everyone()  # nothing to move (paused or not), or moved already
     if same and previous is not None and previous.state == "RolledBack":
@@ -164,12 +218,17 @@ def criteria(head: FleetRender, spec: WaveSpec) -> Verify | None:
 
 
 def wave_roles(
-    head: FleetRender, stable: FleetRender | None, wave: int, plan: WavePlan | None = None
+    head: FleetRender,
+    stable: FleetRender | None,
+    wave: int,
+    plan: WavePlan | None = None,
+    kept: Mapping[str, RenderedRequest] | None = None,
 ) -> Roles:
     """Whose goal outcomes count toward `wave`'s verification: its moved robots on the head's
     requests (for a stage's gate, every moved robot of the stage), and the robots no wave has
-    moved yet on the stable ones (the comparison)."""
-    stable_requests = stable.requests if stable is not None else {}
+    moved yet on what they keep (the comparison): `kept` (`kept_requests`), else the stable
+    revision's requests."""
+    stable_requests = kept if kept is not None else stable.requests if stable is not None else {}
     plan = plan if plan is not None else plan_waves(head)
     return _roles(plan, head, _changed(head, stable_requests), stable_requests, wave)
 
@@ -216,8 +275,11 @@ class _Rollout:
         plan: WavePlan,
         changed: set[str],
         stable_requests: Mapping[str, RenderedRequest],
+        bases: Sequence[str | None] = (),
     ) -> None:
         self.seen = seen
+        self.bases = list(bases)  # per stage: what its robots keep (`stage_bases`)
+        self.revoked: int | None = None  # a verified stage whose robots failed later
         self.policy = policy
         self.plan = plan
         self.specs = plan.specs
@@ -281,6 +343,9 @@ class _Rollout:
             begins = started_at is None or started_at == now
             started_at = now if started_at is None else started_at
             judged, recheck, deadline, memory = self._judge(wave, started_at, begins)
+            revoked = self._revocation(wave, started_at, judged)
+            if revoked is not None:
+                return revoked
             failed = [r for r, h in judged.items() if h is Health.FAILED]
             # A share of the robots that took part: four robots on chargers do not widen it.
             taking_part = sum(1 for h in judged.values() if h is not Health.OFFLINE)
@@ -395,9 +460,93 @@ class _Rollout:
     def rolled_back(self, previous: RolloutStatus) -> RolloutStep:
         if self.seen.stable is None:  # the stable revision cannot be built now: hold on
             return self.halted(previous)
-        step = RolloutStep(serve_stable=True)
+        stopped = [s.state in ("failed", "revoked") for s in previous.stages]
+        at = stopped.index(True) if True in stopped else None
+        step, _ = self._back(at)
         step.status = previous.model_copy()
         return step
+
+    def _back(self, stage: int | None) -> tuple[RolloutStep, str]:
+        """Rolled back from a failure on `stage`, and what the status says of it: the stage and
+        those after it get what was verified for them when the rollout began, the stages
+        before it keep the head (verified there). Without stages, or when that is the stable
+        revision everywhere, the whole fleet is served the stable revision."""
+        stable = self._stable_revision()
+        if stage is None or (stage == 0 and all(b in (None, stable) for b in self.bases)):
+            return RolloutStep(serve_stable=True), f"; rolled back to {short_rev(stable)}"
+        head, step = self.seen.head, RolloutStep()
+        for robot, request in head.requests.items():
+            at = self.plan.stage_of.get(robot)
+            if robot in head.suspended or (at is not None and at < stage):
+                step.requests[robot] = request
+            elif robot in self.stable_requests:
+                step.requests[robot] = self.stable_requests[robot]
+        for robot in self.stable_requests.keys() - head.requests.keys():
+            step.requests[robot] = self.stable_requests[robot]  # gone from the head: back
+        names = [s.name for s in head.stages]
+        told = ", ".join(
+            f"'{names[i]}' to {short_rev(self.bases[i] if i < len(self.bases) else stable)}"
+            for i in range(stage, len(names))
+        )
+        kept = ", ".join(f"'{name}'" for name in names[:stage])
+        what = f"; rolled back stage {told}" + (
+            f"; stage {kept} keeps {short_rev(head.revision)}, verified there" if kept else ""
+        )
+        return step, what
+
+    def _revocation(
+        self, wave: int, started_at: float, judged: dict[str, Health]
+    ) -> RolloutStep | None:
+        """A stage verified before the current wave's, whose robots now fail on the head (crash,
+        back off or exit on its request, online) beyond max_failures of its moved robots: its
+        verification is revoked (a note says so), and it and the stages after it are rolled
+        back. Watched until the rollout completes."""
+        statuses, current = self.seen.statuses, self.specs[wave].stage
+        if statuses is None or not current:
+            return None
+        failing: dict[int, list[str]] = {}
+        moved: dict[int, int] = {}
+        for robot in self.changed:
+            stage = self.plan.stage_of.get(robot)
+            if stage is None or stage >= current:
+                continue
+            moved[stage] = moved.get(stage, 0) + 1
+            status = statuses.get(robot)
+            if (
+                is_online(status)
+                and status is not None
+                and status.digest == self._digest(robot)
+                and status.state in _FAILED_STATES
+            ):
+                failing.setdefault(stage, []).append(robot)
+        for stage in sorted(failing):
+            robots = sorted(failing[stage])
+            if len(robots) <= (failure_budget(self.policy.max_failures, moved[stage]) or 0):
+                continue
+            name = self.seen.head.stages[stage].name
+            why = (
+                f"verification of stage '{name}' revoked: {len(robots)} of its robots failed "
+                f"on {short_rev(self.seen.head.revision)} after it was verified "
+                f"({', '.join(robots[:5])}{', ...' if len(robots) > 5 else ''})"
+            )
+            self.revoked = stage
+            self.noted.append(self._revoked_note(stage, why))
+            found = WaveVerification(verdict="Failed", message=why)
+            return self._failed(wave, started_at, judged, why, found, stage, noted=True)
+        return None
+
+    def _revoked_note(self, stage: int, why: str) -> VerdictNote:
+        gate = next(i for i, spec in enumerate(self.specs) if spec.gate and spec.stage == stage)
+        return VerdictNote(
+            kind="verification",
+            revision=self.seen.head.revision,
+            at=self.seen.now,
+            wave=gate,
+            wave_name=self.specs[gate].name,
+            stage=self.seen.head.stages[stage].name,
+            verdict="Failed",
+            message=why,
+        )
 
     def _failed(
         self,
@@ -406,19 +555,23 @@ class _Rollout:
         judged: dict[str, Health],
         reason: str | None = None,
         verification: WaveVerification | None = None,
+        stage: int | None = None,
+        noted: bool = False,
     ) -> RolloutStep:
+        """Stopped by a failure of `wave` (or of `stage`, verified before it): rolled back, or
+        halted, as the policy says; the failed verification noted unless it is (`noted`)."""
         failed = sorted(r for r, h in judged.items() if h is Health.FAILED)
         why = reason or (
             f"{len(failed)} robot(s) of wave '{self.specs[wave].name}' failed "
             f"({', '.join(failed[:5])}{', ...' if len(failed) > 5 else ''}), over max_failures "
             f"{self.policy.max_failures}"
         )
-        if verification is not None and verification.verdict and started_at is not None:
+        found = verification is not None and verification.verdict
+        if found and verification is not None and started_at is not None and not noted:
             self.noted.append(self._note(wave, started_at, verification))
         rollback = self.policy.on_failure == "rollback" and self.seen.stable is not None
         if rollback:
-            step = RolloutStep(serve_stable=True)
-            what = f"; rolled back to {short_rev(self._stable_revision())}"
+            step, what = self._back(stage if stage is not None else self.specs[wave].stage)
             step.status = self._status(
                 "RolledBack", wave, started_at, judged, why + what, verification
             )
@@ -740,25 +893,32 @@ class _Rollout:
 
     def _stages(self, state: RolloutState, wave: int) -> list[StageState]:
         """Each stage's standing: stages before the current wave's are verified on the head;
-        the current one rolls, verifies (at its gate) or failed; later ones wait, keeping the
-        stable revision."""
+        the current one rolls, verifies (at its gate) or failed; later ones wait, keeping what
+        was verified for them (`stage_bases`). A verified stage revoked is where it stopped."""
         head, stable = self.seen.head, self._stable_revision()
+        stopped = state in ("RolledBack", "Halted")
         current = self.specs[wave].stage if 0 <= wave < self.count else None
+        at = self.revoked if stopped and self.revoked is not None else current
         found: list[StageState] = []
         for index, stage in enumerate(head.stages):
+            base = self.bases[index] if index < len(self.bases) else stable
             word: StageWord
             verified: str | None
-            if state == "Complete" or (current is not None and index < current):
+            if state == "Complete" or (at is not None and index < at):
                 word, verified = "verified", head.revision
-            elif index == current:
-                if state in ("RolledBack", "Halted"):
-                    word = "failed"
+            elif index == at:
+                if stopped:
+                    word = "revoked" if index == self.revoked else "failed"
                 else:
                     word = "verifying" if self.specs[wave].gate else "rolling"
-                verified = stable
+                verified = base
             else:
-                word, verified = "waiting", stable
-            found.append(StageState(name=stage.name, state=word, verified_revision=verified))
+                word, verified = "waiting", base
+            found.append(
+                StageState(
+                    name=stage.name, state=word, verified_revision=verified, rollback_revision=base
+                )
+            )
         return found
 
 

@@ -7,9 +7,17 @@ from __future__ import annotations
 from configurator.render import FleetRender
 from configurator.stages import plan_waves
 from contract.notes import VerdictNote
-from contract.wire import AgentState, AgentStatus
+from contract.wire import AgentState, AgentStatus, RolloutStatus
 from reconciler.evidence import EvidenceKey, Row, WaveEvidence, new_evidence
-from reconciler.rollout import RolloutInput, RolloutStep, criteria, roll_out, wave_roles
+from reconciler.rollout import (
+    RolloutInput,
+    RolloutStep,
+    criteria,
+    kept_requests,
+    roll_out,
+    stage_bases,
+    wave_roles,
+)
 
 T0 = 1_000_000.0
 
@@ -17,18 +25,32 @@ T0 = 1_000_000.0
 class RolloutRun:
     """One rollout of `head` over `stable`; `notes` are the head's (decisions by hand)."""
 
-    def __init__(self, stable: FleetRender, head: FleetRender) -> None:
+    def __init__(
+        self,
+        stable: FleetRender,
+        head: FleetRender,
+        previous: RolloutStatus | None = None,
+        held: dict[str, str] | None = None,
+    ) -> None:
+        """`previous`: the rollout before this one (of another revision), and `held`, what the
+        robots hold when it begins (the stable requests by default)."""
         self.stable, self.head = stable, head
         self.last: RolloutStep | None = None
+        self.previous = previous
+        self.held = held
         self.evidence: WaveEvidence | None = None
         self.notes: list[VerdictNote] = []
+        self.builds: dict[str, FleetRender] = {}  # the stages' kept revisions, by revision
+        self.states: dict[str, AgentState] = {}  # robots not running what they hold
         self.next_id = 0
 
     def launches(self) -> dict[str, str | None]:
-        """What each robot holds after the last step: the stable request, or what the step
+        """What each robot holds after the last step: what it held at first, or what the step
         published (a robot it keeps stays as it is; rolled back, the stable everywhere)."""
         held: dict[str, str | None] = {r: q.digest for r, q in self.stable.requests.items()}
         last = self.last
+        if self.held is not None and (last is None or not last.serve_stable):
+            held.update(self.held)
         if last is not None and not last.serve_stable:
             held.update({r: q.digest for r, q in last.requests.items() if r not in last.keep})
         return held
@@ -36,14 +58,16 @@ class RolloutRun:
     def step(self, now: float) -> RolloutStep:
         launches = self.launches()
         statuses = {
-            r: AgentStatus(robot_id=r, state=AgentState.RUNNING, digest=d, since=T0)
+            r: AgentStatus(
+                robot_id=r, state=self.states.get(r, AgentState.RUNNING), digest=d, since=T0
+            )
             for r, d in launches.items()
         }
         self.last = roll_out(
             RolloutInput(
                 self.head,
                 self.stable,
-                self.last.status if self.last is not None else None,
+                self.last.status if self.last is not None else self.previous,
                 launches,
                 statuses,
                 {r: T0 for r in launches},
@@ -51,6 +75,7 @@ class RolloutRun:
                 self.last.record if self.last is not None else None,
                 evidence=self.evidence,
                 notes=self.notes,
+                stage_builds=self.builds,
             )
         )
         return self.last
@@ -66,7 +91,10 @@ class RolloutRun:
         if self.evidence is None or self.evidence.key != key:
             verify = criteria(self.head, plan_waves(self.head).specs[status.wave])
             assert verify is not None, "this step is judged by health alone"
-            roles = wave_roles(self.head, self.stable, status.wave)
+            plan = plan_waves(self.head)
+            bases = stage_bases(self.head, status, self.stable.revision)
+            kept = kept_requests(self.head, self.stable, bases, self.builds, plan)
+            roles = wave_roles(self.head, self.stable, status.wave, plan, kept)
             self.evidence = new_evidence(key, roles, verify)
         held = self.launches()
         rows = []

@@ -306,6 +306,37 @@ def test_a_good_revision_is_verified_and_soaked_in_sim_then_reaches_the_real_rob
     assert isinstance(soak["goals"], int) and soak["goals"] >= 6
 
 
+def test_a_revision_failing_on_the_real_robots_rolls_back_only_the_real_stage(
+    fleet: Fleet,
+) -> None:
+    stable = with_policy(fleet, STAGES)
+    patrol = "configs/scenarios/patrol-real.yaml"
+    fleet.lab.write(patrol, fleet.lab.read(patrol) + "knowledge: {STANDIN_CRASH: 3}\n")
+    head = staged(fleet, 1.0, "v2")  # good in sim; the real robots' brains crash on it
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, head), "the real rollback")
+    assert status.rollout is not None
+    assert [(s.name, s.state, s.verified_revision) for s in status.rollout.stages] == [
+        ("sim", "verified", head),
+        ("real", "failed", stable),
+    ]
+    assert "stage 'sim' keeps" in status.rollout.message
+    # Sim keeps the head, verified there; the real robots have the stable revision back.
+    wanted = {r: q for r, q in fleet.requests(head).items() if r not in REAL}
+    wanted.update({r: q for r, q in fleet.requests(stable).items() if r in REAL})
+    fleet.watch.wait_running(wanted)
+    # The next commit fails in sim: its sim robots go back to the head, verified for them,
+    # not to the older stable revision; the real robots keep the stable one throughout.
+    fleet.lab.replace(SCENARIO, "STANDIN_SUCCESS_RATE: 1.0", "STANDIN_SUCCESS_RATE: 0.0")
+    worse = fleet.lab.commit("delivery brains that fail (v3)")
+    status = fleet.watch.wait_reconciler(lambda s: rolled_back(s, worse), "the sim rollback")
+    assert status.rollout is not None
+    assert [(s.state, s.verified_revision) for s in status.rollout.stages] == [
+        ("failed", head),
+        ("waiting", stable),
+    ]
+    fleet.watch.wait_running(wanted)
+
+
 def test_an_operator_promotes_a_revision_to_the_real_robots_by_hand(fleet: Fleet) -> None:
     with_policy(fleet, STAGES.replace("min_goals: 3", "min_goals: 100000"))
     head = staged(fleet, 1.0, "v2")

@@ -9,6 +9,8 @@ import yaml
 from configurator.render import FleetRender, render_fleet
 from configurator.stages import plan_waves
 from contract.notes import VerdictNote
+from contract.wire import AgentState, RolloutStatus, StageState
+from reconciler.rollout import RolloutStep, stage_bases
 from tests.support.lab import Lab
 from tests.support.rollout_run import T0, RolloutRun
 
@@ -158,3 +160,130 @@ def test_plan_lists_the_stages_and_each_robots_stage_wave(lab: Lab) -> None:
     assert (
         "stages (each verified before the next): sim (Gazebo; soak 5 goals) → real (Real)" in text
     )
+
+
+# ------------------------------------------------------------------ a stage's own revision
+
+
+def to_real(run: RolloutRun) -> None:
+    """Steps `run` through sim (both waves, then the soak) to the real stage's first wave."""
+    run.step(T0)
+    run.report(["tb3-01"], "succeeded")
+    run.step(T0 + 20)
+    run.report(["tb3-02"], "succeeded")
+    run.step(T0 + 40)
+    run.report(SIM, "succeeded", each=2)
+    rolling = run.step(T0 + 60)
+    assert rolling.status is not None and rolling.status.stage == "real"
+
+
+def digests(step: RolloutStep, robots: list[str]) -> dict[str, str]:
+    """What `robots` hold after `step`: what it sends them, or what they held (kept)."""
+    held = {robot: request.digest for robot, request in step.requests.items()}
+    assert not step.keep & set(robots), "kept as they are: ask the run what they hold"
+    return {robot: held[robot] for robot in robots}
+
+
+def test_a_failure_on_the_real_robots_rolls_back_only_the_real_stage(lab: Lab) -> None:
+    run = Run(lab)
+    to_real(run)
+    run.states["tb3-04"] = AgentState.BACKOFF  # a real robot's brain crashes on the head
+    stopped = run.step(T0 + 70)
+    assert stopped.status is not None and stopped.status.state == "RolledBack"
+    assert not stopped.serve_stable  # sim keeps the head, verified there
+    head, stable = run.head.requests, run.stable.requests
+    assert digests(stopped, SIM) == {r: head[r].digest for r in SIM}
+    assert digests(stopped, REAL) == {r: stable[r].digest for r in REAL}
+    assert [(s.name, s.state, s.verified_revision) for s in stopped.status.stages] == [
+        ("sim", "verified", "b" * 40),
+        ("real", "failed", "a" * 40),
+    ]
+    assert "rolled back stage 'real' to aaaaaaaaaaaa" in stopped.status.message
+    assert "stage 'sim' keeps bbbbbbbbbbbb, verified there" in stopped.status.message
+    # Read back (the next step, a restarted reconciler): the same robots hold the same.
+    again = run.step(T0 + 80)
+    assert again.status is not None and again.status.state == "RolledBack"
+    assert digests(again, SIM + REAL) == digests(stopped, SIM + REAL)
+
+
+def test_a_verified_stage_failing_later_is_revoked_and_rolled_back(lab: Lab) -> None:
+    run = Run(lab)
+    to_real(run)
+    run.states["tb3-03"] = AgentState.FAILED  # a sim robot fails while the real ones roll
+    stopped = run.step(T0 + 70)
+    assert stopped.status is not None and stopped.status.state == "RolledBack"
+    assert stopped.serve_stable  # every stage goes back to what it kept: the stable revision
+    assert [(s.name, s.state, s.verified_revision) for s in stopped.status.stages] == [
+        ("sim", "revoked", "a" * 40),
+        ("real", "waiting", "a" * 40),
+    ]
+    assert [(n.stage, n.wave_name, n.verdict) for n in stopped.verdicts] == [
+        ("sim", "sim", "Failed")
+    ]
+    assert "verification of stage 'sim' revoked" in stopped.verdicts[0].message
+    assert stopped.status.verification is not None
+    assert stopped.status.verification.verdict == "Failed"  # told: verification_failed
+    assert "tb3-03" in stopped.status.message
+
+
+def test_a_crash_within_max_failures_revokes_nothing(lab: Lab) -> None:
+    run = Run(lab, POLICY.replace("healthy_after: 10", "healthy_after: 10\n  max_failures: 1"))
+    to_real(run)
+    run.states["tb3-03"] = AgentState.FAILED
+    going = run.step(T0 + 70)
+    assert going.status is not None and going.status.state == "Progressing"
+    assert [s.state for s in going.status.stages] == ["verified", "rolling"]
+
+
+def test_the_next_revision_keeps_each_stage_on_what_was_verified_for_it(lab: Lab) -> None:
+    first = Run(lab)
+    to_real(first)
+    first.states["tb3-04"] = AgentState.BACKOFF
+    stopped = first.step(T0 + 70)  # sim keeps b (verified), real went back to a
+    assert stopped.status is not None
+    third = build(lab, "c")
+    held = {r: q.digest for r, q in stopped.requests.items()}
+    run = RolloutRun(first.stable, third, previous=stopped.status, held=held)
+    run.builds = {first.head.revision: first.head}
+    begun = run.step(T0 + 100)
+    assert begun.status is not None and begun.status.stage == "sim"
+    assert [(s.state, s.verified_revision) for s in begun.status.stages] == [
+        ("rolling", "b" * 40),
+        ("waiting", "a" * 40),
+    ]
+    assert {r: run.launches()[r] for r in REAL} == {
+        r: first.stable.requests[r].digest for r in REAL
+    }
+    run.states["tb3-01"] = AgentState.FAILED  # the canary fails c in sim
+    back = run.step(T0 + 110)
+    assert back.status is not None and back.status.state == "RolledBack"
+    assert not back.serve_stable
+    # Sim goes back to b, verified there, not to the stable a; real keeps a.
+    assert digests(back, SIM) == {r: first.head.requests[r].digest for r in SIM}
+    assert digests(back, REAL) == {r: first.stable.requests[r].digest for r in REAL}
+    assert "rolled back stage 'sim' to bbbbbbbbbbbb, 'real' to aaaaaaaaaaaa" in (
+        back.status.message
+    )
+
+
+def test_each_stage_keeps_what_was_verified_for_it_across_a_restart(lab: Lab) -> None:
+    head = build(lab, "c")
+    rolling = StageState(
+        name="real", state="rolling", verified_revision="a" * 40, rollback_revision="a" * 40
+    )
+    mine = RolloutStatus(
+        revision=head.revision,
+        state="Progressing",
+        stages=[
+            StageState(
+                name="sim", state="verified", verified_revision="c" * 40, rollback_revision="b" * 40
+            ),
+            rolling,
+        ],
+    )
+    # Restarted mid-rollout: what sim goes back to is what it kept when the rollout began.
+    assert stage_bases(head, mine, "a" * 40) == ["b" * 40, "a" * 40]
+    # A new head: what each stage verified last; a stage never named keeps the stable one.
+    other = mine.model_copy(update={"revision": "d" * 40, "stages": mine.stages[:1]})
+    assert stage_bases(head, other, "a" * 40) == ["c" * 40, "a" * 40]
+    assert stage_bases(head, None, "a" * 40) == ["a" * 40, "a" * 40]
