@@ -435,6 +435,15 @@ class _Rollout:
         """The state and why of a rollout held at `wave`: paused (by fleet.yaml, or for an
         operator), verifying, or waiting for a busy member of a group."""
         name, found = self.specs[wave].name, gate.verification
+        previous = self.seen.previous
+        if (
+            self.seen.statuses is None
+            and previous is not None
+            and previous.state == "Paused"
+            and (previous.revision, previous.wave, previous.wave_started_at)
+            == (self.seen.head.revision, wave, started_at)
+        ):
+            return "Paused", previous.message  # restarted: paused until it can judge again
         state: RolloutState = "Progressing"
         why = ""
         if gate.done and self.policy.paused:

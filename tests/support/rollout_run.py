@@ -42,6 +42,7 @@ class RolloutRun:
         self.notes: list[VerdictNote] = []
         self.builds: dict[str, FleetRender] = {}  # the stages' kept revisions, by revision
         self.states: dict[str, AgentState] = {}  # robots not running what they hold
+        self.blind = False  # the robots' statuses not known (a reconciler just restarted)
         self.next_id = 0
 
     def launches(self) -> dict[str, str | None]:
@@ -69,7 +70,7 @@ class RolloutRun:
                 self.stable,
                 self.last.status if self.last is not None else self.previous,
                 launches,
-                statuses,
+                None if self.blind else statuses,
                 {r: T0 for r in launches},
                 now,
                 self.last.record if self.last is not None else None,

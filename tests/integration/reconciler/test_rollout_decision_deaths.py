@@ -125,11 +125,6 @@ def test_a_resume_noted_while_the_reconciler_is_dead_goes_on_when_it_is_back(
     assert kinds(fleet, head, "resume") == [("canary", None, "ada"), ("all", None, "ada")]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a restarted reconciler's alerts start from a blank memory (events.resumed restores "
-    "refusals only): the pause it finds is not known as told, so its resumption is never told",
-)
 def test_a_resume_carried_out_across_a_restart_is_told(fleet: Fleet, receiver: Receiver) -> None:
     _, head = resumed_while_dead(fleet, "--notify", receiver.url)
     paused = wait_for(

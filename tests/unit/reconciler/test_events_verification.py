@@ -21,6 +21,7 @@ from reconciler.events import (
     Kind,
     Seen,
     Told,
+    resumed,
     resumers,
     transitions,
 )
@@ -253,3 +254,24 @@ def test_a_revision_reaching_a_later_stage_is_told_promoted_once() -> None:
     told = steps[1][0]
     assert told.reason == "Promoted" and "promoted to stage 'real'" in told.message
     assert "verified on 'sim'" in told.message
+
+
+def test_a_restarted_reconciler_knows_the_standing_it_finds_was_told() -> None:
+    paused = status("Paused", message="inconclusive")
+    assert paused.status is not None
+    # The status the reconciler before left (its Last Will keeps the rollout): its pause was
+    # told; going on is told as a resumption, and the pause is not told twice.
+    told = resumed(Told(), paused.status)
+    _, steps = run([paused, status("Progressing", wave=1, started=200.0)], told)
+    assert kinds(steps) == [[], [Kind.ROLLOUT_RESUMED]]
+    rolled_back = status("RolledBack", found=verification("Failed"), message="failed")
+    assert rolled_back.status is not None
+    _, steps = run([rolled_back], resumed(Told(), rolled_back.status))
+    assert kinds(steps) == [[]]  # told by the one before: neither the failure nor the rollback
+
+
+def test_a_paused_wave_run_still_unjudged_is_not_told_resumed() -> None:
+    paused = status("Paused", message="inconclusive")
+    unjudged = status("Progressing", message="")  # the same wave run, no decision on it
+    _, steps = run([paused, unjudged, paused])
+    assert kinds(steps) == [[Kind.ROLLOUT_PAUSED], [], []]

@@ -107,6 +107,19 @@ def test_inconclusive_pauses_and_an_operators_resume_of_that_run_passes_it(lab: 
     assert [(n.verdict, n.by) for n in resumed.verdicts] == [("Inconclusive", "ada")]
 
 
+def test_a_restarted_reconciler_keeps_a_paused_wave_paused_until_it_can_judge(lab: Lab) -> None:
+    run = Run(lab, "min_goals: 5, timeout: 60")
+    run.step(T0)
+    paused = run.step(T0 + 60)
+    assert wave_of(paused) == ("Paused", 0) and paused.status is not None
+    run.blind = True  # the robots' statuses not learned yet: nothing is judged
+    blind = run.step(T0 + 70)
+    assert wave_of(blind) == ("Paused", 0)  # not Progressing: that would read as a resume
+    assert blind.status is not None and blind.status.message == paused.status.message
+    run.blind = False
+    assert wave_of(run.step(T0 + 80)) == ("Paused", 0)
+
+
 def test_an_abort_rolls_the_wave_back_at_once(lab: Lab) -> None:
     run = Run(lab, "min_goals: 5")
     run.step(T0)
