@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from contract.diagnostics import Diagnostic
 from contract.models import ROBOT_ID_PATTERN
+from contract.textsafe import printable, shorten
 from contract.topics import BY_KEY
 
 DEFAULT_PREFIX = "robotconf"
@@ -476,6 +477,27 @@ STALE_INTERVALS, STALE_MIN = 3, 60.0
 ReconcilerState = Literal["Ready", "Stalled", "Progressing", "Offline"]
 
 
+MAX_SUBJECT = 100  # characters of a commit subject carried (a shown one is shortened further)
+MAX_COMMITS = 8  # commits a status describes: the revisions it names
+
+
+class CommitLine(_Message):
+    """A revision as people know it: the subject, author and time of its commit. Commit text
+    is data from whoever can push: made printable and bounded on the way in."""
+
+    revision: str = Field(max_length=64)
+    subject: str = ""
+    author: str = ""
+    at: float | None = Field(None, description="unix time the commit was made")
+
+    @field_validator("subject", "author", mode="before")
+    @classmethod
+    def _bounded(cls, value: object) -> object:
+        if not isinstance(value, str):
+            return value
+        return shorten(printable(value.strip()), MAX_SUBJECT)
+
+
 class ReconcilerStatus(_Message):
     """The reconciler's retained status (Flux-style: ready or stalled, with why)."""
 
@@ -514,6 +536,15 @@ class ReconcilerStatus(_Message):
         description=f"robots held back for drift (drift: hold), in id order; at most {MAX_LISTED}",
     )
     more_held: int = Field(0, description="held robots left out of `held`")
+    commits: list[CommitLine] = Field(
+        default_factory=list,
+        max_length=MAX_COMMITS,
+        description="the commits of the revisions this status names (subject, author, time)",
+    )
+
+    def commit(self, revision: str | None) -> CommitLine | None:
+        """The commit line of `revision`, when the status carries it."""
+        return next((c for c in self.commits if revision and c.revision == revision), None)
 
     @field_validator("diagnostics", mode="before")
     @classmethod

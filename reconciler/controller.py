@@ -44,6 +44,7 @@ from contract.wire import (
     short_rev,
 )
 from reconciler import heap
+from reconciler.commits import CommitBook, named_revisions
 from reconciler.decide import Condition, Decision, Observation, Reason, decide, internal_error
 from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
 from reconciler.diff import Actions
@@ -204,6 +205,7 @@ class Controller:
         and operators' actions as they arrive (bounded: a flood is dropped, counted), judged
         on the loop, the answer to the last one in the rollout's status."""
         self._stage_built: dict[str, Desired] = {}  # revisions a stage keeps (_stage_builds)
+        self._commits = CommitBook(self.source.root)  # what the status's revisions are
         self._evidence = EvidenceCounter(ledger) if ledger is not None else None
         self.notes = NotesStore(self.source.root)
         self._notes_failed = False
@@ -902,7 +904,8 @@ class Controller:
             previous=self.writer.status,
             followed=self.followed,
         )
-        self.writer.write(status, heartbeat=heartbeat)
+        commits = self._commits.lines(named_revisions(status))
+        self.writer.write(status.model_copy(update={"commits": commits}), heartbeat=heartbeat)
 
     def _say(self, message: str, level: int) -> None:
         """Logs a line once, not at every resync."""

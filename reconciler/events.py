@@ -78,6 +78,7 @@ class Event:
     robot: str | None = None
     reason: str | None = None  # the reconciler's reason, or the robot's state
     refused_revision: str | None = None  # commit_recovered: the revision told refused before
+    subject: str | None = None  # the subject of `revision`'s commit, when the status carries it
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -89,12 +90,15 @@ class Event:
             "reason": self.reason,
             "message": self.message,
             "refused_revision": self.refused_revision,
+            "subject": self.subject,
         }
 
     def text(self) -> str:
         """One line for a chat (the Slack form). The message quotes robots (a status message)
         and commits: it is made inert text there, so that no robot pings a channel."""
-        return chat_text(f"robotconf {self.kind.value.replace('_', ' ')}: {self.message}")
+        subject = f' ("{self.subject}")' if self.subject else ""
+        what = f"robotconf {self.kind.value.replace('_', ' ')}: {self.message}{subject}"
+        return chat_text(what)
 
 
 @dataclass(frozen=True)
@@ -264,7 +268,13 @@ def transitions(
     if seen.robots is not None:
         told, deferral_events = _deferral_transitions(told, seen.robots, branch, at)
         events += deferral_events
-    return told, events
+    return told, [_with_subject(event, status) for event in events]
+
+
+def _with_subject(event: Event, status: ReconcilerStatus | None) -> Event:
+    """The event with its revision's commit subject, when the status describes that commit."""
+    line = status.commit(event.revision) if status is not None else None
+    return replace(event, subject=line.subject) if line is not None and line.subject else event
 
 
 def _rollout_transitions(

@@ -95,6 +95,7 @@ def offline_status(status: ReconcilerStatus, message: str) -> ReconcilerStatus:
         robots=status.robots,
         interval=status.interval,
         rollout=status.rollout,
+        commits=status.commits,
     )
 
 

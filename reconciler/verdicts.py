@@ -26,7 +26,7 @@ from configurator.render import FleetRender
 from configurator.waves import assign_waves, matches
 from contract.interfaces import interfaces_verdict
 from contract.launch import template_mismatch
-from contract.textsafe import printable
+from contract.textsafe import printable, shorten
 from contract.wire import (
     ACTIVE_STATES,
     RESUME_COMMAND,
@@ -439,12 +439,25 @@ def stages_words(rollout: RolloutStatus) -> str:
     return " > ".join(parts)
 
 
-def rollout_line(rollout: RolloutStatus) -> str:
-    """The rollout in one line: revision, state, where, who is healthy, failed, pending, the
-    wave's evidence when `rollout.verify` gathers it, why."""
+SUBJECT_SHOWN = 48  # characters of a commit subject in a line of text
+
+
+def rev_text(revision: str | None, status: ReconcilerStatus | None) -> str:
+    """A revision as people read it: its 12 hex digits, and its commit's subject in quotes
+    when the reconciler's status carries it (`3f2a9c1b7d0e "Rename the lab robots"`)."""
+    line = status.commit(revision) if status is not None else None
+    if line is None or not line.subject:
+        return short_rev(revision)
+    return f'{short_rev(revision)} "{clean(shorten(line.subject, SUBJECT_SHOWN))}"'
+
+
+def rollout_line(rollout: RolloutStatus, status: ReconcilerStatus | None = None) -> str:
+    """The rollout in one line: revision (and its commit's subject, from `status`), state,
+    where, who is healthy, failed, pending, the wave's evidence when `rollout.verify` gathers
+    it, why."""
     counts = rollout.counts
     line = (
-        f"rollout: {short_rev(rollout.revision)} {clean(rollout.state)}, "
+        f"rollout: {rev_text(rollout.revision, status)} {clean(rollout.state)}, "
         f"wave {rollout.wave + 1}/{rollout.waves} ({clean(rollout.wave_name)}): "
         f"{counts.get('healthy', 0)} healthy, {counts.get('failed', 0)} failed, "
         f"{counts.get('pending', 0)} pending{_offline_count(rollout)}; "
@@ -479,11 +492,13 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
     why = f" ({clean(status.reason)})" if status.reason and status.reason != status.state else ""
     line = (
         f"reconciler: {clean(status.state)}{why}{where}, "
-        f"applied {short_rev(status.last_applied_revision)}, "
-        f"attempted {short_rev(status.last_attempted_revision)}"
+        f"applied {rev_text(status.last_applied_revision, status)}, "
+        f"attempted {_attempted(status)}"
     )
     if status.failed_revision:
-        line += f", failed on {short_rev(status.failed_revision)}"
+        failed = status.failed_revision
+        said = failed == status.last_attempted_revision  # its subject is said just before
+        line += f", failed on {short_rev(failed) if said else rev_text(failed, status)}"
     line += f", {status.robots} robots"
     if status.message:
         line += f" — {clean(status.message)}"
@@ -494,13 +509,21 @@ def reconciler_lines(status: ReconcilerStatus | None, at: float | None = None) -
             f"every {status.interval or 0:g} s: is the reconciler still running?"
         )
     if status.rollout is not None:
-        lines.append(rollout_line(status.rollout))
+        lines.append(rollout_line(status.rollout, status))
     if status.broker_dropped:
         lines.append(
             f"  the broker dropped retained messages sent to it ({clean(status.broker_dropped)}):"
             " raise its max_queued_messages (robotconf broker-config sets it for the fleet)"
         )
     return lines + diagnostic_lines(status, 10)
+
+
+def _attempted(status: ReconcilerStatus) -> str:
+    """The attempted revision; its subject only when it is not the applied one's (said)."""
+    attempted = status.last_attempted_revision
+    if attempted == status.last_applied_revision:
+        return short_rev(attempted)
+    return rev_text(attempted, status)
 
 
 def diagnostic_lines(status: ReconcilerStatus, limit: int) -> list[str]:

@@ -732,5 +732,5 @@ def summary(fleet: FleetStatus) -> str:
     line = f"{len(fleet.rows)} robots: {counts}"
     rollout = fleet.reconciler.rollout if fleet.reconciler is not None else None
     if rollout is not None and rollout.state != "Complete":
-        line += f"; {rollout_line(rollout)}"
+        line += f"; {rollout_line(rollout, fleet.reconciler)}"
     return line

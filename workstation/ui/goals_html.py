@@ -8,8 +8,10 @@ from __future__ import annotations
 from urllib.parse import quote
 
 from contract.goals import BrainEvent, CurrentGoal, GoalsSummary, LastOutcome, VitalValue
+from contract.textsafe import shorten
+from contract.wire import ReconcilerStatus
 from reconciler.robot_goals import COUNTS, GoalRate, goal_rates
-from reconciler.verdicts import RobotRow, short_digest, short_rev
+from reconciler.verdicts import SUBJECT_SHOWN, RobotRow, short_digest, short_rev
 from workstation.ui.model import FleetQuery, Snapshot
 from workstation.ui.text import age, definitions, esc
 
@@ -210,12 +212,20 @@ def rates_box(snap: Snapshot, query: FleetQuery) -> str:
     )
 
 
-def revision_link(revision: str | None) -> str:
+def revision_link(revision: str | None, status: ReconcilerStatus | None = None) -> str:
+    """A revision, linked to its page; its commit's subject beside it when the reconciler's
+    status carries it (commit text is data: escaped, shortened)."""
     if not revision:
         return "-"
+    line = status.commit(revision) if status is not None else None
+    subject = (
+        f' <span class="subject">{esc(shorten(line.subject, SUBJECT_SHOWN))}</span>'
+        if line is not None and line.subject
+        else ""
+    )
     return (
-        f'<a href="/revisions/{quote(revision, safe="")}"><code>{esc(short_rev(revision))}'
-        "</code></a>"
+        f'<a class="rev" href="/revisions/{quote(revision, safe="")}"><code>'
+        f"{esc(short_rev(revision))}</code></a>{subject}"
     )
 
 

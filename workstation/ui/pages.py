@@ -6,7 +6,13 @@ from __future__ import annotations
 from collections.abc import Iterable
 from urllib.parse import quote, urlencode
 
-from contract.wire import ABORT_COMMAND, RESUME_COMMAND, RolloutStatus, WaveVerification
+from contract.wire import (
+    ABORT_COMMAND,
+    RESUME_COMMAND,
+    ReconcilerStatus,
+    RolloutStatus,
+    WaveVerification,
+)
 from reconciler.verdicts import (
     Health,
     RobotRow,
@@ -17,7 +23,7 @@ from reconciler.verdicts import (
     short_rev,
 )
 from workstation.ui.auth import Identity
-from workstation.ui.goals_html import goals_cell, percent, rates_box
+from workstation.ui.goals_html import goals_cell, percent, rates_box, revision_link
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
 from workstation.ui.text import age, definitions, esc, when
 
@@ -201,9 +207,9 @@ def reconciler_box(snap: Snapshot) -> str:
     facts = [
         ("Reason", esc(status.reason or "-")),
         ("Branch", esc(status.branch or "-")),
-        ("Applied", f"<code>{esc(short_rev(status.last_applied_revision))}</code>"),
-        ("Attempted", f"<code>{esc(short_rev(status.last_attempted_revision))}</code>"),
-        ("Failed", f"<code>{esc(short_rev(status.failed_revision))}</code>"),
+        ("Applied", revision_link(status.last_applied_revision, status)),
+        ("Attempted", revision_link(status.last_attempted_revision, status)),
+        ("Failed", revision_link(status.failed_revision, status)),
         ("Robots", str(status.robots)),
         ("Heartbeat", age(status.heartbeat)),
         ("Health", health),
@@ -254,12 +260,12 @@ def diagnostics(found: Iterable[object], more: int) -> str:
     )
 
 
-def stages_html(rollout: RolloutStatus) -> str:
+def stages_html(rollout: RolloutStatus, status: ReconcilerStatus | None = None) -> str:
     """The promotion ladder: each stage's standing (`data-stage`, its state as the value) and
-    the revision verified for its robots."""
+    the revision verified for its robots (with its commit's subject, from `status`)."""
     items = "".join(
         f'<li data-stage="{esc(stage.state, 20)}">{esc(stage.name, 64)}: {esc(stage.state, 20)} '
-        f"(verified here: <code>{esc(short_rev(stage.verified_revision))}</code>)</li>"
+        f"(verified here: {revision_link(stage.verified_revision, status)})</li>"
         for stage in rollout.stages
     )
     return f'<ol class="stages">{items}</ol>'
@@ -268,7 +274,8 @@ def stages_html(rollout: RolloutStatus) -> str:
 def rollout_box(snap: Snapshot) -> str:
     """The rollout wave by wave: its robots by how they fare, and what a rollback restored."""
     fleet = snap.fleet
-    rollout = fleet.reconciler.rollout if fleet and fleet.reconciler else None
+    reconciler = fleet.reconciler if fleet else None
+    rollout = reconciler.rollout if reconciler else None
     if rollout is None:
         return '<section data-box="rollout" hidden></section>'
     deferred = [
@@ -285,20 +292,25 @@ def rollout_box(snap: Snapshot) -> str:
         ("Offline", rollout.offline, counts.get("offline", len(rollout.offline))),
     ]
     facts = [
-        ("Revision", f"<code>{esc(short_rev(rollout.revision))}</code>"),
+        ("Revision", revision_link(rollout.revision, reconciler)),
         ("Wave", f"{rollout.wave + 1} of {rollout.waves} ({esc(rollout.wave_name, 80)})"),
         ("Wave since", age(rollout.wave_started_at)),
-        ("Stable", f"<code>{esc(short_rev(rollout.stable_revision))}</code>"),
+        ("Stable", revision_link(rollout.stable_revision, reconciler)),
     ]
     if rollout.stages:
-        facts.append(("Stages", stages_html(rollout)))
-    restored = (
-        f"<p data-rolled-back>Rolled back: the moved robots run "
-        f"<code>{esc(short_rev(rollout.stable_revision))}</code> again, the last revision that "
-        "fully rolled out.</p>"
-        if rollout.state == "RolledBack"
-        else ""
-    )
+        facts.append(("Stages", stages_html(rollout, reconciler)))
+    restored = ""
+    if rollout.state == "RolledBack" and rollout.stages:
+        restored = (
+            "<p data-rolled-back>Rolled back: each stage's robots run the revision verified "
+            "for them (Stages).</p>"
+        )
+    elif rollout.state == "RolledBack":
+        restored = (
+            f"<p data-rolled-back>Rolled back: the moved robots run "
+            f"<code>{esc(short_rev(rollout.stable_revision))}</code> again, the last revision "
+            "that fully rolled out.</p>"
+        )
     lists = "".join(
         f'<div class="group" data-group="{name.lower()}"><h3>{name}: {n}</h3>'
         f"{id_list(ids, n)}</div>"

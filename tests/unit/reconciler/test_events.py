@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
+from contract.wire import AgentState, AgentStatus, CommitLine, ReconcilerStatus, RolloutStatus
 from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
 from reconciler.lifecycle import parse_address
 from reconciler.notify import parse_receiver
@@ -302,10 +302,24 @@ def test_receivers_get_the_event_json_or_slack_text() -> None:
         "reason": "X",
         "message": "bbbb on main refused",
         "refused_revision": None,
+        "subject": None,
     }
     assert json.loads(slack.body(event)) == {
         "text": "robotconf commit refused: bbbb on main refused"
     }
+    # The commit's subject, when the reconciler's status describes the commit.
+    status = ReconcilerStatus(
+        state="Stalled",
+        ready=False,
+        reason="BuildFailed",
+        branch="main",
+        failed_revision=BAD,
+        commits=[CommitLine(revision=BAD, subject="Break <!channel> fleet.yaml")],
+    )
+    told = transitions(Told(), Seen(status), 3.0)[1]
+    assert [e.subject for e in told] == ["Break <!channel> fleet.yaml"]
+    assert json.loads(plain.body(told[0]))["subject"] == "Break <!channel> fleet.yaml"
+    assert "<!channel>" not in json.loads(slack.body(told[0]))["text"]  # inert in a chat
     assert slack.slack and not plain.slack
     assert slack.name == "#2 slack:https://hooks.example"
 

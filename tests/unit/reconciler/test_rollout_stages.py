@@ -144,7 +144,8 @@ def test_status_and_the_browser_view_show_each_stage_and_its_verified_revision(l
         rollout_line(status)
     )
     html = stages_html(status)
-    assert '<li data-stage="rolling">sim: rolling (verified here: <code>aaaaaaaaaaaa' in html
+    assert '<li data-stage="rolling">sim: rolling (verified here: <a class="rev"' in html
+    assert "<code>aaaaaaaaaaaa</code></a>)</li>" in html
     assert '<li data-stage="waiting">real: waiting' in html
 
 
