@@ -25,13 +25,15 @@ def revision_page(
     who: Identity,
     kept: History | None,
     why: str | None = None,
+    commit: str = "",
 ) -> str:
     """`kept`: the ledger's answer (None: it holds nothing of this revision, or `why` it could
-    not be asked)."""
+    not be asked); `commit`: the commit's section (`commit_facts.commit_section`)."""
     short = esc(short_rev(revision))
     body = (
         f'<div data-revision-page="{esc(revision, 64)}"><h1>Revision <code>{short}</code></h1>'
         + banner_box(snap)
+        + commit
         + ledger_section(revision, kept, why)
         + live_section(snap, revision)
         + "</div>"

@@ -16,6 +16,7 @@ from workstation.cli.restart import private_key
 from workstation.ui import DEFAULT_LISTEN
 from workstation.ui.actions import Actions
 from workstation.ui.auth import OperatorAuth
+from workstation.ui.commit_reader import CommitReader
 from workstation.ui.logtail import LogTails
 from workstation.ui.restarts import Restarts
 from workstation.ui.revisions import CachedHistory, RevisionHistory
@@ -105,6 +106,7 @@ class RunningUi:
         self.service = UiService(self.live, options.auth)
         if history is not None:
             self.service.history = CachedHistory(history)
+        self.service.commits = CommitReader(repo)
         actions = Actions(
             options.auth,
             Restarts(connection, prefix, options.key),

@@ -21,6 +21,8 @@ from reconciler.http_edge import BoundedHTTPServer, FedStream, Limits, Request, 
 from reconciler.retained import read_object
 from workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
 from workstation.ui.changes import Shown
+from workstation.ui.commit_facts import commit_section
+from workstation.ui.commit_reader import CommitError, CommitReader
 from workstation.ui.model import QueryError, parse_query
 from workstation.ui.pages import error_page, fleet_page
 from workstation.ui.revision_page import revision_page
@@ -95,6 +97,8 @@ class UiService:
         self.restart_outcome: Callable[[str], str] = lambda robot_id: ""
         # The reconciler's outcome ledger, for the revision pages; None: not open here.
         self.history: RevisionHistory | None = None
+        # The repository's commits, for the revision pages; None: no repository here.
+        self.commits: CommitReader | None = None
         self.no_history = (
             "No outcome ledger is open here: it is the reconciler's (robotconf ui --state-dir "
             "DIR names its state folder; reconcile --ui and up --ui read their own)."
@@ -200,7 +204,17 @@ class UiService:
                     "ui: the ledger's answer for %s failed: %s", revision, printable(str(exc))[:300]
                 )
                 why = "The outcome ledger could not be read (the UI's log says why)."
-        return html(200, revision_page(self.live.snapshot, revision, who, kept, why))
+        commit = self._commit(revision)
+        return html(200, revision_page(self.live.snapshot, revision, who, kept, why, commit))
+
+    def _commit(self, revision: str) -> str:
+        """The page's commit section: the commit's facts and plan, or why they are not shown."""
+        if self.commits is None:
+            return commit_section(None, "No repository is open here.")
+        try:
+            return commit_section(self.commits.read(revision))
+        except CommitError as exc:
+            return commit_section(None, str(exc))
 
     def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         """The page's server-sent events: what changed, from the page's own state on."""
