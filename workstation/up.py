@@ -12,6 +12,7 @@ import contextlib
 import dataclasses
 import fcntl
 import itertools
+import json
 import logging
 import os
 import shlex
@@ -24,11 +25,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
+from urllib.parse import quote
 
 import yaml
 
 from agent.parent_death import ENV as DIE_WITH_PARENT
-from agent.workdir import LOCK_FILE, WorkdirLock
+from agent.standin_ros2 import GRAPH_ENV
+from agent.standin_ros2 import install as install_ros2
+from agent.workdir import HOLD_FILE, LOCK_FILE, WorkdirLock
 from configurator.render import FleetRender
 from configurator.source import SourceError
 from contract.errors import CliError, ExitCode
@@ -73,6 +77,13 @@ REFUSED = {ReconcilerReason.BUILD_FAILED.value, ReconcilerReason.EMPTY_FLEET_REF
 REFUSED_DIAGNOSTICS = 3  # the first ones say what to fix; `robotconf validate` lists them all
 GIVEN_BROKER_WAIT = 10.0  # a given broker that has not answered by then is an error, not a wait
 DEFAULT_PORT = 1883
+UI_TOKEN = "ui.token"  # `up --ui`'s operator token, in its folder (0600)
+# Each robot's stand-in `ros2` (agent/standin_ros2.py) reads its graph from this file in the
+# robot's folder: the robot's ROS interfaces, as a real robot's `ros2 ... list -t` would print.
+GRAPH_FILE = "ros2-graph.json"
+# Three short `ros2` runs per robot per reading: every 10 s keeps six robots' readings to a
+# few percent of one core, and an edit of a graph is seen as drift within seconds.
+INTERFACES_INTERVAL = 10.0
 
 
 @dataclass
@@ -91,6 +102,9 @@ class UpSetup:
     port: int = DEFAULT_PORT  # the embedded broker's, when free
     broker_origin: str = "--broker"  # where a given broker came from, for messages
     ui: UiOptions | None = None  # `up --ui`: the fleet's web page, served beside
+    # `up --ui`'s operator token, for the login link it prints (never in a repr or a log).
+    ui_token: str | None = field(default=None, repr=False)
+    ui_token_made: bool = False  # made by this `up` (else kept from an earlier one)
 
     @property
     def state_dir(self) -> Path:
@@ -168,6 +182,15 @@ def agent_yaml(
         # The stand-in brain re-reads its request on SIGHUP: a settings-only commit reloads it.
         "reload": {"signal": "SIGHUP"},
     }
+    if capability.platform == "ROS2":
+        # Its interfaces, as a ROS 2 robot's tooling reports them: the stand-in `ros2` in up's
+        # bin folder reads the robot's graph file (`standin_graph`), so drift and `draft` work.
+        # A ROS 1 robot reports none (`unknown`), as a real one's agent does.
+        config["interfaces"] = {"interval": INTERFACES_INTERVAL}
+        config["env"] = {
+            "PATH": os.pathsep.join([str(workdir / "bin"), os.environ.get("PATH", os.defpath)]),
+            GRAPH_ENV: str(workdir / robot_id / GRAPH_FILE),
+        }
     # A given broker may need the same credentials and TLS settings as `up` itself.
     if connection.username:
         config["username"] = connection.username
@@ -251,6 +274,26 @@ def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:
             raise CliError(f"an agent still holds {folder / LOCK_FILE}; stop it and start again")
 
 
+def standin_graph(fleet: FleetRender, robot_id: str) -> dict[str, Any]:
+    """The graph the robot's stand-in `ros2` prints: every interface its request needs, with
+    the types it needs, and the ROS graph's own two topics, as a robot built for it reports."""
+    from configurator.drift import needs_of_rendered
+
+    kinds = {"topic": "topics", "service": "services", "action_client": "actions"}
+    graph: dict[str, Any] = {
+        "topics": [
+            {"name": "/parameter_events", "type": "rcl_interfaces/msg/ParameterEvent"},
+            {"name": "/rosout", "type": "rcl_interfaces/msg/Log"},
+        ],
+        "services": [],
+        "actions": [],
+    }
+    for need in needs_of_rendered(fleet.requests[robot_id]):
+        if need.kind in kinds:
+            graph[kinds[need.kind]].append({"name": need.name, "type": need.type})
+    return graph
+
+
 def _runs_config(pid: int, config: Path) -> bool:
     """True when process `pid` was started with `--config config`, as `up` starts agents."""
     try:
@@ -278,11 +321,18 @@ class Agents:
         self.prefix = prefix
         self.public_key = public_key
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._ros2 = False  # the stand-in `ros2` installed in the bin folder
 
     def start(self, robot_ids: list[str], fleet: FleetRender) -> None:
+        """Starts an agent for each robot that has none yet, its graph file written afresh:
+        the robot reports what the commit it starts on needs (edit the file to take some
+        away)."""
         for robot_id in robot_ids:
             if robot_id in self.procs or robot_id not in fleet.requests:
                 continue
+            if not self._ros2:
+                install_ros2(self.workdir / "bin")  # once: an agent may be running it
+                self._ros2 = True
             folder = self.workdir / robot_id
             folder.mkdir(parents=True, exist_ok=True)
             config = folder / "agent.yaml"
@@ -295,6 +345,9 @@ class Agents:
                 self.public_key,
             )
             config.write_text(yaml.safe_dump(settings, sort_keys=False), encoding="utf-8")
+            if "interfaces" in settings:
+                graph = json.dumps(standin_graph(fleet, robot_id), indent=1) + "\n"
+                (folder / GRAPH_FILE).write_text(graph, encoding="utf-8")
             with (folder / "agent.log").open("ab") as out:
                 self.procs[robot_id] = subprocess.Popen(
                     [sys.executable, "-m", "agent.cli", "--config", str(config)],
@@ -516,6 +569,7 @@ def _serve(
         f"reconciling {setup.root} branch '{setup.branch}' (head {short_rev(setup.head)}), "
         f"{len(setup.fleet.requests)} robot(s); agent files and logs in {setup.workdir}"
     )
+    say(robots_line(setup))
     desk = write_desk(setup.root, up_desk(setup, connection, prefix, private_key))
     header = banner(setup, connection, desk)
     for line in header[1:3]:
@@ -524,7 +578,7 @@ def _serve(
     thread.start()
     view.start()
     agents.start(sorted(setup.fleet.requests), setup.fleet)
-    ui = _start_ui(setup, connection, prefix, say)
+    ui = _start_ui(setup, connection, prefix, say, private_key)
     screen.begin(header)
     try:
         _loop(controller, agents, view, Topics(prefix), stop, changed, screen)
@@ -595,19 +649,46 @@ def _start_ledger(
 
 
 def _start_ui(
-    setup: UpSetup, connection: Connection, prefix: str, say: Callable[[str], None]
+    setup: UpSetup,
+    connection: Connection,
+    prefix: str,
+    say: Callable[[str], None],
+    private_key: Path | None,
 ) -> RunningUi | None:
-    """`up --ui`: the fleet's web page, read with the operator's login; its address said."""
+    """`up --ui`: the fleet's web page, read with the operator's login, its restarts signed
+    with up's key (its agents verify it); its address and login link said."""
     if setup.ui is None:
         return None
+    from contract.signing import load_private_key
     from reconciler.ledger import ledger_path
     from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi
 
     history = LedgerHistory(ledger_path(setup.state_dir))
-    ui = RunningUi(connection, prefix, setup.root, setup.ui, history=history)
+    key = load_private_key(private_key) if private_key is not None else None
+    options = dataclasses.replace(setup.ui, key=key)
+    ui = RunningUi(connection, prefix, setup.root, options, history=history)
     say(f"ui: the fleet's web page is at {ui.url}")
+    if setup.ui_token is not None:
+        kept = "made now" if setup.ui_token_made else "the same as before"
+        say(
+            f"ui: log in as its operator (robots' logs, restarts) with "
+            f"{ui.url}login?token={quote(setup.ui_token, safe='')} (the token, {kept}, is in "
+            f"{_shown_path(setup.workdir / UI_TOKEN)}, mode 0600)"
+        )
     return ui
+
+
+def with_operator(setup: UpSetup) -> UpSetup:
+    """`up --ui`: its UI with an operator, whoever reads the token in up's folder (made once,
+    mode 0600; a wider mode is refused, CliError), who logs in with the link `up` prints."""
+    if setup.ui is None:
+        return setup
+    from workstation.ui.auth import OperatorAuth, own_token
+
+    token, made = own_token(setup.workdir / UI_TOKEN, "up's operator token file")
+    ui = dataclasses.replace(setup.ui, auth=OperatorAuth(token), link_login=True)
+    return dataclasses.replace(setup, ui=ui, ui_token=token, ui_token_made=made)
 
 
 def up_desk(
@@ -724,6 +805,26 @@ def _shown_path(path: Path) -> str:
     with contextlib.suppress(ValueError):
         path = path.relative_to(Path.cwd())
     return shlex.quote(str(path))
+
+
+def robots_line(setup: UpSetup) -> str:
+    """How to make one of up's robots busy or drift, on the files of the first robot (the
+    first on ROS 2, whose interfaces are reported)."""
+    requests = setup.fleet.requests
+    ros2 = [r for r in requests if _platform(setup.fleet, r) == "ROS2"]
+    robot = min(ros2 or requests, default="ROBOT")
+    folder = _shown_path(setup.workdir / robot)
+    line = f"robots: `touch {folder}/{HOLD_FILE}` makes {robot} busy (its brain's hold file; rm it"
+    if not ros2:
+        return line + " to release)"
+    return (
+        f"{line} to release), and {folder}/{GRAPH_FILE} is what its stand-in ros2 reports "
+        f"every {INTERFACES_INTERVAL:g} s (take an interface out: {robot} drifts)"
+    )
+
+
+def _platform(fleet: FleetRender, robot_id: str) -> str:
+    return fleet.requests[robot_id].scenario_requests.scenario.capability.platform
 
 
 def summary(fleet: FleetStatus) -> str:

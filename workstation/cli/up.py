@@ -126,14 +126,25 @@ def up(
     """The whole loop on this machine: broker, reconciler, one agent per robot, live status;
     Ctrl-C stops everything. In another terminal, within the repository, `robotconf status`,
     `robotconf logs ROBOT` and `robotconf restart ROBOT` need no options: they find this up's
-    broker, login and signing key in .robotconf/up/desk.json while it runs."""
-    from workstation.up import prepare, run_up
+    broker, login and signing key in .robotconf/up/desk.json while it runs.
+
+    With --ui, the browser view's operator is whoever holds the token made once into
+    .robotconf/up/ui.token (mode 0600; kept for the next up, refused if others may read it):
+    up prints a link, http://127.0.0.1:PORT/login?token=..., that logs a browser in to follow
+    robots' logs and restart them.
+
+    Each ROS 2 robot reports its interfaces through a stand-in ros2 reading
+    .robotconf/up/ROBOT/ros2-graph.json (written at its agent's start with what its request
+    needs: edit it and the robot drifts; robotconf draft ROBOT measures it), and
+    `touch .robotconf/up/ROBOT/brain.hold` makes it busy (restarts and reloads wait) until
+    the file is removed."""
+    from workstation.up import prepare, run_up, with_operator
 
     source = click.get_current_context().get_parameter_source("broker")
     origin = f"${BROKER_ENV}" if source is ParameterSource.ENVIRONMENT else "--broker"
     ui = ui_beside(ui_at)
-    setup = dataclasses.replace(
-        prepare(repo, branch, workdir), port=port, broker_origin=origin, ui=ui
+    setup = with_operator(
+        dataclasses.replace(prepare(repo, branch, workdir), port=port, broker_origin=origin, ui=ui)
     )
     mqtt.connection()  # the URL, prefix and credentials are checked before anything starts
     screen = Screen(live=is_terminal())

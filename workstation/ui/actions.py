@@ -63,8 +63,12 @@ class Actions:
         tails: LogTails | None,
         layout: Layout = framed,
         decisions: Decisions | None = None,
+        link_login: bool = False,
     ) -> None:
         self.auth = auth
+        # `up --ui`'s printed link, /login?token=...: on loopback only, where the token in an
+        # address reaches no proxy's log (Jupyter's way); elsewhere the form alone.
+        self.link_login = link_login
         self.restarts = restarts
         self.tails = tails
         self.layout = layout
@@ -108,9 +112,12 @@ class Actions:
     # ------------------------------------------------------------------ login, logout
 
     def login_page(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        next_path = _query_field(request.target, "next")
+        token = _query_field(request.target, "token")
+        if token and self.link_login:
+            return self.login_link(request, token, next_path, who)
         if who.operator and who.via == "cookie":
             return self.page(200, "Log in", forms.logged_in(), who)
-        next_path = _query_field(request.target, "next")
         body = forms.login_form(next_path, enabled=self.auth.enabled)
         return self.page(200, "Log in", body, who)
 
@@ -124,14 +131,31 @@ class Actions:
         token = fields.get("token")
         if token is None:
             raise Refused(400, "the login form has no token field")
+        return self._logged_in(request, token, next_path, who)
+
+    def _logged_in(self, request: Request, token: str, next_path: str, who: Identity) -> Response:
+        """A login with `token`: on to `next_path` with the session cookie, or the form again
+        saying why not."""
         result = self.auth.login(client_key(request.client), token[: MAX_TOKEN + 1])
         if result.cookie is not None:
             self.auth.logout(request.headers)  # a session it had ends: one per login
             return _see_other(next_path, ("Set-Cookie", result.cookie))
-        body = forms.login_form(next_path, refusal_text(result))
+        body = forms.login_form(next_path, refusal_text(result), enabled=self.auth.enabled)
         if result.refusal == "throttled":
             return self.page(429, "Log in", body, who, ("Retry-After", str(result.retry_after)))
-        return self.page(401, "Log in", body, who)
+        return self.page(403 if result.refusal == "disabled" else 401, "Log in", body, who)
+
+    def login_link(self, request: Request, token: str, next_path: str, who: Identity) -> Response:
+        """`up --ui`'s login link: the token as the form would send it (compared in constant
+        time, throttled alike), then on to `next` with the session cookie. Opened from a
+        terminal or typed, never followed from another site's page."""
+        if (request.headers.get("Sec-Fetch-Site") or "none").strip() not in ("none", "same-origin"):
+            raise Refused(
+                403,
+                "a login link followed from another site is refused: open it "
+                "from the terminal that printed it, or paste it into the address bar",
+            )
+        return self._logged_in(request, token, forms.local_path(next_path), who)
 
     def logout(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         _same_origin(request)

@@ -3,6 +3,7 @@ header or a login session's cookie) or a viewer; sessions, CSRF tokens and login
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
 import os
@@ -76,35 +77,36 @@ class _Session:
     used: float
 
 
-def read_token(path: Path) -> str:
+def read_token(path: Path, what: str = "--operator-token-file") -> str:
     """The token in `path` (its one line); CliError when the file is missing, not a regular
     file, readable or writable by others than its owner, owned by someone else, or the token
-    is too short, too long or not one line of visible characters."""
+    is too short, too long or not one line of visible characters. `what` names the file in
+    the errors."""
+    where = f"{what} {path}"
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
-        raise CliError(f"cannot read --operator-token-file {path}: {exc.strerror}") from None
+        raise CliError(f"cannot read {where}: {exc.strerror}") from None
     try:
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise CliError(f"--operator-token-file {path} is not a regular file")
+            raise CliError(f"{where} is not a regular file")
         if info.st_mode & 0o077:
             raise CliError(
-                f"--operator-token-file {path} may be read or changed by others "
+                f"{where} may be read or changed by others "
                 f"(mode {stat.S_IMODE(info.st_mode):04o}): chmod 600 it, as ssh asks of a key"
             )
         if hasattr(os, "geteuid") and info.st_uid != os.geteuid():
-            raise CliError(f"--operator-token-file {path} belongs to another user")
+            raise CliError(f"{where} belongs to another user")
         data = os.read(fd, MAX_TOKEN + 3)
     finally:
         os.close(fd)
-    return _token_in(data, path)
+    return _token_in(data, where)
 
 
-def _token_in(data: bytes, path: Path) -> str:
+def _token_in(data: bytes, where: str) -> str:
     text = data.decode("ascii", "replace")
     line = text[:-2] if text.endswith("\r\n") else text[:-1] if text.endswith("\n") else text
-    where = f"--operator-token-file {path}"
     if len(line) > MAX_TOKEN:
         raise CliError(f"{where}: the token is longer than {MAX_TOKEN} characters")
     if not _TOKEN.fullmatch(line):
@@ -115,6 +117,31 @@ def _token_in(data: bytes, path: Path) -> str:
     if len(line) < MIN_TOKEN:
         raise CliError(f"{where}: the token is shorter than {MIN_TOKEN} characters")
     return line
+
+
+def own_token(path: Path, what: str) -> tuple[str, bool]:
+    """The token kept in `path`, made there once (random, mode 0600) when the file does not
+    exist, and True when it was made now. An existing file is read as `read_token` reads one:
+    one that others may read is refused (chmod 600 it, or delete it for a new token), never
+    silently replaced, as its owner may have given it a mode on purpose."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+    try:
+        fd = os.open(path, flags | getattr(os, "O_CLOEXEC", 0), 0o600)
+    except FileExistsError:
+        return read_token(path, what), False
+    except OSError as exc:
+        raise CliError(f"cannot create {what} {path}: {exc.strerror}") from None
+    token = secrets.token_urlsafe(32)
+    try:
+        os.write(fd, f"{token}\n".encode("ascii"))  # 44 bytes: one write
+    except OSError as exc:
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        raise CliError(f"cannot write {what} {path}: {exc.strerror}") from None
+    os.close(fd)
+    return token, True
 
 
 def _digest(session_id: str) -> str:

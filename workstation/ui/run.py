@@ -35,6 +35,7 @@ class UiOptions:
     auth: OperatorAuth
     tls: ssl.SSLContext | None = None
     key: Ed25519PrivateKey | None = None  # operators' restarts are signed with it
+    link_login: bool = False  # /login?token=... logs in (up's printed link; loopback only)
 
     @property
     def url(self) -> str:
@@ -112,6 +113,7 @@ class RunningUi:
             Restarts(connection, prefix, options.key),
             LogTails(connection, prefix),
             decisions=Decisions(connection, prefix, options.key),
+            link_login=options.link_login,
         )
         self.service.routes += actions.routes()
         self.service.restart_outcome = actions.outcome_html

@@ -53,6 +53,8 @@ def port_1883_taken() -> Iterator[bool]:
 
 
 def processes_mentioning(text: str) -> list[int]:
+    """Agents and brains run from `text` (a folder); not the stand-in `ros2` an agent runs
+    for a moment every interfaces reading (it ends by itself)."""
     found = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
@@ -60,7 +62,7 @@ def processes_mentioning(text: str) -> list[int]:
         with contextlib.suppress(OSError):
             cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
             stat = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
-            if text in cmdline and stat != "Z":
+            if text in cmdline and stat != "Z" and "/bin/ros2 " not in cmdline:
                 found.append(int(entry.name))
     return found
 

@@ -30,9 +30,11 @@ def message(**values: str) -> http.client.HTTPMessage:
 class UI:
     """The action routes on an auth with no broker behind (restarts and logs: 503)."""
 
-    def __init__(self, token: str | None = TOKEN, policy: Policy | None = None) -> None:
+    def __init__(
+        self, token: str | None = TOKEN, policy: Policy | None = None, link_login: bool = False
+    ) -> None:
         self.auth = OperatorAuth(token, policy=policy)
-        self.routes: list[Route] = Actions(self.auth, None, None).routes()
+        self.routes: list[Route] = Actions(self.auth, None, None, link_login=link_login).routes()
 
     def ask(
         self,
@@ -108,6 +110,37 @@ def test_a_wrong_token_is_refused_then_throttled_without_a_hint() -> None:
     )
     held = ui.ask("GET", "/robots/tb3-01/restart", Authorization=f"Bearer {TOKEN}")
     assert held.code == 429
+
+
+def test_up_s_login_link_logs_in_and_sends_to_a_local_next_only() -> None:
+    ui = UI(link_login=True)
+    answer = ui.ask("GET", "/login?" + urlencode({"token": TOKEN}), Sec_Fetch_Site="none")
+    assert answer.code == 303 and header(answer, "Location") == "/"
+    cookie = header(answer, "Set-Cookie")
+    assert cookie is not None and cookie.startswith(f"{COOKIE}=") and "HttpOnly" in cookie
+    assert ui.auth.identify(message(Cookie=cookie.split(";")[0])).operator
+    onward = ui.ask("GET", "/login?" + urlencode({"token": TOKEN, "next": "/robots/tb3-01"}))
+    assert header(onward, "Location") == "/robots/tb3-01"
+    away = ui.ask("GET", "/login?" + urlencode({"token": TOKEN, "next": "//evil.example/"}))
+    assert header(away, "Location") == "/"
+
+
+def test_up_s_login_link_refuses_a_wrong_token_another_site_and_other_uis() -> None:
+    ui = UI(link_login=True, policy=Policy(guesses=2))
+    for _ in range(2):
+        wrong = ui.ask("GET", "/login?token=not-the-token-00000000")
+        assert wrong.code == 401 and header(wrong, "Set-Cookie") is None
+        assert TOKEN not in wrong.body.decode()
+    throttled = ui.ask("GET", "/login?" + urlencode({"token": TOKEN}))
+    assert throttled.code == 429 and header(throttled, "Set-Cookie") is None
+    foreign = UI(link_login=True).ask(
+        "GET", "/login?" + urlencode({"token": TOKEN}), Sec_Fetch_Site="cross-site"
+    )
+    assert foreign.code == 403 and header(foreign, "Set-Cookie") is None
+    # `robotconf ui`'s: a token in an address is no login there (the form is shown).
+    form = UI().ask("GET", "/login?" + urlencode({"token": TOKEN}))
+    assert form.code == 200 and header(form, "Set-Cookie") is None
+    assert "data-login" in form.body.decode()
 
 
 @pytest.mark.parametrize(

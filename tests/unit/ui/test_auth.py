@@ -16,6 +16,7 @@ from workstation.ui.auth import (
     Identity,
     OperatorAuth,
     Policy,
+    own_token,
     read_token,
     session_cookie,
 )
@@ -64,6 +65,22 @@ def test_the_token_file_gives_its_one_line(tmp_path: Path) -> None:
     assert read_token(token_file(tmp_path, TOKEN)) == TOKEN
     assert OperatorAuth.from_file(token_file(tmp_path, TOKEN)).enabled
     assert not OperatorAuth.from_file(None).enabled
+
+
+def test_an_own_token_is_made_once_readable_by_its_owner_alone(tmp_path: Path) -> None:
+    path = tmp_path / "up" / "ui.token"
+    token, made = own_token(path, "up's operator token file")
+    assert made and len(token) >= 43 and path.read_text() == token + "\n"
+    assert path.stat().st_mode & 0o777 == 0o600
+    assert own_token(path, "up's operator token file") == (token, False)  # kept, not remade
+    assert read_token(path) == token
+
+
+def test_an_own_token_others_may_read_is_refused_not_replaced(tmp_path: Path) -> None:
+    path = token_file(tmp_path, TOKEN, 0o644)
+    with pytest.raises(CliError, match=r"^up's operator token file .* \(mode 0644\): chmod 600"):
+        own_token(path, "up's operator token file")
+    assert path.read_text() == TOKEN
 
 
 @pytest.mark.parametrize("mode", [0o640, 0o604, 0o620, 0o666])
