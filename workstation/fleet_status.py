@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from configurator.drift import DriftMemo
+from configurator.gcpause import collector_paused
 from configurator.render import RenderError, render_fleet
 from configurator.source import SourceError
 from configurator.workspace import check
@@ -87,6 +88,20 @@ def fleet_status(
     """`memos` (one per way of reading requests, in full or not): what was read of each
     payload, kept for the next call (`--watch` reads only what changed); `drift`: each robot's
     drift, worked out again only for a robot whose request or interfaces changed."""
+    # Reading 10,000 robots makes objects that all live on: a collection of the young ones
+    # would walk them again and again (most of the time spent on the desired robots' needs).
+    with collector_paused():
+        fleet = _fleet_status(messages, topics, desired, memos, drift)
+    return fleet if lost is None else unknown_when_lost(fleet, messages, topics, lost)
+
+
+def _fleet_status(
+    messages: dict[str, bytes],
+    topics: Topics,
+    desired: DesiredCache,
+    memos: dict[bool, ReadMemo] | None,
+    drift: DriftMemo | None,
+) -> FleetStatus:
     # With a repository to compare with, the requests' digests are all a row needs: 10,000
     # requests are validated in full only when they are the one account of what is desired.
     status = {t: m for t, m in messages.items() if t == topics.reconciler_status}
@@ -97,8 +112,7 @@ def fleet_status(
     if robots is None:
         robots = desired_from_retained(retained)
     rows = build_rows(robots, retained, drift)
-    fleet = FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
-    return fleet if lost is None else unknown_when_lost(fleet, messages, topics, lost)
+    return FleetStatus(rows, retained.reconciler, where, list(notes), retained.ignored)
 
 
 def unknown_when_lost(

@@ -11,6 +11,7 @@ import click
 from rich.live import Live
 from rich.text import Text
 
+from configurator.gcpause import collector_paused
 from configurator.types import is_robot_id
 from contract.errors import CliError, ExitCode
 from contract.wire import Topics
@@ -90,7 +91,8 @@ def status(
                 fleet = unknown_when_lost(fleet, messages, topics, lost)
             fleet = fleet.select(selector)
             if as_json:
-                print(json.dumps(fleet.as_json(), indent=2))
+                with collector_paused():  # 10,000 rows' dicts, all alive until printed
+                    print(json.dumps(fleet.as_json(), indent=2))
             else:
                 show(fleet_status_view(fleet))
             return _verdict(fleet)
