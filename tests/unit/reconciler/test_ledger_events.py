@@ -72,10 +72,9 @@ def test_events_survive_reopening(tmp_path: Path) -> None:
 def schema_one(path: Path) -> None:
     """A ledger as robotconf wrote it before the timeline: no events table, user_version 1."""
     Ledger.open_or_start(path).close()
-    db = sqlite3.connect(path)
+    db = sqlite3.connect(path, isolation_level=None)  # each statement its own transaction
     db.execute("DROP TABLE events")
     db.execute("PRAGMA user_version=1")
-    db.commit()
     db.close()
 
 

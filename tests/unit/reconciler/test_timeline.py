@@ -51,9 +51,7 @@ def rolling(revision: str, wave: int, state: str = "Progressing") -> ReconcilerS
     )
 
 
-def robot(
-    by: str | None, at: float | None, state: AgentState = AgentState.RUNNING
-) -> AgentStatus:
+def robot(by: str | None, at: float | None, state: AgentState = AgentState.RUNNING) -> AgentStatus:
     return AgentStatus(
         robot_id="tb3-02", state=state, restart_requested_by=by, restart_requested_at=at
     )
@@ -177,7 +175,8 @@ def test_what_is_kept_is_bounded() -> None:
 
 
 def test_a_kept_event_as_a_line_and_as_json() -> None:
-    kept = KeptEvent(0.0, "robot_restarted", "tb3-02 restarted\x1b[2J by alice", "tb3-02", by="alice")
+    said = "tb3-02 restarted\x1b[2J by alice"
+    kept = KeptEvent(0.0, "robot_restarted", said, "tb3-02", by="alice")
     assert kept.line().startswith("1970-01-01 00:00:00 UTC  robot_restarted  tb3-02  ")
     assert "\x1b" not in kept.line()  # a robot's words made inert
     assert kept.as_json()["by"] == "alice" and kept.as_json()["event"] == "robot_restarted"
