@@ -55,6 +55,11 @@ class Kind(str, enum.Enum):
         "robot_goals_failing"  # told by the outcome ledger (reconciler/outcomes.py)
     )
     ROBOT_GOALS_RECOVERED = "robot_goals_recovered"
+    # Kept in the timeline only (reconciler/timeline.py), not told to --notify's receivers:
+    # every commit and wave would be noise in a chat; the history wants them.
+    COMMIT_APPLIED = "commit_applied"
+    WAVE_STARTED = "wave_started"
+    ROBOT_RESTARTED = "robot_restarted"
 
 
 _ROLLOUT_KINDS = {"Halted": Kind.ROLLOUT_HALTED, "RolledBack": Kind.ROLLOUT_ROLLED_BACK}
@@ -79,9 +84,10 @@ class Event:
     reason: str | None = None  # the reconciler's reason, or the robot's state
     refused_revision: str | None = None  # commit_recovered: the revision told refused before
     subject: str | None = None  # the subject of `revision`'s commit, when the status carries it
+    by: str | None = None  # robot_restarted: who asked for it from the desk
 
     def as_json(self) -> dict[str, Any]:
-        return {
+        found = {
             "event": self.kind.value,
             "at": self.at,
             "branch": self.branch,
@@ -92,6 +98,9 @@ class Event:
             "refused_revision": self.refused_revision,
             "subject": self.subject,
         }
+        if self.by is not None:  # the alerts' payload as it was, unless there is a who
+            found["by"] = self.by
+        return found
 
     def text(self) -> str:
         """One line for a chat (the Slack form). The message quotes robots (a status message)

@@ -13,11 +13,16 @@ The query API (what `robotconf history` and the browser's revision page call):
     ledger.history(rev=None, robot=None, since=None)  # History: a revision beside the one before
     ledger.report(revision, robot=None, since=None) # RevisionReport of one revision
     ledger.before(revision)                         # the revision seen before it, or None
+    ledger.events(EventQuery(robot=..., kind=..., since=...))  # [KeptEvent], newest first
     find_ledger(repo, prefix, state_dir=None)       # where `history` looks for it
 
 A kill mid-write loses nothing committed (WAL, one transaction a batch); a file that is not a
 ledger (corrupt, truncated, another program's) is set aside beside it, said in one line, and a
 new ledger is started: never a crash loop.
+
+Schema 2 added the fleet's timeline (`events`: what the reconciler told or noted, see
+`reconciler/timeline.py`), bounded as the outcomes are, by age and by a count of rows. A writer
+opening a schema 1 ledger adds it (one transaction); a reader of one finds no events.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from contract.goals import OutcomeRecord, OutcomeState
+from reconciler.events import Event
 from reconciler.evidence import Row
 from reconciler.outcomes import (
     NO_REVISION,
@@ -46,13 +52,15 @@ from reconciler.outcomes import (
     advance,
     aggregate,
 )
+from reconciler.timeline import EventQuery, KeptEvent, stored
 
 log = logging.getLogger("robotconf.reconciler")
 
 LEDGER_FILE = "ledger.sqlite3"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: the events table (the timeline)
 DEFAULT_MAX_AGE = 30 * 86400.0  # seconds an outcome is kept
 DEFAULT_MAX_RECORDS = 5_000_000  # outcomes kept at most (about 1 GB on disk)
+DEFAULT_MAX_EVENTS = 200_000  # timeline events kept at most (about 100 MB at their longest)
 KEEP_ASIDE = 3  # unreadable ledgers kept beside the new one (older ones are removed)
 PRUNE_CHUNK = 5000  # rows deleted per transaction when pruning: the writer is never held long
 BUSY_TIMEOUT_MS = 5000
@@ -106,7 +114,29 @@ CREATE TABLE streaks (
     failing INTEGER NOT NULL
 );
 """
+# Schema 2: the timeline. Ids grow with each event kept, as the outcomes' do (pruned likewise).
+_EVENTS_SCHEMA = """
+CREATE TABLE IF NOT EXISTS events (
+    id INTEGER PRIMARY KEY,
+    at REAL NOT NULL,
+    kind TEXT NOT NULL,
+    message TEXT NOT NULL,
+    robot_id TEXT,
+    branch TEXT,
+    revision TEXT,
+    reason TEXT,
+    refused_revision TEXT,
+    by TEXT,
+    subject TEXT
+);
+CREATE INDEX IF NOT EXISTS events_by_at ON events (at);
+CREATE INDEX IF NOT EXISTS events_by_robot ON events (robot_id, at);
+CREATE INDEX IF NOT EXISTS events_by_kind ON events (kind, at);
+"""
 _TABLES = {"outcomes", "revisions", "tallies", "streaks"}
+_EVENT_COLUMNS = (
+    "at, kind, message, robot_id, branch, revision, reason, refused_revision, by, subject"
+)
 # The outcomes' counts kept beside them, per (revision, scenario, task, robot, outcome, code),
 # updated in each batch's transaction: a report of a revision reads its tallies, not its rows
 # (a million rows take seconds to group; their tallies, milliseconds).
@@ -253,7 +283,7 @@ class Ledger:
                 raise LedgerError(f"{self.path} is an empty ledger")
             db.execute("PRAGMA journal_mode=WAL")
             with self._transaction():
-                for statement in _SCHEMA.split(";"):
+                for statement in (_SCHEMA + _EVENTS_SCHEMA).split(";"):
                     if statement.strip():
                         db.execute(statement)
                 db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
@@ -269,6 +299,18 @@ class Ledger:
             db.execute("PRAGMA journal_mode=WAL")
             # Ledgers made before rollouts counted evidence lack it (made once, at open).
             db.execute("CREATE INDEX IF NOT EXISTS outcomes_by_received ON outcomes (received_at)")
+            if version < SCHEMA_VERSION:
+                self._migrate(version)
+
+    def _migrate(self, version: int) -> None:
+        """A ledger of an older schema brought up to this one, in one transaction."""
+        with self._transaction():
+            if version < 2:
+                for statement in _EVENTS_SCHEMA.split(";"):
+                    if statement.strip():
+                        self._db.execute(statement)
+            self._db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+        log.info("ledger: %s brought from schema %d to %d", self.path, version, SCHEMA_VERSION)
 
     def close(self) -> None:
         self._db.close()
@@ -390,6 +432,29 @@ class Ledger:
         )
         return events
 
+    def add_events(self, events: Sequence[Event]) -> int:
+        """Keeps `events` (each field bounded: `timeline.stored`) in one transaction; how many."""
+        rows = [
+            (
+                kept.at,
+                kept.kind,
+                kept.message,
+                kept.robot,
+                kept.branch,
+                kept.revision,
+                kept.reason,
+                kept.refused_revision,
+                kept.by,
+                kept.subject,
+            )
+            for kept in map(stored, events)
+        ]
+        with self._transaction():
+            self._db.executemany(
+                f"INSERT INTO events ({_EVENT_COLUMNS}) VALUES (?,?,?,?,?,?,?,?,?,?)", rows
+            )
+        return len(rows)
+
     def streaks(self, robots: Sequence[str]) -> dict[str, Streak]:
         """The failing streaks of `robots` (those with none are not in the result)."""
         found: dict[str, Streak] = {}
@@ -444,6 +509,32 @@ class Ledger:
                     "WHERE outcomes.revision = revisions.revision)"
                 )
         return removed
+
+    def prune_events(
+        self,
+        max_age: float = DEFAULT_MAX_AGE,
+        max_events: int = DEFAULT_MAX_EVENTS,
+        now: float | None = None,
+    ) -> int:
+        """Removes the oldest events beyond `max_events` and those older than `max_age`
+        seconds, at most PRUNE_CHUNK of them (one transaction); how many went (PRUNE_CHUNK:
+        more may be left). As `prune` does the outcomes, by id: the oldest have the lowest."""
+        now = time.time() if now is None else now
+        low, high = self._db.execute("SELECT min(id), max(id) FROM events").fetchone()
+        if low is None:
+            return 0
+        over = (high - low + 1) - max_events
+        cutoff = low - 1 + min(PRUNE_CHUNK, max(over, 0))
+        old = self._db.execute(
+            "SELECT id FROM events WHERE id < ? AND at < ? ORDER BY id DESC LIMIT 1",
+            (low + PRUNE_CHUNK, now - max_age),
+        ).fetchone()
+        if old is not None:
+            cutoff = max(cutoff, old[0])
+        if cutoff < low:
+            return 0
+        with self._transaction():
+            return int(self._db.execute("DELETE FROM events WHERE id <= ?", (cutoff,)).rowcount)
 
     def _untally(self, cutoff: int) -> None:
         """The tallies without the outcomes up to `cutoff`, about to be removed."""
@@ -603,6 +694,29 @@ class Ledger:
             robot=robot,
             since=since,
         )
+
+    def events(self, query: EventQuery | None = None) -> list[KeptEvent]:
+        """The kept events `query` asks for, newest first (a ledger of schema 1: none)."""
+        query = query if query is not None else EventQuery()
+        if not self._read("SELECT 1 FROM sqlite_master WHERE type='table' AND name='events'"):
+            return []
+        where, args = [], list[object]()
+        if query.robot is not None:
+            where.append("robot_id = ?")
+            args.append(query.robot)
+        if query.kind is not None:
+            where.append("kind = ?")
+            args.append(query.kind)
+        if query.since is not None:
+            where.append("at >= ?")
+            args.append(query.since)
+        sql = f"SELECT {_EVENT_COLUMNS} FROM events"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        args.append(query.limit)
+        return [
+            KeptEvent(*row) for row in self._read(f"{sql} ORDER BY at DESC, id DESC LIMIT ?", args)
+        ]
 
     def _read(self, sql: str, args: Sequence[object] = ()) -> list[Any]:
         """A query's rows; LedgerError when the file turns out unreadable."""

@@ -11,6 +11,11 @@ records (`outcomes.check_record`), commits them in batches (as many as arrived w
 previous batch was written), acknowledges them, counts them (metrics) and tells failing and
 recovered robots (notify). No record, however broken, stops it; a ledger that turns out
 corrupt is set aside and a new one started.
+
+The same thread keeps the fleet's timeline: the events the reconciler tells or notes (`keep`,
+called from the telemetry's thread, never waits) are queued, a bounded queue, and committed
+each batch in one transaction. An event that cannot be kept is counted and said (throttled),
+never a stop: the timeline is history, not control.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from contract.throttle import Throttle
 from contract.wire import Topics
 from reconciler.ledger import (
     DEFAULT_MAX_AGE,
+    DEFAULT_MAX_EVENTS,
     DEFAULT_MAX_RECORDS,
     PRUNE_CHUNK,
     Added,
@@ -53,6 +59,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("robotconf.reconciler")
 
 MAX_BATCH = 2000  # records committed at once at most
+MAX_EVENTS_QUEUED = 10_000  # events waiting to be kept; past it the oldest are dropped (counted)
 PRUNE_EVERY = 60.0  # seconds between prunings of the ledger
 RETRY_INITIAL, RETRY_MAX = 0.5, 30.0  # a ledger that cannot be written (disk full), tried again
 STOP_TIMEOUT = 10.0
@@ -66,6 +73,7 @@ class LedgerSettings:
     max_age: float = DEFAULT_MAX_AGE
     max_records: int = DEFAULT_MAX_RECORDS
     streak: int = DEFAULT_STREAK  # failed goals in a row before a robot is told failing
+    max_events: int = DEFAULT_MAX_EVENTS  # timeline events kept at most (the newest)
 
     @property
     def path(self) -> Path:
@@ -118,6 +126,8 @@ class LedgerFeed:
         self._says = Throttle(60.0)
         self.ledger: Ledger | None = None
         self.kept = self.duplicates = self.refused = 0  # since start
+        self._events: collections.deque[Event] = collections.deque()
+        self.events_kept = self.events_lost = 0  # timeline events, since start
         self._pruned = 0  # removed by the pruning under way
         self.committed = threading.Condition()  # notified after each commit (tests, benches)
         self._client = self._paho_client()
@@ -155,6 +165,18 @@ class LedgerFeed:
             self._client.loop_stop()
         if self.ledger is not None and not self._thread.is_alive():
             self.ledger.close()
+
+    def keep(self, events: Sequence[Event]) -> None:
+        """Queues `events` for the timeline (any thread; never waits on the ledger)."""
+        if not events:
+            return
+        with self._lock:
+            self._events.extend(events)
+            over = len(self._events) - MAX_EVENTS_QUEUED
+            for _ in range(max(over, 0)):
+                self._events.popleft()
+            self.events_lost += max(over, 0)
+        self._ready.set()
 
     @property
     def pending(self) -> int:
@@ -227,9 +249,11 @@ class LedgerFeed:
         next_prune = time.monotonic()  # what went past the bounds while it was down, first
         backoff = Backoff(RETRY_INITIAL, RETRY_MAX)
         while True:
+            self._keep_events()
             batch = self._take()
             if not batch:
                 if self._stop.is_set():
+                    self._keep_events()  # what the last steps told, before leaving
                     return
                 self._ready.wait(max(0.0, next_prune - time.monotonic()))
                 self._ready.clear()
@@ -246,6 +270,24 @@ class LedgerFeed:
                 # A chunk at a time between batches: more left, the next comes at once.
                 more = self._prune()
                 next_prune = time.monotonic() + (0.0 if more else PRUNE_EVERY)
+
+    def _keep_events(self) -> None:
+        """The events queued, in one transaction; when they cannot be written they are
+        counted lost and said (throttled): the records' batches, not these, are retried."""
+        with self._lock:
+            events = list(self._events)
+            self._events.clear()
+        if not events or self.ledger is None:
+            return
+        try:
+            self.events_kept += self.ledger.add_events(events)
+        except (sqlite3.Error, LedgerError) as exc:
+            self.events_lost += len(events)
+            line = self._says.admit(
+                f"ledger: cannot keep {len(events)} timeline event(s): {exc}", time.monotonic()
+            )
+            if line is not None:
+                log.error("%s (lost: %d since start)", line, self.events_lost)
 
     def _take(self) -> list[_Arrived]:
         with self._lock:
@@ -277,8 +319,11 @@ class LedgerFeed:
         if self.metrics is not None:
             self.metrics.outcomes(added.kept)
             self.metrics.ledger(len(added.kept), added.duplicates, refused)
-        if added.events and self._tell is not None:
-            self._tell([streak_event(event) for event in added.events])
+        if added.events:
+            told = [streak_event(event) for event in added.events]
+            if self._tell is not None:
+                self._tell(told)
+            self.keep(told)
         with self.committed:
             self.committed.notify_all()
 
@@ -328,6 +373,7 @@ class LedgerFeed:
             return False
         try:
             removed = self.ledger.prune(self.settings.max_age, self.settings.max_records, chunks=1)
+            gone = self.ledger.prune_events(self.settings.max_age, self.settings.max_events)
             self.ledger.checkpoint()
         except (sqlite3.Error, LedgerError) as exc:
             log.warning("ledger: pruning failed: %s", exc)
@@ -336,4 +382,4 @@ class LedgerFeed:
         if removed < PRUNE_CHUNK and self._pruned:
             log.info("ledger: %d outcome(s) past its bounds removed", self._pruned)
             self._pruned = 0
-        return removed >= PRUNE_CHUNK
+        return removed >= PRUNE_CHUNK or gone >= PRUNE_CHUNK

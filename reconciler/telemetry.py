@@ -1,8 +1,9 @@
 """Alerts and metrics of `robotconf reconcile`, off the reconcile loop, on a thread of their own.
 
-Fed by the controller's `on_step` hook and by a view of the robots' statuses (started only when
---notify or --metrics asks for it): it judges transitions (`events`), tells the receivers
-(`notify`) and sets the gauges (`metrics`).
+Fed by the controller's `on_step` hook and by a view of the robots' statuses: it judges
+transitions (`events`), tells the receivers (`notify`), hands every event to the timeline
+(`keep`: the ledger's, `reconciler/timeline.py` notes the timeline's own kinds) and sets the
+gauges (`metrics`).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import collections
 import logging
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from configurator.drift import Drift, DriftMemo
@@ -20,9 +21,10 @@ from contract.topics import Role, subscriptions
 from contract.wire import AgentState, AgentStatus, Topics
 from reconciler.controller import Step
 from reconciler.decide import state_of
-from reconciler.events import Seen, Told, WaveRun, resumed, resumers, transitions
+from reconciler.events import Event, Seen, Told, WaveRun, resumed, resumers, transitions
 from reconciler.observed import ReadMemo, Retained, RobotSeen, parse_retained
 from reconciler.retained import RetainedView
+from reconciler.timeline import Noted, noted_at_start, timeline_transitions
 from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
 
 if TYPE_CHECKING:
@@ -42,10 +44,14 @@ class Telemetry:
         *,
         notifier: Notifier | None = None,
         metrics: Metrics | None = None,
+        keep: Callable[[Sequence[Event]], None] | None = None,
     ) -> None:
         self.topics = Topics(prefix)
         self.notifier = notifier
         self.metrics = metrics
+        self.keep = keep  # the timeline's: every event told or noted (set before `start`)
+        self._noted = Noted()
+        self._started = time.time()  # a desk restart asked before it was noted by another
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -105,6 +111,7 @@ class Telemetry:
                 # The first step's: a later step may be all `_look` sees.
                 self._resumed = True
                 self._told = resumed(self._told, step.found)
+                self._noted = noted_at_start(self._noted, step.found)
             self._step = step
             if step.verdicts:
                 self._resumers = resumers(self._resumers, step.verdicts)
@@ -132,13 +139,19 @@ class Telemetry:
         robots = self._robots(seen, now) if self.view.synced else None
         desired = self._desired_of(step)
         drift = self._drifts(desired, seen) if robots is not None else None
-        if self.notifier is not None:
+        if self.notifier is not None or self.keep is not None:
             digests = {r: d.digest for r, d in desired.items() if not d.suspended}
             since = {r: seen for r, (_, seen) in self._running_since.items()}
             self._told, events = transitions(
                 self._told, Seen(step.status, robots, digests, since, drift, resumed_by), now
             )
-            self.notifier.tell(events)
+            if self.notifier is not None:
+                self.notifier.tell(events)
+            self._noted, noted = timeline_transitions(
+                self._noted, step.status, robots, now, self._started
+            )
+            if self.keep is not None:
+                self.keep(noted + events)
         if self.metrics is not None and robots is not None and drift is not None:
             self.metrics.verdicts(verdict_counts(desired, robots, self.view.lost is not None))
             self.metrics.drift(drift)

@@ -52,6 +52,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "workstation.cli.history:history",
         "what a revision's robots achieved, beside the revision before (the outcome ledger)",
     ),
+    "events": (
+        "workstation.cli.events:events",
+        "the fleet's timeline, newest first: commits, waves, rollbacks, restarts (the ledger)",
+    ),
     "ui": (
         "workstation.cli.ui:ui",
         "serve the fleet as a live web page (the reconciler, rollouts, every robot)",

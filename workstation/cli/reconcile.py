@@ -39,11 +39,10 @@ def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | No
 
 def make_telemetry(
     connection: Connection, prefix: str, notify: tuple[str, ...], metrics_at: str | None
-) -> Telemetry | None:
-    """Alerts and metrics, when asked for (the default path starts nothing); a bad URL or
-    address, or a port that cannot be listened on, is a one-line error."""
-    if not notify and metrics_at is None:
-        return None
+) -> Telemetry:
+    """Alerts and metrics when asked for, and the timeline's events always (`start_ledger`
+    hands them to the ledger); a bad URL or address, or a port that cannot be listened on, is
+    a one-line error."""
     from reconciler.notify import Notifier, parse_receiver
     from reconciler.telemetry import Telemetry
 
@@ -103,8 +102,8 @@ def start_ledger(
     connection: Connection, prefix: str, settings: LedgerSettings, telemetry: Telemetry | None
 ) -> LedgerFeed:
     """The outcome ledger's feed, started: its file opened (an unreadable one set aside and
-    a new one started, said in the log), its session connecting. CliError when no ledger can
-    be kept in the state folder at all."""
+    a new one started, said in the log), its session connecting; the telemetry's events are
+    kept in it (the timeline). CliError when no ledger can be kept in the state folder at all."""
     from reconciler.ledger import LedgerError
     from reconciler.ledger_feed import LedgerFeed
 
@@ -120,6 +119,8 @@ def start_ledger(
         feed.start()
     except LedgerError as exc:
         raise CliError(f"--state-dir: {exc}") from None
+    if telemetry is not None:
+        telemetry.keep = feed.keep
     return feed
 
 
@@ -139,7 +140,8 @@ def state_options(command: Callable[..., ExitCode]) -> Callable[..., ExitCode]:
             default="30d",
             show_default=True,
             metavar="DURATION",
-            help="outcomes older than this are removed from the ledger (s, m, h, d, w)",
+            help="outcomes and timeline events older than this are removed from the ledger "
+            "(s, m, h, d, w)",
         ),
         click.option(
             "--ledger-max-records",
@@ -325,7 +327,7 @@ def reconcile(
         mqtt.prefix,
         interval,
         signer=signer,
-        on_step=telemetry.on_step if telemetry is not None else None,
+        on_step=telemetry.on_step,
         no_local=no_local,
         ledger=kept.path,
         verifier=verifier,

@@ -108,7 +108,8 @@ def ui(
     wrong one a restart is refused (401/403); wrong tokens from one address are throttled.
 
     A revision's page (/revisions/REV) shows what it achieved beside the revision before,
-    from the reconciler's outcome ledger (read-only; --state-dir says where it is)."""
+    from the reconciler's outcome ledger (read-only; --state-dir says where it is); the
+    timeline (/timeline) lists the fleet's events kept in the same ledger, newest first."""
     from reconciler.ledger import find_ledger
     from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi, ui_options

@@ -65,6 +65,7 @@ def page(title: str, body: str, who: Identity, attrs: str = "") -> str:
         f"<body{attrs}>"
         '<a class="skip" href="#main">Skip to content</a>'
         '<header><nav aria-label="site"><a href="/">Fleet</a> '
+        '<a href="/timeline">Timeline</a> '
         f'<span class="who">{"operator" if who.operator else "viewer (read-only)"}</span> '
         f"{account}</nav></header>"
         f'<main id="main" tabindex="-1">{body}</main></body></html>\n'

@@ -1,7 +1,8 @@
 """What one revision achieved, as the revision page reads it: the small interface the page asks
 of the reconciler's outcome ledger (`RevisionHistory`, answered with the ledger's own `History`),
-the ledger file behind it (`LedgerHistory`, the one edge here), and the page's live part worked
-out from the robots' retained goals summaries."""
+the ledger file behind it (`LedgerHistory`, the one edge here, which also answers the timeline
+page's `EventLog`), and the page's live part worked out from the robots' retained goals
+summaries."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from typing import Protocol
 
 from reconciler.outcomes import History
 from reconciler.robot_goals import GoalRate, goal_rates
+from reconciler.timeline import EventQuery, KeptEvent
 from reconciler.verdicts import RobotRow
 
 REVISION = re.compile(r"[0-9a-f]{4,64}")  # a commit id or a prefix of one, as links carry it
@@ -32,6 +34,15 @@ class RevisionHistory(Protocol):
         ...
 
 
+class EventLog(Protocol):
+    """What the timeline page asks of the ledger."""
+
+    def events(self, query: EventQuery) -> list[KeptEvent]:
+        """The kept events `query` asks for, newest first. HistoryError when the ledger
+        cannot be read."""
+        ...
+
+
 class LedgerHistory:
     """The reconciler's ledger file, opened read-only for each question (the reconciler
     writes it meanwhile; WAL lets both)."""
@@ -47,6 +58,15 @@ class LedgerHistory:
                 if not any(seen.revision.startswith(revision) for seen in ledger.revisions()):
                     return None
                 return ledger.history(revision)
+        except LedgerError as exc:
+            raise HistoryError(str(exc)) from None
+
+    def events(self, query: EventQuery) -> list[KeptEvent]:
+        from reconciler.ledger import Ledger, LedgerError
+
+        try:
+            with Ledger.open(self.path, read_only=True, check=False) as ledger:
+                return ledger.events(query)
         except LedgerError as exc:
             raise HistoryError(str(exc)) from None
 

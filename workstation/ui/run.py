@@ -19,7 +19,7 @@ from workstation.ui.auth import OperatorAuth
 from workstation.ui.commit_reader import CommitReader
 from workstation.ui.logtail import LogTails
 from workstation.ui.restarts import Restarts
-from workstation.ui.revisions import CachedHistory, RevisionHistory
+from workstation.ui.revisions import CachedHistory, LedgerHistory, RevisionHistory
 from workstation.ui.rollout_decisions import Decisions
 from workstation.ui.server import UiService, is_loopback, serve
 from workstation.ui.state import LiveFleet
@@ -107,6 +107,8 @@ class RunningUi:
         self.service = UiService(self.live, options.auth)
         if history is not None:
             self.service.history = CachedHistory(history)
+            if isinstance(history, LedgerHistory):  # the same file holds the timeline
+                self.service.timeline = history
         self.service.commits = CommitReader(repo)
         actions = Actions(
             options.auth,

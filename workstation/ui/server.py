@@ -7,6 +7,7 @@ import ipaddress
 import logging
 import re
 import ssl
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -19,6 +20,7 @@ from contract.models import is_robot_id
 from contract.textsafe import printable
 from reconciler.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
 from reconciler.retained import read_object
+from reconciler.timeline import QueryRefused
 from workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
 from workstation.ui.changes import Shown
 from workstation.ui.commit_facts import commit_section
@@ -26,9 +28,10 @@ from workstation.ui.commit_reader import CommitError, CommitReader
 from workstation.ui.model import QueryError, parse_query
 from workstation.ui.pages import error_page, fleet_page
 from workstation.ui.revision_page import revision_page
-from workstation.ui.revisions import REVISION, HistoryError, RevisionHistory
+from workstation.ui.revisions import REVISION, EventLog, HistoryError, RevisionHistory
 from workstation.ui.robot_page import robot_page
 from workstation.ui.state import LiveFleet
+from workstation.ui.timeline_page import timeline_page, timeline_query
 
 log = logging.getLogger("robotconf.ui")
 
@@ -99,6 +102,7 @@ class UiService:
         self.history: RevisionHistory | None = None
         # The repository's commits, for the revision pages; None: no repository here.
         self.commits: CommitReader | None = None
+        self.timeline: EventLog | None = None  # the same ledger's events, for /timeline
         self.no_history = (
             "No outcome ledger is open here: it is the reconciler's (robotconf ui --state-dir "
             "DIR names its state folder; reconcile --ui and up --ui read their own)."
@@ -111,6 +115,7 @@ class UiService:
             Route("GET", r"/favicon\.ico", self.no_icon),
             Route("GET", r"/robots/(?P<robot>[^/]{1,200})", self.robot),
             Route("GET", r"/revisions/(?P<rev>[^/]{1,200})", self.revision),
+            Route("GET", r"/timeline", self.timeline_view),
             *extra,
         ]
 
@@ -215,6 +220,25 @@ class UiService:
             return commit_section(self.commits.read(revision))
         except CommitError as exc:
             return commit_section(None, str(exc))
+
+    def timeline_view(self, request: Request, match: re.Match[str], who: Identity) -> Response:
+        """The fleet's events kept in the ledger, newest first, narrowed by the query string."""
+        try:
+            query, typed = timeline_query(urlsplit(request.target).query, time.time())
+        except QueryRefused as exc:
+            return self.error(400, str(exc), who)
+        found, why = None, None
+        if self.timeline is None:
+            why = self.no_history
+        else:
+            try:
+                found = self.timeline.events(query)
+            except HistoryError as exc:
+                why = f"The ledger cannot be read: {exc}"
+            except Exception as exc:  # a bug in reading it: said, never a traceback
+                log.error("ui: the ledger's events failed: %s", printable(str(exc))[:300])
+                why = "The ledger could not be read (the UI's log says why)."
+        return html(200, timeline_page(query, typed, who, found, why))
 
     def events(self, request: Request, match: re.Match[str], who: Identity) -> Response:
         """The page's server-sent events: what changed, from the page's own state on."""
