@@ -54,6 +54,7 @@ from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.signer import make_signer, make_verifier
 from reconciler.source import LocalBranch, open_repo
+from reconciler.telemetry import Telemetry
 from reconciler.verdicts import (
     FleetStatus,
     build_rows,
@@ -552,10 +553,14 @@ def _serve(
 
     stop = threading.Event()
     changed = threading.Event()
-    controller = _controller(setup, logins, prefix, changed, signer, private_key)
+    # The timeline's events (robotconf events, /timeline), kept in the ledger as reconcile's.
+    telemetry = Telemetry(logins.reconciler, prefix)
+    controller = _controller(setup, logins, prefix, changed, signer, private_key, telemetry)
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
     view = open_view(logins.reconciler, prefix, changed.set)
     ledger = _start_ledger(setup, logins.reconciler, prefix, say)
+    if ledger is not None:
+        telemetry.keep = ledger.keep
 
     def at_once() -> None:  # a second Ctrl-C: do not wait (the brains get SIGTERM as orphans)
         for proc in agents.procs.values():
@@ -575,6 +580,7 @@ def _serve(
     for line in header[1:3]:
         say(line.strip())
     thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
+    telemetry.start()
     thread.start()
     view.start()
     agents.start(sorted(setup.fleet.requests), setup.fleet)
@@ -592,6 +598,7 @@ def _serve(
         view.stop()
         controller.stop()
         thread.join(10)
+        telemetry.stop()
         if ledger is not None:
             ledger.stop()
     return ExitCode.OK
@@ -604,6 +611,7 @@ def _controller(
     changed: threading.Event,
     signer: Any,
     private_key: Path | None,
+    telemetry: Telemetry,
 ) -> Controller:
     """up's reconciler: its branch, its login, signing when asked; rollout.verify counts its
     ledger's outcomes, and operators' rollout actions are checked against the signing key."""
@@ -617,6 +625,7 @@ def _controller(
         builder=setup.builder,
         ledger=ledger_path(setup.state_dir),
         verifier=make_verifier(private_key),
+        on_step=telemetry.on_step,
     )
 
 

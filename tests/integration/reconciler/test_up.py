@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import json
 import logging
 import os
 import pty
@@ -382,6 +383,18 @@ def test_up_leaves_alone_an_agent_it_did_not_start(lab: GitLab, tmp_path: Path) 
     assert processes_mentioning(up_folder(lab)) == []
 
 
+def events(lab: GitLab, kind: str) -> str:
+    """The revisions of `kind` events `robotconf events --json` reads in up's folder."""
+    done = subprocess.run(
+        robotconf_argv("events", "--repo", str(lab.root), "--kind", kind, "--json"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert "Traceback" not in done.stdout + done.stderr, done.stderr
+    return " ".join(str(e.get("revision")) for e in json.loads(done.stdout or "[]"))
+
+
 def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path) -> None:
     up = start_up(lab, tmp_path)
     try:
@@ -400,6 +413,9 @@ def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path
         assert f"the robots keep {good[:12]}" in after[0], after[0]
         # The first diagnostics follow, each naming its file: what to fix, without a search.
         assert "delivery-gazebo.yaml" in after[1] and "nope" in after[1], after[:4]
+        # up keeps the timeline as the reconciler does: `robotconf events` finds it.
+        wait_for(lambda: bad in events(lab, "commit_refused"), "the refusal in the timeline")
+        assert good in events(lab, "commit_applied")
     finally:
         assert up.stop(signal.SIGINT, timeout=60) == 0, up.output()
     assert out.count(said) == 1  # said once, not at every status change
