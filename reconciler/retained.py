@@ -261,7 +261,13 @@ class RetainedView:
         try:
             self._client.disconnect()
         finally:
-            self._client.loop_stop()
+            if self._connected:
+                self._client.loop_stop()
+            else:
+                # Between connection attempts paho's thread sleeps in steps of a second before
+                # it sees the stop: holding no connection, it is told and not waited for (a
+                # command that found no broker ends at once, not a second later).
+                threading.Thread(target=self._client.loop_stop, daemon=True).start()
 
     def __enter__(self) -> RetainedView:
         self.start()
