@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -20,6 +21,51 @@ ChangeKind = Literal["added", "removed", "changed", "held"]
 
 
 Action = Literal["start", "stop", "restart", "reload", "none"]
+
+
+# A commit as a reconciler's status names it: hex only, so that text from the broker can never
+# reach git as an option or a revision expression.
+_COMMIT = re.compile(r"[0-9a-f]{7,64}")
+
+
+@dataclass(frozen=True)
+class FleetRead:
+    """What the desk learnt from the broker at `url` of the revision the fleet runs: nothing
+    (`unreached`: why the broker could not be read), or the reconciler's retained status's
+    `applied` revision (None: no reconciler status, or none applied yet)."""
+
+    url: str
+    unreached: str | None = None
+    applied: str | None = None
+
+
+@dataclass(frozen=True)
+class PlanBase:
+    """The revision `plan` compares with when no --base is given, and why that one."""
+
+    revision: str  # the fleet's applied commit, or "HEAD"
+    from_fleet: bool
+    why: str
+
+    def line(self, commit: str) -> str:
+        """The output's first line, once `revision` is known as `commit`."""
+        if self.from_fleet:
+            return f"against what the fleet runs: {short_rev(commit)} ({self.why})"
+        return f"against HEAD {short_rev(commit)} ({self.why})"
+
+
+def choose_base(read: FleetRead) -> PlanBase:
+    """What the fleet's reconciler has applied when the broker said so, else HEAD."""
+    if read.unreached is not None:
+        return PlanBase("HEAD", False, read.unreached)
+    if read.applied is not None and _COMMIT.fullmatch(read.applied):
+        return PlanBase(read.applied, True, "applied by the reconciler")
+    why = (
+        "holds no revision applied by a reconciler"
+        if read.applied is None
+        else "names no commit as applied by the reconciler"
+    )
+    return PlanBase("HEAD", False, f"the broker at {read.url} {why}")
 
 
 def action_of(old: RenderedRequest, new: RenderedRequest) -> Action:

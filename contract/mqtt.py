@@ -6,6 +6,8 @@ broker (Mosquitto, the embedded amqtt of `robotconf up`) serves it.
 
 from __future__ import annotations
 
+import errno
+import socket
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,3 +78,29 @@ def make_client(connection: Connection, client_id: str, *, session: bool = False
         min_delay=int(RECONNECT_MIN_DELAY), max_delay=int(RECONNECT_MAX_DELAY)
     )
     return client
+
+
+# Errors of a connection attempt that the network answered: trying again within a desk
+# command's wait would meet the same answer. A timeout is not among them (a silent network).
+NOTHING_LISTENS = "connection refused: nothing listens on that port"
+_UNREACHABLE = {errno.ENETUNREACH: "network unreachable", errno.EHOSTUNREACH: "no route to host"}
+
+
+def connect_failure(exc: BaseException | None) -> str | None:
+    """Why a connection attempt failed, in words, when the broker's side answered it at once
+    (refused, reset, closed, an unknown host, a TLS handshake it failed); None for a silence
+    (a timeout) or anything else, which only waiting can tell."""
+    if isinstance(exc, ConnectionRefusedError):
+        return NOTHING_LISTENS
+    if isinstance(exc, (ConnectionResetError, ConnectionAbortedError, BrokenPipeError)):
+        return "the connection was reset"
+    if isinstance(exc, ssl.SSLError):
+        why = getattr(exc, "verify_message", None) or exc.reason or exc
+        return f"TLS handshake failed: {why}"
+    if isinstance(exc, socket.gaierror):
+        if exc.errno == socket.EAI_AGAIN:  # the resolver did not answer: a silence
+            return None
+        return f"unknown host ({exc.strerror})"
+    if isinstance(exc, OSError) and exc.errno in _UNREACHABLE:
+        return _UNREACHABLE[exc.errno]
+    return None

@@ -14,6 +14,7 @@ import itertools
 import logging
 import os
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -24,7 +25,7 @@ from paho.mqtt.enums import MQTTProtocolVersion
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from configurator.gcpause import collector_paused
-from contract.mqtt import Connection, make_client
+from contract.mqtt import Connection, connect_failure, make_client
 from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
 from contract.throttle import Throttle
 
@@ -36,6 +37,7 @@ P = ParamSpec("P")
 # Kept in place of a payload dropped for its size: the topic holds something, and it is
 # unreadable (a NUL byte never starts JSON). Only ever in memory.
 _OVERSIZED = b"\x00oversized "
+KEEPALIVE_TIMEOUT = 0x8D  # MQTT 5's reason code, which paho also gives an MQTT 3.1.1 client
 LOG_EVERY = 60.0  # seconds: at most one line per this about payloads that were skipped
 
 
@@ -207,6 +209,10 @@ class RetainedView:
         # Why the broker refused our CONNECT (a login, an ACL), until it accepts one: a command
         # says so at once instead of waiting for an answer that will not come.
         self.refused: str | None = None
+        # Why the last attempt could not connect when the network answered it (refused, reset,
+        # closed before CONNACK, an unknown host, a failed TLS handshake), until one connects:
+        # a command says so at once; a silent network is waited out.
+        self.closed: str | None = None
         self.connections = 0
         self.reached = False  # a TCP connection was made, whether or not MQTT answered on it
         # How this snapshot is known to lack retained messages the broker holds (it dropped
@@ -255,7 +261,13 @@ class RetainedView:
         try:
             self._client.disconnect()
         finally:
-            self._client.loop_stop()
+            if self._connected:
+                self._client.loop_stop()
+            else:
+                # Between connection attempts paho's thread sleeps in steps of a second before
+                # it sees the stop: holding no connection, it is told and not waited for (a
+                # command that found no broker ends at once, not a second later).
+                threading.Thread(target=self._client.loop_stop, daemon=True).start()
 
     def __enter__(self) -> RetainedView:
         self.start()
@@ -276,13 +288,15 @@ class RetainedView:
 
     def wait_synced(self, timeout: float | None, *, or_refused: bool = False) -> bool:
         """True once the retained messages are known; with `or_refused`, False as soon as the
-        broker refuses the connection (a one-shot command has nothing to wait for then)."""
+        broker refuses the connection or cannot be connected to (`refused`, `closed`): a
+        one-shot command has nothing to wait for then."""
         if not or_refused:
             return self._synced.wait(timeout)
         deadline = None if timeout is None else time.monotonic() + timeout
         while not self._synced.is_set():
             left = None if deadline is None else deadline - time.monotonic()
-            if self.refused is not None or (left is not None and left <= 0):
+            gone = self.refused is not None or self.closed is not None
+            if gone or (left is not None and left <= 0):
                 return False
             self._synced.wait(0.05 if left is None else min(0.05, left))
         return True
@@ -427,7 +441,7 @@ class RetainedView:
             self._connected = True
             self.connections += 1
             self.lost = None
-        self.last_error = self.refused = None
+        self.last_error = self.refused = self.closed = None
         # QoS 0: a snapshot is taken anew at every connection, so redelivery buys nothing,
         # while a broker may drop queued QoS 1 messages beyond its per-client queue limit
         # (Mosquitto: max_queued_messages 1000) and a large fleet's snapshot would be lossy.
@@ -489,18 +503,31 @@ class RetainedView:
 
     @_guarded
     def _handle_connect_fail(self, client: paho.Client, userdata: Any) -> None:
-        self.last_error = f"cannot reach the broker at {self.connection.address.url}"
+        # paho calls this from the `except OSError` of its connection attempt and does not
+        # pass the error: it is the one being handled. Should that change, `closed` stays None
+        # and a command waits out its timeout, as for a silent network.
+        self.closed = connect_failure(sys.exc_info()[1])
+        why = f": {self.closed}" if self.closed else ""
+        self.last_error = f"cannot reach the broker at {self.connection.address.url}{why}"
 
     @_guarded
     def _handle_disconnect(
         self, client: paho.Client, userdata: Any, flags: Any, reason: Any, properties: Any
     ) -> None:
         with self._lock:
-            self._connected = False
+            answered, self._connected = self._connected, False
             self._synced.clear()
-        if self._started:
-            self.last_error = f"disconnected from {self.connection.address.url}: {reason}"
-            log.info("%s; reconnecting", self.last_error)
+        if not self._started:
+            return
+        url = self.connection.address.url
+        if not answered and self.refused is None and not _keepalive(reason):
+            # Closed by the broker's side before it answered CONNECT (not our keepalive giving
+            # up on a silent one): a listener that turns clients away.
+            self.closed = "it closed the connection before answering MQTT's CONNECT"
+            self.last_error = f"the broker at {url} {self.closed}"
+        else:
+            self.last_error = f"disconnected from {url}: {reason}"
+        log.info("%s; reconnecting", self.last_error)
 
     @_guarded
     def _handle_message(
@@ -594,6 +621,11 @@ class Presence:
             _leave(client)
 
 
+def _keepalive(reason: Any) -> bool:
+    """Whether a disconnection is paho's own keepalive giving up (reason code 0x8D)."""
+    return getattr(reason, "value", None) == KEEPALIVE_TIMEOUT
+
+
 def _leave(client: paho.Client) -> None:
     try:
         client.disconnect()
@@ -646,7 +678,7 @@ def take_snapshot_said(
     view = RetainedView(connection, filters, marker_topic, role=role)
     view.start()
     try:
-        if not view.wait_synced(timeout):
+        if not view.wait_synced(timeout, or_refused=True):
             return None, None
         return view.snapshot(), view.lost
     finally:

@@ -73,10 +73,6 @@ class RobotDesk:
     def __exit__(self, *exc: object) -> None:
         self.view.stop()
 
-    def wait_synced(self, timeout: float) -> bool:
-        """False at once when the broker refuses the connection (`view.refused` says why)."""
-        return self.view.wait_synced(timeout, or_refused=True)
-
     def robot(self) -> RobotSeen | None:
         """The robot as its retained topics show it; None when nothing is retained for it."""
         retained = parse_retained(self.view.snapshot(), self.topics)

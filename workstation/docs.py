@@ -89,9 +89,15 @@ of the one-line internal-error message.
 
 `--repo DIR` (default: the current folder) wherever a repository is read, `--rev REV` to read
 a commit instead of the work tree. `--broker URL` (`mqtt://host:port`, `mqtts://` for TLS;
-default `$ROBOTCONF_BROKER`, else for `status`, `logs`, `restart`, `draft` and `autofill
---robot` the broker of a `robotconf up` running in the repository, with its login and key, else
-`mqtt://127.0.0.1:1883`) and `--prefix` (default `robotconf`) wherever MQTT is used.
+default `$ROBOTCONF_BROKER`, else for `status`, `logs`, `restart`, `rollout`, `promote`,
+`plan`, `draft` and `autofill --robot` the broker of a `robotconf up` running in the repository,
+with its login and key, else `mqtt://127.0.0.1:1883`) and `--prefix` (default `robotconf`)
+wherever MQTT is used. A broker that is not there is said at once, in one line naming its URL
+and what to do: nothing listening on the port (`cannot connect to the broker at URL (connection
+refused: nothing listens on that port): is the broker running? ...`), a connection reset or
+closed before the broker answered (plain MQTT to a TLS listener, or the reverse), a failed TLS
+handshake, an unknown host, a refused login. Only a network that stays silent is waited out
+(`--wait`).
 """
 
 

@@ -538,9 +538,11 @@ def _given_answers(connection: Connection, prefix: str, origin: str) -> None:
         if probe.wait_synced(GIVEN_BROKER_WAIT, or_refused=True):
             return
     unset = f"; unset {BROKER_ENV} to run up's own broker" if origin == f"${BROKER_ENV}" else ""
+    silence = f"did not answer within {GIVEN_BROKER_WAIT:g} s ({probe.silence()})"
+    said = silence if probe.closed is None else f"cannot be connected to ({probe.closed})"
     raise CliError(
-        f"the broker {connection.address.url} (given by {origin}) did not answer within "
-        f"{GIVEN_BROKER_WAIT:g} s ({probe.silence()}): start it or give another{unset}"
+        f"the broker {connection.address.url} (given by {origin}) {said}: start it or give "
+        f"another{unset}"
     )
 
 

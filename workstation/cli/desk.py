@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from contract.errors import CliError, ExitCode
 from reconciler.observed import RobotSeen
-from workstation.cli.broker_options import refused
+from workstation.cli.broker_options import wait_for_broker
 from workstation.desk import RobotDesk
 
 
@@ -13,13 +13,7 @@ def online_robot(desk: RobotDesk, wait: float, why_online: str) -> RobotSeen:
     """The robot as the broker knows it, once its retained topics are read; raises CliError
     when the broker does not answer, knows nothing of the robot, or has it offline."""
     url = desk.connection.address.url
-    if not desk.wait_synced(wait):
-        if desk.view.refused is not None:
-            raise refused(url, desk.view.refused)
-        raise CliError(
-            f"no answer from the broker at {url} within {wait:g} s "
-            f"({desk.view.silence()}); is it running? (--broker URL)"
-        )
+    wait_for_broker(desk.view, wait)
     robot = desk.robot()
     if robot is None:
         raise CliError(desk.unknown(wait).message(url), ExitCode.FINDINGS)

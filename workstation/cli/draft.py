@@ -34,7 +34,7 @@ from contract.topics import Role, subscriptions
 from contract.wire import Topics
 from contract.yamlio import MAX_FILE_BYTES
 from reconciler.retained import RetainedView, read_object
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options, refused
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options, wait_for_broker
 from workstation.cli.options import repo_option
 
 SHOWN = 20  # interfaces left out for a reason, listed one by one (a hostile report has 4,096)
@@ -66,13 +66,7 @@ def from_broker(mqtt: BrokerOptions, robot_id: str, wait: float) -> RobotInterfa
         max_payload=MAX_INTERFACES_BYTES,
     )
     with view:
-        if not view.wait_synced(wait, or_refused=True):
-            if view.refused is not None:
-                raise refused(connection.address.url, view.refused)
-            raise CliError(
-                f"no answer from {connection.address.url} within {wait:g} s "
-                f"({view.silence()}); is the broker running? (--broker, --wait)"
-            )
+        wait_for_broker(view, wait)
         payload = view.get(topic)
     if payload is None:
         raise CliError(

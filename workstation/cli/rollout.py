@@ -19,7 +19,7 @@ from contract.textsafe import printable
 from contract.topics import Role, subscriptions
 from contract.wire import OperatorAnswer, ReconcilerStatus, RolloutStatus, Topics, short_rev
 from reconciler.retained import RetainedView, read_object
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options, wait_for_broker
 from workstation.cli.options import F, repo_option
 from workstation.cli.restart import private_key, requester, signing_key_option
 
@@ -80,9 +80,7 @@ class ReconcilerDesk:
 
 
 def current_rollout(desk: ReconcilerDesk, url: str, wait: float) -> RolloutStatus:
-    if not desk.view.wait_synced(min(wait, 10.0), or_refused=True):
-        why = desk.view.refused or desk.view.last_error or "no answer"
-        raise CliError(f"cannot read the reconciler's status from {url}: {why}", ExitCode.TOOL)
+    wait_for_broker(desk.view, min(wait, 10.0))
     status = desk.status()
     if status is None:
         raise CliError(f"{url} holds no reconciler status: is a reconciler running?")

@@ -18,7 +18,7 @@ from contract.wire import Topics
 from reconciler.lifecycle import on_stop_signals
 from reconciler.retained import RetainedView
 from reconciler.verdicts import FleetStatus
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options, refused
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options, wait_for_broker
 from workstation.cli.fleet_view import fleet_status_view
 from workstation.cli.options import repo_option, rev_option
 from workstation.cli.terminal import is_terminal, plain_text, show, terminal_console
@@ -75,14 +75,7 @@ def status(
     view = open_view(connection, mqtt.prefix, changed.set)
     view.start()
     try:
-        if not view.wait_synced(wait, or_refused=True):
-            if view.refused is not None:
-                raise refused(connection.address.url, view.refused)
-            reason = view.silence()
-            raise CliError(
-                f"no retained messages from {connection.address.url} within {wait:g} s "
-                f"({reason}); is the broker running? (--broker URL, --wait S)"
-            )
+        wait_for_broker(view, wait)
         if not follow:
             messages = view.snapshot()
             fleet = fleet_status(messages, topics, desired)

@@ -13,7 +13,11 @@ from rich.tree import Tree
 from configurator.catalog import Section, catalogue_sections, catalogue_summary
 from configurator.incremental import BuildCache
 from configurator.plan import (
+    FleetRead,
+    Plan,
+    PlanBase,
     Reported,
+    choose_base,
     format_plan_markdown,
     format_plan_text,
     make_plan,
@@ -35,10 +39,10 @@ from configurator.types import RolloutPolicy
 from configurator.workspace import Checked, check
 from contract.diagnostics import did_you_mean, format_text, summary_line
 from contract.errors import CliError, ExitCode
-from contract.textsafe import json_printable, printable
+from contract.textsafe import json_printable, markdown_text, printable
 from contract.topics import Role, subscriptions
 from contract.wire import Topics
-from workstation.cli.broker_options import BrokerOptions, broker_options
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.options import repo_option, rev_option
 from workstation.cli.terminal import safe, show
 
@@ -206,26 +210,37 @@ def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
     return {r: (robot.interfaces, robot.interfaces_error) for r, robot in seen.robots.items()}
 
 
-@click.command("plan")
-@repo_option
-@click.option("--base", required=True, help="the revision robots run now")
-@click.option("--head", default=None, help="the new revision (default: the work tree)")
-@click.option("--format", "fmt", type=click.Choice(["text", "markdown", "json"]), default="text")
-@broker_options
-@click.option(
-    "--wait",
-    type=float,
-    default=3.0,
-    help="with --broker: seconds to wait for the robots' interfaces (then drift is not judged)",
-)
-def plan(
-    repo: Path, base: str, head: str | None, fmt: str, mqtt: BrokerOptions, wait: float
-) -> ExitCode:
-    """What would change per robot between two revisions (exit 1 when something would).
-    With --broker (or $ROBOTCONF_BROKER; without either no broker is read), also the drift of
-    each robot that would change: what its new request needs that the interfaces it reports
-    lack."""
-    # Both revisions are checked before either is reported: each names its own problems.
+def _fleet_runs(mqtt: BrokerOptions, wait: float) -> FleetRead:
+    """The revision the fleet's reconciler has applied (its retained status), read from the
+    broker within `wait` seconds; a broker that refuses or is not there is known at once."""
+    from pydantic import ValidationError
+
+    from contract.safejson import PayloadError
+    from contract.wire import ReconcilerStatus
+    from reconciler.retained import RetainedView, read_object
+
+    connection = mqtt.connection()
+    url = connection.address.url
+    topics = Topics(mqtt.prefix)
+    filters = subscriptions(Role.VIEWER, mqtt.prefix, "reconciler_status")
+    with RetainedView(connection, filters, topics.sync, role="plan-base") as view:
+        if not view.wait_synced(wait, or_refused=True):
+            if view.refused is not None:
+                return FleetRead(url, f"the broker at {url} refused the login: {view.refused}")
+            return FleetRead(url, f"no broker reachable at {url}")
+        payload = view.get(topics.reconciler_status)
+    try:
+        status = ReconcilerStatus.model_validate(read_object(payload)) if payload else None
+    except (PayloadError, ValidationError):
+        status = None  # not a reconciler's status: it names no applied revision
+    return FleetRead(url, applied=status.last_applied_revision if status is not None else None)
+
+
+def _fleets(
+    repo: Path, base: str, head: str | None, chosen: PlanBase | None
+) -> tuple[FleetRender, tuple[FleetRender, RolloutPolicy | None]]:
+    """The base's and the head's rendered fleets (the head's rollout policy too); both are
+    checked before either is reported: each names its own problems."""
     found: dict[str, tuple[FleetRender, RolloutPolicy | None]] = {}
     problems: list[str] = []
     cache = BuildCache()  # the head is built from what the base proved: it costs its changes
@@ -233,20 +248,74 @@ def plan(
         try:
             found[label] = _fleet_at(repo, rev, label, cache)
         except CliError as exc:
-            problems.append(exc.message)
+            lacking = label == "base" and chosen is not None and chosen.from_fleet
+            problems.append(
+                f"the fleet runs {base[:12]}, which this clone cannot build ({exc.message}): "
+                "git fetch, or give --base"
+                if lacking
+                else exc.message
+            )
     if problems:
         raise CliError("\nrobotconf: ".join(problems))
+    return found["base"][0], found["head"]
+
+
+def _show_plan(result: Plan, fmt: str, chosen: PlanBase | None) -> None:
+    """The plan in `fmt`; when the base was chosen (no --base), which one and why: the first
+    line of text and markdown, `against` in JSON."""
+    lead = None if chosen is None else printable(chosen.line(result.base))
+    if fmt == "markdown":
+        sys.stdout.write("" if lead is None else f"{markdown_text(lead)}\n\n")
+        sys.stdout.write(format_plan_markdown(result))
+    elif fmt == "json":
+        found = plan_as_json(result)
+        if chosen is not None:
+            source = "fleet" if chosen.from_fleet else "HEAD"
+            found["against"] = {"source": source, "why": printable(chosen.why)}
+        print(json.dumps(found, indent=2))
+    else:
+        sys.stdout.write("" if lead is None else lead + "\n")
+        sys.stdout.write(format_plan_text(result))
+
+
+@click.command("plan")
+@repo_option
+@click.option(
+    "--base",
+    default=None,
+    help="the revision robots run now (default: what the fleet's reconciler has applied, read "
+    "from the broker; HEAD when no broker answers)",
+)
+@click.option(
+    "--head", "--rev", "head", default=None, help="the new revision (default: the work tree)"
+)
+@click.option("--format", "fmt", type=click.Choice(["text", "markdown", "json"]), default="text")
+@desk_broker_options
+@click.option(
+    "--wait",
+    type=float,
+    default=3.0,
+    help="seconds to wait for the broker: the fleet's revision (without --base), the robots' "
+    "interfaces (with a broker given)",
+)
+def plan(
+    repo: Path, base: str | None, head: str | None, fmt: str, mqtt: BrokerOptions, wait: float
+) -> ExitCode:
+    """What would change per robot between two revisions (exit 1 when something would).
+
+    Without --base, the base is what the fleet runs: the revision the reconciler has applied,
+    read from its retained status on the broker (--broker, $ROBOTCONF_BROKER, a running
+    `robotconf up`'s broker, else the default one); when no broker answers, HEAD. The first
+    line says which. With a broker given (or robotconf up's), also the drift of each robot
+    that would change: what its new request needs that the interfaces it reports lack."""
+    chosen = None if base is not None else choose_base(_fleet_runs(mqtt, wait))
+    base_rev = chosen.revision if chosen is not None else base or "HEAD"
+    base_fleet, (head_fleet, rollout) = _fleets(repo, base_rev, head, chosen)
     # The head's policy decides the waves: it is the one the reconciler will roll out by.
-    (base_fleet, _), (head_fleet, rollout) = found["base"], found["head"]
     result = make_plan(base_fleet, head_fleet, rollout)
     if mqtt.broker is not None:
         reported = _reported_interfaces(mqtt, wait)
         if reported is not None:
             result = with_drift(result, head_fleet, reported)
-    if fmt == "markdown":
-        sys.stdout.write(format_plan_markdown(result))
-    elif fmt == "json":
-        print(json.dumps(plan_as_json(result), indent=2))
-    else:
-        sys.stdout.write(format_plan_text(result))
+    _show_plan(result, fmt, chosen)
     return ExitCode.FINDINGS if result.changes else ExitCode.OK

@@ -391,7 +391,7 @@ def test_agent_arguments_pass_through(tmp_path: Path) -> None:
     [
         ("no-such-command",),
         ("validate", "--format", "xml"),
-        ("plan",),  # --base is required
+        ("plan", "--wait", "soon"),
         ("status", "--wait", "soon"),
         ("keys", "make"),
     ],

@@ -159,6 +159,24 @@ def test_a_given_broker_that_never_answers_is_an_error_with_a_reason(
             assert "never answered MQTT's CONNECT" in done.stderr, (argv, done.stderr)
 
 
+def test_a_given_broker_nobody_listens_on_is_said_at_once(lab: GitLab, tmp_path: Path) -> None:
+    url = f"mqtt://127.0.0.1:{free_port('127.0.0.1')}"
+    env = {**os.environ, "ROBOTCONF_BROKER": url}
+    up = subprocess.run(
+        robotconf_argv("up", "--repo", str(lab.root), "--workdir", str(tmp_path / "work")),
+        capture_output=True,
+        text=True,
+        timeout=90,
+        env=env,
+    )
+    assert up.returncode == 2, up.stdout + up.stderr
+    assert (
+        f"the broker {url} (given by $ROBOTCONF_BROKER) cannot be connected to (connection "
+        "refused: nothing listens on that port): start it or give another; unset "
+        "ROBOTCONF_BROKER" in up.stderr
+    ), up.stderr
+
+
 def test_a_settings_only_commit_reloads_up_s_brains(lab: GitLab, tmp_path: Path) -> None:
     up = start_up(lab, tmp_path, "--port", str(free_port("127.0.0.1")))
     try:

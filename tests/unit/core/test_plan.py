@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 
 from configurator.plan import (
+    FleetRead,
     Plan,
+    choose_base,
     format_plan_markdown,
     format_plan_text,
     make_plan,
@@ -204,3 +206,38 @@ def test_the_head_s_verify_is_printed_under_its_waves(lab: Lab) -> None:
 def test_without_verify_nothing_is_said_of_it(plan: Plan) -> None:
     assert "verified" not in format_plan_text(plan) + format_plan_markdown(plan)
     assert plan_as_json(plan)["verify"] is None
+
+
+# ------------------------------------------------------------------ the base without --base
+
+URL = "mqtt://127.0.0.1:1883"
+COMMIT = "0123456789abcdef0123456789abcdef01234567"
+
+
+def test_the_base_is_what_the_fleet_runs_when_the_broker_says() -> None:
+    chosen = choose_base(FleetRead(URL, applied=COMMIT))
+    assert (chosen.revision, chosen.from_fleet) == (COMMIT, True)
+    assert chosen.line(COMMIT) == (
+        "against what the fleet runs: 0123456789ab (applied by the reconciler)"
+    )
+
+
+def test_the_base_is_head_when_no_broker_answers() -> None:
+    chosen = choose_base(FleetRead(URL, unreached=f"no broker reachable at {URL}"))
+    assert (chosen.revision, chosen.from_fleet) == ("HEAD", False)
+    assert chosen.line("fedcba9876543210") == (
+        f"against HEAD fedcba987654 (no broker reachable at {URL})"
+    )
+
+
+def test_the_base_is_head_when_no_reconciler_applied_anything() -> None:
+    chosen = choose_base(FleetRead(URL))
+    assert chosen.revision == "HEAD"
+    assert chosen.why == f"the broker at {URL} holds no revision applied by a reconciler"
+
+
+@pytest.mark.parametrize("named", ["--upload-pack=evil", "HEAD~1", "main", "abc", "A" * 40, ""])
+def test_a_status_that_names_no_commit_never_reaches_git_as_a_revision(named: str) -> None:
+    chosen = choose_base(FleetRead(URL, applied=named))
+    assert chosen.revision == "HEAD" and not chosen.from_fleet
+    assert "names no commit" in chosen.why
