@@ -14,7 +14,7 @@ from configurator.stages import plan_waves
 from configurator.types import RolloutPolicy, Stage, Verify
 from configurator.waves import assign_waves
 from contract.interfaces import Reported as Report
-from contract.textsafe import markdown_code, markdown_text, printable_lines
+from contract.textsafe import markdown_code, markdown_text, printable, printable_lines, shorten
 from contract.wire import short_rev
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
@@ -103,6 +103,8 @@ class Plan:
     # robot -> its drift against the head's request, for the robots that would get a new one,
     # when the robots' interfaces were read (`plan --broker`); None: not read, nothing said
     drift: dict[str, Drift] | None = None
+    # revision -> its commit's subject, as the edge read it (the work tree has none)
+    subjects: dict[str, str] = field(default_factory=dict)
 
     @property
     def restarts(self) -> list[str]:
@@ -341,8 +343,18 @@ def verify_text(verify: Verify) -> str:
     return text + (" (dry run: judged, not gating)" if verify.dry_run else "")
 
 
+def _commit_lines(plan: Plan) -> list[str]:
+    """`  3f2a9c1b7d0e "Rename the lab robots"`: each side's commit subject, when known."""
+    return [
+        f'  {_short(rev)} "{shorten(plan.subjects[rev], 72)}"'
+        for rev in dict.fromkeys((plan.base, plan.head))
+        if plan.subjects.get(rev)
+    ]
+
+
 def format_plan_text(plan: Plan) -> str:
     lines = [f"plan {_short(plan.base)} -> {_short(plan.head)}: {_counts(plan)}"]
+    lines += _commit_lines(plan)
     if plan.waves is not None:
         lines.append(f"rollout in waves: {', '.join(plan.waves)}{_offline_text(plan)}")
     if plan.waves is not None and plan.verify is not None:
@@ -362,6 +374,8 @@ def format_plan_markdown(plan: Plan) -> str:
     lines = [
         f"### robotconf plan `{_short(plan.base)}` → `{_short(plan.head)}`",
         "",
+        *[f"- {markdown_text(line.strip())}" for line in _commit_lines(plan)],
+        *([""] if plan.subjects else []),
         _counts(plan) + ".",
         "",
     ]
@@ -430,6 +444,8 @@ def plan_as_json(plan: Plan) -> dict[str, Any]:
     `wave` only when the head has a rollout policy; each change's `interfaces` and `drift` only
     when the robots' interfaces were read."""
     found: dict[str, Any] = {"base": plan.base, "head": plan.head, "unchanged": plan.unchanged}
+    if plan.subjects:  # the revisions' commit subjects, when read
+        found["subjects"] = {rev: printable(text) for rev, text in plan.subjects.items()}
     if plan.waves is not None:
         found["waves"] = plan.waves
         found["offline"] = plan.offline

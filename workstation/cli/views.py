@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import re
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -260,6 +262,14 @@ def _fleets(
     return found["base"][0], found["head"]
 
 
+def _subjects(repo: Path, result: Plan) -> dict[str, str]:
+    """The commit subjects of the plan's revisions (the work tree's side has none)."""
+    from reconciler.commits import CommitBook
+
+    commits = [rev for rev in (result.base, result.head) if re.fullmatch("[0-9a-f]{40}", rev)]
+    return {line.revision: line.subject for line in CommitBook(repo).lines(commits)}
+
+
 def _show_plan(result: Plan, fmt: str, chosen: PlanBase | None) -> None:
     """The plan in `fmt`; when the base was chosen (no --base), which one and why: the first
     line of text and markdown, `against` in JSON."""
@@ -313,6 +323,7 @@ def plan(
     base_fleet, (head_fleet, rollout) = _fleets(repo, base_rev, head, chosen)
     # The head's policy decides the waves: it is the one the reconciler will roll out by.
     result = make_plan(base_fleet, head_fleet, rollout)
+    result = replace(result, subjects=_subjects(repo, result))
     if mqtt.broker is not None:
         reported = _reported_interfaces(mqtt, wait)
         if reported is not None:

@@ -45,6 +45,7 @@ def test_plan_compares_with_what_the_fleet_runs(lab: GitLab, mosquitto: Mosquitt
     lines = done.stdout.splitlines()
     assert lines[0] == f"against what the fleet runs: {running[:12]} (applied by the reconciler)"
     assert done.returncode == 1 and "~ tb3-01" in done.stdout, done.stdout + done.stderr
+    assert f'  {head[:12]} "faster"' in lines  # each side's commit, by its subject
     # The same change as --base names it; against HEAD there would be none.
     given = plan(lab, "--base", running, "--broker", mosquitto.url).stdout
     assert done.stdout.split("\n", 1)[1] == given
@@ -52,6 +53,7 @@ def test_plan_compares_with_what_the_fleet_runs(lab: GitLab, mosquitto: Mosquitt
 
     as_json = json.loads(plan(lab, "--broker", mosquitto.url, "--format", "json").stdout)
     assert as_json["base"] == running and as_json["head"] == head
+    assert as_json["subjects"][head] == "faster"
     assert as_json["against"] == {"source": "fleet", "why": "applied by the reconciler"}
     markdown = plan(lab, "--broker", mosquitto.url, "--format", "markdown").stdout
     assert markdown.startswith(f"against what the fleet runs: {running[:12]} ")

@@ -241,3 +241,18 @@ def test_a_status_that_names_no_commit_never_reaches_git_as_a_revision(named: st
     chosen = choose_base(FleetRead(URL, applied=named))
     assert chosen.revision == "HEAD" and not chosen.from_fleet
     assert "names no commit" in chosen.why
+
+
+def test_each_side_s_commit_subject_is_said_when_known(lab: Lab) -> None:
+    from dataclasses import replace
+
+    base, head = "a" * 40, "b" * 40
+    plan = replace(
+        Plan(base=base, head=head, changes=[], unchanged=6),
+        subjects={head: "Rename the lab robots\x1b[2J"},
+    )
+    text = format_plan_text(plan)
+    assert text.splitlines()[1] == '  bbbbbbbbbbbb "Rename the lab robots\\x1b[2J"'
+    assert 'aaaaaaaaaaaa "' not in text  # no subject known: no line
+    assert "- bbbbbbbbbbbb" in format_plan_markdown(plan)
+    assert plan_as_json(plan)["subjects"] == {head: "Rename the lab robots\\x1b[2J"}
