@@ -116,6 +116,23 @@ def publish(broker: Broker, topic: str, payload: bytes, retain: bool = True) -> 
         client.loop_stop()
 
 
+def publish_many(broker: Broker, messages: dict[str, bytes]) -> None:
+    """Publish each (topic, payload) retained at QoS 1 on one connection, as a fleet of agents
+    would, and wait for every acknowledgement."""
+    address = _connection(broker).address
+    client = _client("test-pub-many", broker)
+    client.connect(address.host, address.port)
+    client.loop_start()
+    try:
+        sent = [client.publish(t, payload, qos=1, retain=True) for t, payload in messages.items()]
+        for info in sent:
+            info.wait_for_publish(TIMEOUT * 3)
+            assert info.is_published(), "a publish was not acknowledged"
+    finally:
+        client.disconnect()
+        client.loop_stop()
+
+
 def read_retained(broker: Broker, topic: str) -> bytes:
     """What a newcomer sees on `topic` right now (the topic must hold a retained message)."""
     address = _connection(broker).address

@@ -11,11 +11,14 @@ from contract.goals import BrainEvent, CurrentGoal, GoalsSummary, LastOutcome, V
 from contract.textsafe import shorten
 from contract.wire import ReconcilerStatus
 from reconciler.robot_goals import COUNTS, GoalRate, goal_rates
-from reconciler.verdicts import SUBJECT_SHOWN, RobotRow, short_digest, short_rev
+from reconciler.verdicts import SUBJECT_SHOWN, RobotRow, short_rev
 from workstation.ui.model import FleetQuery, Snapshot
-from workstation.ui.text import age, definitions, esc
+from workstation.ui.text import age, definitions, digest, esc, fold
 
 RATES_SHOWN = 50  # (scenario, revision) rows of the fleet page's success rates; the rest counted
+# More (scenario, revision) rows than this and the rates fold to one line: the robots' table,
+# where trouble shows, stays in the first screen of a large fleet.
+RATES_OPEN = 3
 HEADINGS = {"completed": "Succeeded"}  # the counts' names as a table heads them
 
 
@@ -76,8 +79,8 @@ def counts_line(s: GoalsSummary) -> str:
 def run_facts(s: GoalsSummary) -> list[tuple[str, str]]:
     ready = "yes" if s.ready else "not yet" if s.ready is False else "-"
     found = [
-        ("Revision", f"<code>{esc(short_rev(s.revision))}</code>"),
-        ("Digest", f"<code>{esc(short_digest(s.digest))}</code>"),
+        ("Revision", revision_link(s.revision)),
+        ("Digest", digest(s.digest)),
         ("Scenario", esc(s.scenario or "-")),
         ("Counted since", age(s.since)),
         ("Brain run", f"<code>{esc(s.run or '-', 80)}</code>"),
@@ -200,15 +203,32 @@ def rates_box(snap: Snapshot, query: FleetQuery) -> str:
         else ""
     )
     quiet = f"<p>{silent} robots do not report their goals (unknown).</p>" if silent else ""
-    return (
-        '<section data-box="rates"><h2>Goals: success rate per scenario and revision</h2>'
+    details = (
         "<p>Goals ended since each robot's current request; the rate is succeeded of succeeded "
         'and failed (canceled and stale goals are not counted against it).</p><div class="scroll">'
         '<table data-rates><thead><tr><th scope="col">Scenario</th><th scope="col">Revision</th>'
         '<th scope="col">Robots</th><th scope="col">Success rate</th>'
         '<th scope="col">Succeeded</th><th scope="col">Failed</th><th scope="col">Canceled</th>'
         '<th scope="col">Stale</th><th scope="col">Underway</th></tr></thead>'
-        f"<tbody>{shown}</tbody></table></div>{more}{quiet}</section>"
+        f"<tbody>{shown}</tbody></table></div>{more}{quiet}"
+    )
+    line = (
+        "<h2>Goals: success rate per scenario and revision</h2> "
+        f'<span class="line">{rates_line(rates)}</span>'
+    )
+    return f'<section data-box="rates">{fold(line, details, len(rates) <= RATES_OPEN)}</section>'
+
+
+def rates_line(rates: list[GoalRate]) -> str:
+    """The rates in a few words: how many pairs, and the lowest rate."""
+    pairs = f"{len(rates)} scenario and revision pair{'' if len(rates) == 1 else 's'}"
+    rated = [r for r in rates if r.rate is not None]
+    if not rated:
+        return f"{pairs}, no goal ended yet"
+    low = min(rated, key=lambda r: (r.rate or 0.0, r.scenario or ""))
+    return (
+        f"{pairs}, lowest {low.rate_text()}: {esc(low.scenario or '-', 128)} at "
+        f"{revision_link(low.revision)}"
     )
 
 
@@ -224,8 +244,9 @@ def revision_link(revision: str | None, status: ReconcilerStatus | None = None) 
         else ""
     )
     return (
-        f'<a class="rev" href="/revisions/{quote(revision, safe="")}"><code>'
-        f"{esc(short_rev(revision))}</code></a>{subject}"
+        f'<a class="rev" href="/revisions/{quote(revision, safe="")}" '
+        f'title="commit {esc(revision, 80)}"><code>{esc(short_rev(revision))}</code></a>'
+        f"{subject}"
     )
 
 

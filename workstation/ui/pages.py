@@ -19,19 +19,20 @@ from reconciler.verdicts import (
     Verdict,
     paused_for_evidence,
     reconciler_health,
-    short_digest,
-    short_rev,
 )
 from workstation.ui.auth import Identity
 from workstation.ui.goals_html import goals_cell, percent, rates_box, revision_link
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
-from workstation.ui.text import age, definitions, esc, when
+from workstation.ui.text import age, definitions, digest, esc, fold, when
 
 MAX_LISTED = 300  # items of one list on a robot page (interfaces, mappings); the rest counted
 DIAGNOSTICS = 50  # diagnostics listed; the rest counted
+# What says what is wrong comes first (robot, verdict, why): at a laptop's width, or a phone's,
+# the rest of a wide row scrolls in the table's own box, never these.
 COLUMNS = (
     "Robot",
     "Verdict",
+    "Why",
     "State",
     "Online",
     "Labels",
@@ -43,7 +44,6 @@ COLUMNS = (
     "Reloads",
     "Goals",
     "Drift",
-    "Why",
 )
 
 
@@ -149,18 +149,18 @@ def row_html(row: RobotRow) -> str:
     cells = [
         f'<th scope="row"><a href="/robots/{quote(row.robot_id, safe="")}">{rid}</a></th>',
         f'<td class="verdict"><span class="badge">{row.verdict.value}</span></td>',
+        f'<td class="why">{"" if row.verdict is Verdict.IN_SYNC else esc(row.reason, 200)}</td>',
         f"<td>{esc(row.state, 40)}</td>",
         f"<td>{'yes' if row.online else 'no'}</td>",
         f"<td>{esc(labels)}</td>",
         f"<td>{esc(row.wave or '-')}</td>",
         f"<td>{esc(row.scenario or '-')}</td>",
-        f"<td><code>{esc(short_digest(row.desired))}</code></td>",
-        f"<td><code>{esc(short_digest(row.reported))}</code></td>",
+        f"<td>{digest(row.desired)}</td>",
+        f"<td>{digest(row.reported)}</td>",
         f"<td>{row.restarts}</td>",
         f"<td>{row.reloads}</td>",
         goals_cell(row),
         f'<td class="drift">{esc(row.drift.summary())}</td>',
-        f"<td>{'' if row.verdict is Verdict.IN_SYNC else esc(row.reason, 200)}</td>",
     ]
     return (
         f'<tr data-robot="{rid}" data-verdict="{row.verdict.value}" '
@@ -194,7 +194,8 @@ def banner_box(snap: Snapshot) -> str:
 
 
 def reconciler_box(snap: Snapshot) -> str:
-    """The reconciler's state, revisions and heartbeat, and a refused commit's diagnostics."""
+    """The reconciler's state, revisions and heartbeat, and a refused commit's diagnostics: one
+    line while it is at work with nothing to say, the whole of it open when it is not."""
     fleet = snap.fleet
     status = fleet.reconciler if fleet is not None else None
     if status is None:
@@ -204,7 +205,7 @@ def reconciler_box(snap: Snapshot) -> str:
             f'<section data-box="reconciler" data-reconciler-state="{state}">'
             f"<h2>Reconciler: {state}</h2>{inner}</section>"
         )
-    health = reconciler_health(status, snap.at).value
+    health = reconciler_health(status, snap.at)
     facts = [
         ("Reason", esc(status.reason or "-")),
         ("Branch", esc(status.branch or "-")),
@@ -213,14 +214,32 @@ def reconciler_box(snap: Snapshot) -> str:
         ("Failed", revision_link(status.failed_revision, status)),
         ("Robots", str(status.robots)),
         ("Heartbeat", age(status.heartbeat)),
-        ("Health", health),
+        ("Health", health.value),
     ]
     message = f"<p>{esc(status.message)}</p>" if status.message else ""
-    return (
-        f'<section data-box="reconciler" data-reconciler-state="{esc(status.state, 20)}" '
-        f'data-health="{health}"><h2>Reconciler: {esc(status.state, 20)}</h2>'
+    state = esc(status.state, 20)
+    line = (
+        f"<h2>Reconciler: {state}</h2> "
+        f'<span class="line">applied {revision_link(status.last_applied_revision, status)}'
+        f" · heartbeat {age(status.heartbeat, short=True)}</span>"
+    )
+    details = (
         f"{definitions(facts)}{message}{diagnostics(status.diagnostics, status.more_diagnostics)}"
+    )
+    return (
+        f'<section data-box="reconciler" data-reconciler-state="{state}" '
+        f'data-health="{health.value}">{fold(line, details, reconciler_trouble(status, health))}'
         "</section>"
+    )
+
+
+def reconciler_trouble(status: ReconcilerStatus, health: Health) -> bool:
+    """Something to read in the reconciler's box: not at work (Stalled, Offline), silent, a
+    refused commit, robots held back, or reads of the broker that miss messages."""
+    return (
+        status.state not in ("Ready", "Progressing")
+        or health is not Health.OK
+        or bool(status.diagnostics or status.held or status.broker_dropped)
     )
 
 
@@ -273,7 +292,8 @@ def stages_html(rollout: RolloutStatus, status: ReconcilerStatus | None = None) 
 
 
 def rollout_box(snap: Snapshot) -> str:
-    """The rollout wave by wave: its robots by how they fare, and what a rollback restored."""
+    """The rollout wave by wave: its robots by how they fare, and what a rollback restored; one
+    line while it goes well or is done, the whole of it open when it does not."""
     fleet = snap.fleet
     reconciler = fleet.reconciler if fleet else None
     rollout = reconciler.rollout if reconciler else None
@@ -300,18 +320,6 @@ def rollout_box(snap: Snapshot) -> str:
     ]
     if rollout.stages:
         facts.append(("Stages", stages_html(rollout, reconciler)))
-    restored = ""
-    if rollout.state == "RolledBack" and rollout.stages:
-        restored = (
-            "<p data-rolled-back>Rolled back: each stage's robots run the revision verified "
-            "for them (Stages).</p>"
-        )
-    elif rollout.state == "RolledBack":
-        restored = (
-            f"<p data-rolled-back>Rolled back: the moved robots run "
-            f"<code>{esc(short_rev(rollout.stable_revision))}</code> again, the last revision "
-            "that fully rolled out.</p>"
-        )
     lists = "".join(
         f'<div class="group" data-group="{name.lower()}"><h3>{name}: {n}</h3>'
         f"{id_list(ids, n)}</div>"
@@ -323,10 +331,57 @@ def rollout_box(snap: Snapshot) -> str:
         if rollout.verification is not None
         else ""
     )
+    details = (
+        f"{definitions(facts)}{rolled_back(rollout, reconciler)}{message}{evidence}"
+        f'<div class="groups">{lists}</div>'
+    )
+    line = rollout_line(rollout, reconciler, groups)
     return (
         f'<section data-box="rollout" data-rollout-state="{esc(rollout.state, 20)}">'
-        f"<h2>Rollout: {esc(rollout.state, 20)}</h2>{definitions(facts)}{restored}{message}"
-        f'{evidence}<div class="groups">{lists}</div></section>'
+        f"{fold(line, details, rollout_trouble(rollout))}</section>"
+    )
+
+
+def rollout_line(
+    rollout: RolloutStatus,
+    status: ReconcilerStatus | None,
+    groups: list[tuple[str, list[str], int]],
+) -> str:
+    """The rollout in one line: its state, revision, wave and how the wave's robots fare."""
+    fare = ", ".join(f"{n} {name.lower()}" for name, _, n in groups if n or name == "Failed")
+    return (
+        f"<h2>Rollout: {esc(rollout.state, 20)}</h2> "
+        f'<span class="line">{revision_link(rollout.revision, status)} · wave '
+        f"{rollout.wave + 1} of {rollout.waves} ({esc(rollout.wave_name, 80)}) · {fare}</span>"
+    )
+
+
+def rollout_trouble(rollout: RolloutStatus) -> bool:
+    """Something to read in the rollout's box: it stopped, went back, or waits for someone
+    (Paused, Halted, RolledBack), a robot of its wave failed, or its evidence failed."""
+    failed = rollout.counts.get("failed", len(rollout.failed))
+    verdict = rollout.verification.verdict if rollout.verification is not None else None
+    return (
+        rollout.state in ("Paused", "Halted", "RolledBack")
+        or failed > 0
+        or verdict in ("Failed", "Inconclusive")
+        or paused_for_evidence(rollout)
+    )
+
+
+def rolled_back(rollout: RolloutStatus, status: ReconcilerStatus | None) -> str:
+    """What a rollback restored."""
+    if rollout.state != "RolledBack":
+        return ""
+    if rollout.stages:
+        return (
+            "<p data-rolled-back>Rolled back: each stage's robots run the revision verified "
+            "for them (Stages).</p>"
+        )
+    return (
+        "<p data-rolled-back>Rolled back: the moved robots run "
+        f"{revision_link(rollout.stable_revision, status)} again, the last revision "
+        "that fully rolled out.</p>"
     )
 
 

@@ -7,12 +7,13 @@ from urllib.parse import quote
 
 from contract.interfaces import Interface, RobotInterfaces
 from contract.launch import LaunchRequest
-from reconciler.verdicts import RobotRow, short_digest
+from contract.wire import ReconcilerStatus
+from reconciler.verdicts import RobotRow
 from workstation.ui.auth import Identity
-from workstation.ui.goals_html import goals_box
+from workstation.ui.goals_html import goals_box, revision_link
 from workstation.ui.model import HistoryEntry, Snapshot
 from workstation.ui.pages import MAX_LISTED, banner_box, page
-from workstation.ui.text import age, definitions, esc, when
+from workstation.ui.text import age, definitions, digest, esc, when
 
 
 def robot_page(
@@ -42,7 +43,7 @@ def robot_page(
         + banner_box(snap)
         + robot_box(snap, robot_id)
         + goals_box(snap, robot_id)
-        + launch_section(launch)
+        + launch_section(launch, snap.fleet.reconciler if snap.fleet else None)
         + interfaces_section(interfaces)
         + f"<section><h2>Brain log</h2>{log}</section></div>"
     )
@@ -62,7 +63,8 @@ def robot_box(snap: Snapshot, robot_id: str) -> str:
     return (
         f'<section data-box="robot" data-verdict="{row.verdict.value}">'
         f'<h2>Status: <span class="badge">{row.verdict.value}</span></h2>'
-        f"<p>{esc(row.reason)}</p>{definitions(facts(row))}{drift_list(row)}{warnings(row)}"
+        f'<p class="why">{esc(row.reason)}</p>{definitions(facts(row))}'
+        f"{drift_list(row)}{warnings(row)}"
         f"{history(snap.history.get(robot_id, ()))}</section>"
     )
 
@@ -75,9 +77,9 @@ def facts(row: RobotRow) -> list[tuple[str, str]]:
         ("Labels", esc(labels)),
         ("Wave", esc(row.wave or "-")),
         ("Scenario", esc(row.scenario or "-")),
-        ("Desired", f"<code>{esc(short_digest(row.desired))}</code>"),
-        ("Published", f"<code>{esc(short_digest(row.published))}</code>"),
-        ("Reported", f"<code>{esc(short_digest(row.reported))}</code>"),
+        ("Desired", digest(row.desired)),
+        ("Published", digest(row.published)),
+        ("Reported", digest(row.reported)),
         ("Restarts", str(row.restarts)),
         ("Reloads", str(row.reloads)),
         ("Drift", esc(row.drift.summary())),
@@ -104,20 +106,20 @@ def history(entries: tuple[HistoryEntry, ...]) -> str:
     if not entries:
         return "<h3>Recent status</h3><p>No change seen since this page's server started.</p>"
     rows = "".join(
-        f"<tr><td>{age(e.at)}</td><td>{e.verdict}</td>"
-        f"<td>{esc(e.state, 40)}</td><td><code>{esc(short_digest(e.reported))}</code></td>"
-        f"<td>{e.restarts}</td><td>{e.reloads}</td><td>{esc(e.reason, 200)}</td></tr>"
+        f'<tr><td>{age(e.at)}</td><td class="verdict">{e.verdict}</td>'
+        f'<td class="why">{esc(e.reason, 200)}</td><td>{esc(e.state, 40)}</td>'
+        f"<td>{digest(e.reported)}</td><td>{e.restarts}</td><td>{e.reloads}</td></tr>"
         for e in reversed(entries)
     )
     return (
         '<h3>Recent status</h3><div class="scroll"><table data-history><thead><tr>'
-        '<th scope="col">When</th><th scope="col">Verdict</th><th scope="col">State</th>'
-        '<th scope="col">Reported</th><th scope="col">Restarts</th><th scope="col">Reloads</th>'
-        f'<th scope="col">Why</th></tr></thead><tbody>{rows}</tbody></table></div>'
+        '<th scope="col">When</th><th scope="col">Verdict</th><th scope="col">Why</th>'
+        '<th scope="col">State</th><th scope="col">Reported</th><th scope="col">Restarts</th>'
+        f'<th scope="col">Reloads</th></tr></thead><tbody>{rows}</tbody></table></div>'
     )
 
 
-def launch_section(launch: LaunchRequest | None) -> str:
+def launch_section(launch: LaunchRequest | None, status: ReconcilerStatus | None) -> str:
     """Its published launch request as a tree: capability > tasks, actions > logics, mappings
     as bound, goals."""
     if launch is None:
@@ -129,8 +131,8 @@ def launch_section(launch: LaunchRequest | None) -> str:
     cap = scenario.capability
     facts = [
         ("Name", esc(launch.robot_name)),
-        ("Revision", f"<code>{esc(launch.revision[:12])}</code>"),
-        ("Digest", f"<code>{esc(short_digest(launch.digest))}</code>"),
+        ("Revision", revision_link(launch.revision, status)),
+        ("Digest", digest(launch.digest)),
         ("Scenario", esc(scenario.name)),
         (
             "Environment",

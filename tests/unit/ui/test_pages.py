@@ -170,3 +170,61 @@ def test_the_rollout_box_lists_the_wave_by_how_its_robots_fare_and_a_rollback() 
         assert found is not None and f">{robot}<" in found.group(1), group
     assert "&lt;r3&gt;" in text and "<r3>" not in text
     assert "data-rolled-back" in text and "d" * 12 in text
+
+
+def fold_of(page: str, box: str) -> str | None:
+    """The `data-fold` of a box's details, with ` open` when the page opens it."""
+    found = re.search(rf'data-box="{box}"[^>]*><details data-fold="(\w+)"( open)?>', page)
+    return None if found is None else found.group(1) + (found.group(2) or "")
+
+
+def test_healthy_boxes_fold_to_one_line_and_trouble_opens_them() -> None:
+    calm = fleet_page(snapshot(fleet([row("r1")])), FleetQuery(), ANONYMOUS)
+    assert fold_of(calm, "reconciler") == "closed"
+    summary = re.search(r'data-box="reconciler".*?<summary>(.*?)</summary>', calm)
+    assert summary is not None and "Reconciler: Ready" in summary.group(1)
+    assert 'class="rev"' in summary.group(1) and "data-short" in summary.group(1)
+    stalled = fleet_page(snapshot(fleet([row("r1")], refused())), FleetQuery(), ANONYMOUS)
+    assert fold_of(stalled, "reconciler") == "open open"
+    stale = fleet_page(
+        snapshot(fleet([row("r1")], reconciler(heartbeat=1_000.0))), FleetQuery(), ANONYMOUS
+    )
+    assert fold_of(stale, "reconciler") == "open open"
+
+    def with_rollout(state: str, failed: int = 0) -> str:
+        rollout = RolloutStatus(
+            revision="c" * 40, state=state, waves=2, wave_name="all",  # type: ignore[arg-type]
+            counts={"healthy": 3, "failed": failed},
+        )  # fmt: skip
+        status = reconciler(rollout=rollout)
+        return fleet_page(snapshot(fleet([row("r1")], status)), FleetQuery(), ANONYMOUS)
+
+    assert fold_of(with_rollout("Complete"), "rollout") == "closed"
+    assert fold_of(with_rollout("Progressing"), "rollout") == "closed"
+    assert "3 healthy, 0 failed" in with_rollout("Complete")
+    for state in ("Paused", "Halted", "RolledBack"):
+        assert fold_of(with_rollout(state), "rollout") == "open open", state
+    assert fold_of(with_rollout("Progressing", failed=1), "rollout") == "open open"
+
+
+def test_why_comes_after_the_verdict_and_digests_differ_from_revisions() -> None:
+    r = row("r1", Verdict.DEGRADED, reason="brain exited with 1")
+    page = fleet_page(snapshot(fleet([r])), FleetQuery(), ANONYMOUS)
+    heads = re.findall(r'<th scope="col">(\w+)</th>', page)
+    assert heads[:3] == ["Robot", "Verdict", "Why"]
+    line = re.search(r'<tr data-robot="r1".*?</tr>', page)
+    assert line is not None
+    cells = re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", line.group())
+    assert "Degraded" in cells[1] and cells[2] == "brain exited with 1"
+    digest = f'<code class="digest" title="sha256:{"1" * 64}">sha256:{"1" * 8}</code>'
+    assert digest in line.group()
+    # A revision is a link, 12 hex digits, the commit in its title.
+    assert f'<a class="rev" href="/revisions/{"a" * 40}" title="commit {"a" * 40}"><code>' in page
+    snap = snapshot(fleet([r]))
+    entry = HistoryEntry.of(r, 1_790_000_000.0)
+    snap = snap.__class__(**{**snap.__dict__, "history": {"r1": (entry,)}})
+    robot = robot_page(snap, "r1", ANONYMOUS, None, None)
+    assert '<p class="why">brain exited with 1</p>' in robot
+    assert re.search(r"<th[^>]*>When</th><th[^>]*>Verdict</th><th[^>]*>Why</th>", robot)
+    assert '<td class="why">brain exited with 1</td>' in robot
+    assert f'title="sha256:{"2" * 64}">sha256:{"2" * 8}</code>' in robot  # what it reported

@@ -52,14 +52,35 @@
     });
   }
 
+  // A box folded to one line (details[data-fold]) that its reader opened or closed stays so
+  // across live updates while the page's own choice (data-fold: open when something is wrong)
+  // stays the same; when that changes, the page's choice is shown.
+  function keepFold(old, box) {
+    var was = old.querySelector("details[data-fold][data-reader]");
+    var now = box.querySelector("details[data-fold]");
+    if (!was || !now || was.getAttribute("data-fold") !== now.getAttribute("data-fold")) return;
+    now.open = was.open;
+    now.setAttribute("data-reader", "");
+  }
+
   function applyBoxes(boxes) {
     Object.keys(boxes).forEach(function (name) {
       var old = document.querySelector('[data-box="' + CSS.escape(name) + '"]');
       var box = fragment(boxes[name]);
-      if (old && box) old.replaceWith(box);
+      if (old && box) {
+        keepFold(old, box);
+        old.replaceWith(box);
+      }
     });
     ages();
   }
+
+  // The reader's own opening or closing of a folded box (a click, or Enter on its summary).
+  document.addEventListener("click", function (event) {
+    var summary = event.target && event.target.closest && event.target.closest("summary");
+    var details = summary && summary.parentElement;
+    if (details && details.matches("details[data-fold]")) details.setAttribute("data-reader", "");
+  });
 
   function ages() {
     var now = Date.now() / 1000;
@@ -68,7 +89,7 @@
       var seconds = Math.max(0, Math.round(now - parseFloat(el.getAttribute("data-since"))));
       var text = seconds < 120 ? seconds + " s ago" : seconds < 7200
         ? Math.round(seconds / 60) + " min ago" : Math.round(seconds / 3600) + " h ago";
-      el.textContent = text + " (" + el.title + ")";
+      el.textContent = el.hasAttribute("data-short") ? text : text + " (" + el.title + ")";
     });
   }
 
