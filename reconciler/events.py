@@ -105,7 +105,11 @@ class Event:
     def text(self) -> str:
         """One line for a chat (the Slack form). The message quotes robots (a status message)
         and commits: it is made inert text there, so that no robot pings a channel."""
-        subject = f' ("{self.subject}")' if self.subject else ""
+        subject = (
+            f' (commit {short_rev(self.revision)}: "{self.subject}")'
+            if self.subject and self.revision
+            else ""
+        )
         what = f"robotconf {self.kind.value.replace('_', ' ')}: {self.message}{subject}"
         return chat_text(what)
 

@@ -184,7 +184,10 @@ def test_a_refused_commit_is_told_once_and_failing_receivers_delay_nothing(
         assert refused[0]["reason"] == "BuildFailed" and refused[0]["branch"] == "main"
         assert refused[0]["robot"] is None and bad[:12] in refused[0]["message"]
         texts = wait_for(lambda: receivers["slack"].got(), "the Slack receiver told")
-        assert texts == [{"text": f"robotconf commit refused: {refused[0]['message']}"}]
+        # The commit's subject follows, named as the commit's (the message names two).
+        subject = f' (commit {bad[:12]}: "{refused[0]["subject"]}")'
+        assert refused[0]["subject"] == lab.git("log", "-1", "--format=%s", bad).strip()
+        assert texts == [{"text": f"robotconf commit refused: {refused[0]['message']}{subject}"}]
         # The failing receiver was tried again (bounded); the hanging one holds the first POST.
         wait_for(lambda: len(receivers["500"].got()) >= 3, "three attempts at the 500")
         assert receivers["hang"].got()[0]["revision"] == bad
