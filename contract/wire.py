@@ -198,6 +198,15 @@ def now() -> float:
     return round(time.time(), 3)
 
 
+_COMMIT = re.compile(r"[0-9a-f]{40}")
+
+
+def is_commit(text: str) -> bool:
+    """Whether `text` is a whole commit id (40 lower-case hex digits): what may reach git when
+    it was read from the broker or a file, never an option or a ref expression."""
+    return _COMMIT.fullmatch(text) is not None
+
+
 def short_rev(revision: str | None) -> str:
     """A commit as people read it: its first 12 hex digits ("-" for none)."""
     return revision[:12] if revision else "-"

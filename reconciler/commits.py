@@ -7,17 +7,15 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 import time
 from collections import OrderedDict
 from collections.abc import Iterable
 from pathlib import Path
 
-from contract.wire import MAX_COMMITS, CommitLine, ReconcilerStatus
+from contract.wire import MAX_COMMITS, CommitLine, ReconcilerStatus, is_commit
 
 log = logging.getLogger("robotconf.reconciler")
 
-_COMMIT = re.compile(r"[0-9a-f]{40}")
 KEPT = 64  # commit lines remembered; a status names a handful
 RETRY = 30.0  # seconds before a revision the repository lacked is looked for again
 
@@ -36,7 +34,7 @@ def named_revisions(status: ReconcilerStatus) -> list[str]:
             found += [stage.verified_revision, stage.rollback_revision]
     named: list[str] = []
     for revision in found:
-        if revision and _COMMIT.fullmatch(revision) and revision not in named:
+        if revision and is_commit(revision) and revision not in named:
             named.append(revision)
     return named[:MAX_COMMITS]
 
@@ -55,6 +53,9 @@ class CommitBook:
         return [line for line in found if line is not None]
 
     def line(self, revision: str) -> CommitLine | None:
+        """`revision`'s commit line; None when it is not a whole commit id or not here."""
+        if not is_commit(revision):
+            return None
         known = self._known.get(revision)
         if known is not None:
             self._known.move_to_end(revision)

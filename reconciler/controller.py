@@ -11,7 +11,6 @@ from __future__ import annotations
 import collections
 import enum
 import logging
-import re
 import threading
 import time
 from collections import OrderedDict
@@ -40,6 +39,7 @@ from contract.wire import (
     ReconcilerStatus,
     StatusDiagnostic,
     Topics,
+    is_commit,
     is_online,
     short_rev,
 )
@@ -88,7 +88,6 @@ SAMPLE_TIMEOUT = 10.0  # seconds to wait for a sample of the robots' statuses
 # an oversized message is dropped on arrival and would be republished at every pass. The
 # margin leaves room for the signature.
 MAX_REQUEST_BYTES = MAX_PAYLOAD_BYTES - 4096
-_COMMIT = re.compile(r"[0-9a-f]{40}")  # a revision read from the broker, before git sees it
 
 Builder = Callable[[Path, str], Desired]
 
@@ -516,7 +515,7 @@ class Controller:
         wanted = {
             base
             for base in stage_bases(fleet, rollout, serving)
-            if base is not None and base != serving and _COMMIT.fullmatch(base)
+            if base is not None and base != serving and is_commit(base)
         }
         for gone in self._stage_built.keys() - wanted:
             del self._stage_built[gone]

@@ -156,44 +156,15 @@ class Told:
 
 
 def resumed(told: Told, found: ReconcilerStatus | None) -> Told:
-    """What a restarted reconciler knows was told, from the status it found on the broker: a
-    refusal there was told by the one before, so it is not told again, and its recovery is
-    told when the branch applies; so was its rollout's standing (`_rollout_told`). (A clean
-    stop or a Last Will leaves `Offline`, which names no refusal: the new reconciler tells the
-    refusal again if the head is still refused.)"""
+    """What a restarted reconciler knows was told, from the status it found on the broker:
+    whatever that status would have told, the reconciler before told — a refusal (its
+    recovery is told when the branch applies), the rollout's pause (its going on is told as a
+    resumption), stop, failed verification and stage. The same transitions, their events
+    dropped. (A clean stop or a Last Will leaves `Offline`, which names no refusal: the new
+    reconciler tells the refusal again if the head is still refused.)"""
     if found is None:
         return told
-    told = _rollout_told(told, found.rollout)
-    if found.reason not in _REFUSED or not found.failed_revision:
-        return told
-    revision = found.failed_revision
-    refused = told.refused if revision in told.refused else _remember(told.refused, revision)
-    return replace(told, refused=refused, unrecovered=revision)
-
-
-def _rollout_told(told: Told, rollout: RolloutStatus | None) -> Told:
-    """What the reconciler before told of the rollout in the status it left: its pause (so
-    that going on is told as a resumption, and the pause not told twice), its stop, its
-    failed verification and the stage it reached."""
-    if rollout is None:
-        return told
-    run = _wave_run(rollout)
-    if rollout.state == "Paused" and run not in told.paused:
-        told = replace(
-            told, paused=_remember(told.paused, run), pausing=PausedRun(run, _wave_named(rollout))
-        )
-    key = (rollout.revision, rollout.state)
-    if rollout.state in _ROLLOUT_KINDS and key not in told.rollouts:
-        told = replace(told, rollouts=_remember(told.rollouts, key))
-    failed = rollout.verification is not None and rollout.verification.verdict == "Failed"
-    wave = (rollout.revision, rollout.wave)
-    if failed and wave not in told.verifications:
-        told = replace(told, verifications=_remember(told.verifications, wave))
-    if rollout.stage is not None and (rollout.revision, rollout.stage) not in told.promotions:
-        told = replace(
-            told, promotions=_remember(told.promotions, (rollout.revision, rollout.stage))
-        )
-    return told
+    return transitions(told, Seen(found), found.since)[0]
 
 
 def _refusal(told: Told, status: ReconcilerStatus, at: float) -> tuple[Told, list[Event]]:

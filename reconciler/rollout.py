@@ -539,23 +539,11 @@ class _Rollout:
                 f"({', '.join(robots[:5])}{', ...' if len(robots) > 5 else ''})"
             )
             self.revoked = stage
-            self.noted.append(self._revoked_note(stage, why))
             found = WaveVerification(verdict="Failed", message=why)
+            gate = next(i for i, s in enumerate(self.specs) if s.gate and s.stage == stage)
+            self.noted.append(self._note(gate, None, found))  # about the stage, not a wave run
             return self._failed(wave, started_at, judged, why, found, stage, noted=True)
         return None
-
-    def _revoked_note(self, stage: int, why: str) -> VerdictNote:
-        gate = next(i for i, spec in enumerate(self.specs) if spec.gate and spec.stage == stage)
-        return VerdictNote(
-            kind="verification",
-            revision=self.seen.head.revision,
-            at=self.seen.now,
-            wave=gate,
-            wave_name=self.specs[gate].name,
-            stage=self.seen.head.stages[stage].name,
-            verdict="Failed",
-            message=why,
-        )
 
     def _failed(
         self,
@@ -636,7 +624,7 @@ class _Rollout:
         ]
         return max(found, key=lambda note: note.at) if found else None
 
-    def _note(self, wave: int, started_at: float, found: WaveVerification) -> VerdictNote:
+    def _note(self, wave: int, started_at: float | None, found: WaveVerification) -> VerdictNote:
         return VerdictNote(
             kind="verification",
             revision=self.seen.head.revision,

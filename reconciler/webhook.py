@@ -14,13 +14,13 @@ from typing import Any
 
 from contract.safejson import PayloadError, parse_object
 from contract.textsafe import printable
+from contract.wire import is_commit
 
 # A push of a few commits is a few kB (GitHub lists at most 20 commits in one); the repository
 # and sender blocks add a few more. A megabyte is generous, and small enough to hold in memory.
 MAX_BODY = 1024 * 1024
 
 _SIGNATURE = re.compile(r"(?:sha256=)?([0-9a-fA-F]{64})")
-_COMMIT = re.compile(r"[0-9a-f]{40}")
 
 
 @dataclass(frozen=True)
@@ -208,7 +208,5 @@ def _judge_push(server: str, payload: dict[str, Any], branch: str) -> Answer:
             f"the reconciler follows {branch}",
         )
     after = payload.get("after")
-    commit = (
-        f" (commit {after[:12]})" if isinstance(after, str) and _COMMIT.fullmatch(after) else ""
-    )
+    commit = f" (commit {after[:12]})" if isinstance(after, str) and is_commit(after) else ""
     return Answer(200, Outcome.FETCH, server, f"push from {server} for {branch}: fetching{commit}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -266,8 +265,8 @@ def _subjects(repo: Path, result: Plan) -> dict[str, str]:
     """The commit subjects of the plan's revisions (the work tree's side has none)."""
     from reconciler.commits import CommitBook
 
-    commits = [rev for rev in (result.base, result.head) if re.fullmatch("[0-9a-f]{40}", rev)]
-    return {line.revision: line.subject for line in CommitBook(repo).lines(commits)}
+    revisions = (result.base, result.head)  # the work tree's is no commit: left out
+    return {line.revision: line.subject for line in CommitBook(repo).lines(revisions)}
 
 
 def _show_plan(result: Plan, fmt: str, chosen: PlanBase | None) -> None:

@@ -4,6 +4,7 @@ header or a login session's cookie) or a viewer; sessions, CSRF tokens and login
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import hmac
 import os
@@ -77,15 +78,18 @@ class _Session:
     used: float
 
 
-def read_token(path: Path, what: str = "--operator-token-file") -> str:
+def read_token(path: Path, what: str = "--operator-token-file", follow: bool = True) -> str:
     """The token in `path` (its one line); CliError when the file is missing, not a regular
     file, readable or writable by others than its owner, owned by someone else, or the token
     is too short, too long or not one line of visible characters. `what` names the file in
-    the errors."""
+    the errors; `follow`: False refuses a symbolic link (a file the tool made itself)."""
     where = f"{what} {path}"
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        nofollow = 0 if follow else getattr(os, "O_NOFOLLOW", 0)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | nofollow | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise CliError(f"{where} is a symbolic link: delete it for a new token") from None
         raise CliError(f"cannot read {where}: {exc.strerror}") from None
     try:
         info = os.fstat(fd)
@@ -129,7 +133,7 @@ def own_token(path: Path, what: str) -> tuple[str, bool]:
     try:
         fd = os.open(path, flags | getattr(os, "O_CLOEXEC", 0), 0o600)
     except FileExistsError:
-        return read_token(path, what), False
+        return read_token(path, what, follow=False), False
     except OSError as exc:
         raise CliError(f"cannot create {what} {path}: {exc.strerror}") from None
     token = secrets.token_urlsafe(32)

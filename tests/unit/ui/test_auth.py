@@ -292,3 +292,13 @@ def test_session_cookie_parsing_is_bounded_and_strict() -> None:
     assert session_cookie([f"{COOKIE}={sid}" + " " * 9000]) is None
     assert session_cookie([f"{COOKIE}=short"]) is None
     assert session_cookie([]) is None
+
+
+def test_an_own_token_file_that_is_a_symbolic_link_is_refused(tmp_path: Path) -> None:
+    elsewhere = tmp_path / "elsewhere"
+    own_token(elsewhere, "a token")  # an owner-only file: read_token alone would take it
+    link = tmp_path / "up" / "ui.token"
+    link.parent.mkdir()
+    link.symlink_to(elsewhere)
+    with pytest.raises(CliError, match="is a symbolic link"):
+        own_token(link, "up's operator token file")
