@@ -50,6 +50,9 @@ class Telemetry:
         self.notifier = notifier
         self.metrics = metrics
         self.keep = keep  # the timeline's: every event told or noted (set before `start`)
+        # Told each new serving revision's desired robots, made here anyway (set before
+        # `start`): `robotconf status` and the browser view read them back rather than build.
+        self.keep_desired: Callable[[str, Mapping[str, DesiredRobot]], None] | None = None
         self._noted = Noted()
         self._started = time.time()  # a desk restart asked before it was noted by another
         self._wake = threading.Event()
@@ -189,6 +192,8 @@ class Telemetry:
         if revision != self._desired[0]:
             fleet = serving.fleet if serving is not None else None
             self._desired = (revision, desired_from_fleet(fleet) if fleet is not None else {})
+            if self.keep_desired is not None and revision is not None and fleet is not None:
+                self.keep_desired(revision, self._desired[1])
         return self._desired[1]
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -70,7 +70,7 @@ class DesiredRobot:
     template: str | None = None
     labels: Mapping[str, str] = field(default_factory=dict)
     wave: str | None = None  # the rollout wave it falls in; None: no policy
-    needs: tuple[Need, ...] = ()  # the interfaces its request needs of the robot
+    needs: Sequence[Need] = ()  # the interfaces its request needs of the robot
 
 
 def desired_from_fleet(fleet: FleetRender) -> dict[str, DesiredRobot]:

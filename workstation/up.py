@@ -23,6 +23,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 from urllib.parse import quote
@@ -63,6 +64,7 @@ from reconciler.verdicts import (
     diagnostic_lines,
     rollout_line,
 )
+from workstation import desired_store
 from workstation.fleet_status import change_key, open_view
 from workstation.up_desk import UpDesk, remove_desk, write_desk
 
@@ -557,6 +559,7 @@ def _serve(
     changed = threading.Event()
     # The timeline's events (robotconf events, /timeline), kept in the ledger as reconcile's.
     telemetry = Telemetry(logins.reconciler, prefix)
+    telemetry.keep_desired = partial(desired_store.write, setup.root)
     controller = _controller(setup, logins, prefix, changed, signer, private_key, telemetry)
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
     view = open_view(logins.reconciler, prefix, changed.set)

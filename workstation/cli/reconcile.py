@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +26,7 @@ if TYPE_CHECKING:
     from reconciler.ledger_feed import LedgerFeed, LedgerSettings
     from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
+    from reconciler.verdicts import DesiredRobot
     from reconciler.webhook_server import WebhookServer
     from workstation.ui.run import RunningUi, UiOptions
 
@@ -35,6 +37,16 @@ def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | No
     source = LocalBranch(repo, branch)
     source.head()  # a branch that does not exist is a typo: say so now
     return source
+
+
+def keep_desired(source: BranchSource) -> Callable[[str, Mapping[str, DesiredRobot]], None] | None:
+    """Where the served revisions' desired robots are kept for `status` and the browser view:
+    beside a local repository's git data (a remote one's clone is no reader's)."""
+    from workstation import desired_store
+
+    if isinstance(source, LocalBranch):
+        return partial(desired_store.write, source.root)
+    return None
 
 
 def make_telemetry(
@@ -317,6 +329,7 @@ def reconcile(
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
     kept = ledger_settings(mqtt.prefix, **ledger_options)
     telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
+    telemetry.keep_desired = keep_desired(source)
     log_to_stderr("reconciler")
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
     # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.

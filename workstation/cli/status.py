@@ -6,6 +6,7 @@ import json
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 import click
 from rich.live import Live
@@ -85,13 +86,24 @@ def status(
             fleet = fleet.select(selector)
             if as_json:
                 with collector_paused():  # 10,000 rows' dicts, all alive until printed
-                    print(json.dumps(fleet.as_json(), indent=2))
+                    print(fleet_json(fleet.as_json()))
             else:
                 show(fleet_status_view(fleet))
             return _verdict(fleet)
         return _follow(view, topics, desired, changed, as_json, selector)
     finally:
         view.stop()
+
+
+def fleet_json(found: dict[str, Any]) -> str:
+    """`--json`'s text: indented, each robot on one line. Each line is the C encoder's (an
+    indented dump goes through json's Python encoder, several times slower at 10,000 rows)."""
+    text = json.dumps({**found, "robots": []}, indent=2)
+    rows = ",\n".join("    " + json.dumps(row) for row in found["robots"])
+    if not rows:
+        return text
+    # Exactly two blanks: the top level's key (a nested "robots" is indented further).
+    return text.replace('\n  "robots": []', '\n  "robots": [\n' + rows + "\n  ]", 1)
 
 
 def parse_selector(selectors: tuple[str, ...]) -> dict[str, str]:

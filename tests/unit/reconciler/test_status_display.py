@@ -89,3 +89,21 @@ def test_reloads_stand_beside_restarts_in_the_table_and_the_json() -> None:
     assert header.split()[-2:] == ["RESTARTS", "RELOADS"]
     assert row.split()[-2:] == ["1", "3"]
     assert [(r["restarts"], r["reloads"]) for r in fleet.as_json()["robots"]] == [(1, 3), (0, 0)]
+
+
+def test_status_json_is_the_fleet_with_one_robot_per_line() -> None:
+    import json
+
+    from workstation.cli.status import fleet_json
+
+    fleet = rolled_back_fleet()
+    found = fleet.as_json()
+    assert found["reconciler"]["rollout"] is not None  # a nested object above the robots
+    found["reconciler"]["robots"] = []  # a nested "robots" key is left alone
+    text = fleet_json(found)
+    assert json.loads(text) == found
+    lines = [line.removesuffix(",") for line in text.splitlines()]
+    for row in found["robots"]:
+        assert "    " + json.dumps(row) in lines  # each robot whole, on a line of its own
+    empty = {**found, "robots": []}
+    assert json.loads(fleet_json(empty)) == empty
