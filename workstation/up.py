@@ -36,6 +36,7 @@ from agent.workdir import HOLD_FILE, LOCK_FILE, WorkdirLock
 from configurator.render import FleetRender
 from configurator.source import SourceError
 from contract.errors import CliError, ExitCode
+from contract.models import file_name
 from contract.mqtt import Connection
 from contract.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from contract.wire import (
@@ -334,7 +335,7 @@ class Agents:
             if not self._ros2:
                 install_ros2(self.workdir / "bin")  # once: an agent may be running it
                 self._ros2 = True
-            folder = self.workdir / robot_id
+            folder = self.workdir / file_name("robot id", robot_id)  # validated: RC501
             folder.mkdir(parents=True, exist_ok=True)
             config = folder / "agent.yaml"
             settings = agent_yaml(
