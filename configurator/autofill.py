@@ -6,11 +6,9 @@ mapping scheme answer it here (`template_fit`); a robot's reported interfaces ma
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-
-import yaml
+from typing import Any
 
 from configurator.composition import missing_requires, why_unavailable
 from configurator.repository import Repository
@@ -23,6 +21,7 @@ from configurator.types import (
     logic_choice,
     logic_names,
 )
+from contract.yamlio import document_text
 
 # (action name, action, logic name, logic) -> why the logic cannot run; empty: it fits.
 LogicFit = Callable[[str, Action, str, Logic], list[str]]
@@ -133,35 +132,14 @@ def autofill(
 
 
 def to_yaml(config: CapabilityConfiguration, schema_ref: str, comment: str) -> str:
-    """The file text, with the editor modeline; names are quoted only where YAML needs it, and
-    an action's logics are a list only when it selects several."""
-    lines = [
-        f"# yaml-language-server: $schema={schema_ref}",
-        f"# {comment}",
-        f"platform: {_scalar(config.platform)}",
-        f"mapping_scheme: {_scalar(config.mapping_scheme)}",
-    ]
+    """The file text, with the editor modeline, written by the emitter (contract.yamlio): names
+    are quoted only where YAML needs it, and an action's logics are a list only when it selects
+    several."""
+    body: dict[str, Any] = {"platform": config.platform, "mapping_scheme": config.mapping_scheme}
     if config.robot_template is not None:
-        lines.append(f"robot_template: {_scalar(config.robot_template)}")
-    if config.actions:
-        lines.append("actions:")
-        for action, choice in config.actions.items():
-            names = logic_names(choice)
-            if len(names) == 1:
-                lines.append(f"  {_scalar(action)}: {_scalar(names[0])}")
-            else:
-                lines.append(f"  {_scalar(action)}:")
-                lines.extend(f"    - {_scalar(name)}" for name in names)
-    else:
-        lines.append("actions: {}")
-    return "\n".join(lines) + "\n"
-
-
-def _scalar(text: str) -> str:
-    try:
-        plain = yaml.safe_load(f"k: {text}") if text and text.strip() == text else None
-    except yaml.YAMLError:
-        plain = None
-    if isinstance(plain, dict) and plain.get("k") == text:
-        return text
-    return json.dumps(text)
+        body["robot_template"] = config.robot_template
+    body["actions"] = {}
+    for action, choice in config.actions.items():
+        names = logic_names(choice)
+        body["actions"][action] = names[0] if len(names) == 1 else list(names)
+    return document_text([f"yaml-language-server: $schema={schema_ref}", comment], body)

@@ -11,7 +11,6 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-import yaml
 from pydantic import ValidationError
 
 from configurator.repository import Repository
@@ -32,6 +31,7 @@ from contract.interfaces import (
     RobotInterfaces,
     same_type,
 )
+from contract.yamlio import document_text
 
 # The ROS graph's own plumbing, which no brain is configured with: a draft leaves it out.
 INFRASTRUCTURE_TOPICS = frozenset({"/rosout", "/parameter_events"})
@@ -280,14 +280,10 @@ def draft(
 
 
 def _text(schema_ref: str, comment: str, body: dict[str, Any]) -> str:
-    """A file with the editor modeline. PyYAML quotes what must be quoted (`yes`, `1.0`, `a: b`)
-    and escapes what is not ASCII, so every name reads back as the same text."""
-    dumped = yaml.safe_dump(
-        body, sort_keys=False, default_flow_style=None, allow_unicode=False, width=100
+    """A file with the editor modeline, written by the emitter (contract.yamlio)."""
+    return document_text(
+        [f"yaml-language-server: $schema={schema_ref}", comment], body, flow_leaves=True
     )
-    header = [f"# yaml-language-server: $schema={schema_ref}"]
-    header += [f"# {line}" for line in comment.splitlines()]
-    return "\n".join(header) + "\n" + dumped
 
 
 def template_yaml(template: RobotTemplate, schema_ref: str, comment: str) -> str:

@@ -11,6 +11,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from contract.errors import CliError
+from contract.textsafe import printable, shorten
+
 # A goal's failure code, as brains report them and rollout.verify's `critical` names them:
 # NAV2_TIMEOUT, nav2:104, E_BLOCKED. Here, beside the documents' models: validate reads
 # fleet.yaml without the wire's models.
@@ -34,6 +37,30 @@ ROS_DOMAIN_DESCRIPTION = (
 
 def is_robot_id(text: str) -> bool:
     return _ROBOT_ID.fullmatch(text) is not None
+
+
+# What may become a file or folder name: a robot id's shape. No `/`, no leading `.` (so no `..`),
+# no space, control character, escape or line break: nothing that leaves its folder, hides, or
+# misleads a terminal listing it.
+FILE_NAME_RULE = "letters, digits, '_', '.', '-' (1 to 64), starting with a letter or digit"
+
+
+def file_name_problem(name: str) -> str | None:
+    """Why `name` may not become a file or folder name, else None. The one rule for every name
+    a command writes a file from: robot ids, robot templates, mapping schemes, platforms,
+    scenarios, capability configurations and broker users."""
+    if is_robot_id(name):
+        return None
+    return f"cannot name a file: {FILE_NAME_RULE}"
+
+
+def file_name(what: str, name: str) -> str:
+    """`name`, once it may become a file name; else a CliError (exit 2) saying `what` it was
+    (an option, e.g. `--template`) and the rule, the name shown escaped."""
+    problem = file_name_problem(name)
+    if problem is not None:
+        raise CliError(f"{what} '{shorten(printable(name), 80)}' {problem}")
+    return name
 
 
 def reserved_robot_id(text: str) -> str | None:

@@ -20,6 +20,7 @@ from yaml.constructor import SafeConstructor
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from contract.codes import require
+from contract.textsafe import printable
 
 try:  # the C parser is several times faster; fall back where libyaml is missing
     from yaml import CSafeLoader as _Loader
@@ -694,3 +695,31 @@ def parse_document(path: str, raw: bytes) -> YamlDocument:
     if builder.problems:
         raise YamlReadError(_capped(builder.problems))
     return YamlDocument(path, data, root, raw)
+
+
+# ------------------------------------------------------------------ writing
+
+
+class _IndentedDumper(yaml.SafeDumper):
+    """PyYAML's safe dumper, with a block list indented under its key, as people write it."""
+
+    def increase_indent(self, flow: bool = False, indentless: bool = False) -> None:
+        super().increase_indent(flow, False)
+
+
+def document_text(header: Iterable[str], body: dict[str, Any], *, flow_leaves: bool = False) -> str:
+    """A YAML file written by the emitter, never by formatting strings: `header` as comment
+    lines (each line of it escaped: no line break or escape sequence leaves its comment), then
+    `body`. The emitter quotes what must be quoted (`yes`, `1.0`, `a: b`) and escapes what is
+    not ASCII, so every value reads back as the same text; `flow_leaves` writes a list or map
+    of scalars on one line (`[a, b]`)."""
+    lines = [f"# {printable(line)}" for text in header for line in text.splitlines() or [""]]
+    dumped = yaml.dump(
+        body,
+        Dumper=_IndentedDumper,
+        sort_keys=False,
+        default_flow_style=None if flow_leaves else False,
+        allow_unicode=False,
+        width=100,
+    )
+    return "".join(line + "\n" for line in lines) + dumped

@@ -165,6 +165,13 @@ class _Connection:
     transport: asyncio.Transport
     serial: int
     evicted: bool = False
+    answered: bool = False  # the whole answer was handed to the transport
+
+    @property
+    def finished(self) -> bool:
+        """Answered, and every byte of it with the kernel: the client may already have it all
+        (it cannot have it all before), and closing loses none of it."""
+        return self.answered and self.transport.get_write_buffer_size() == 0
 
 
 class _Cut(Exception):
@@ -176,7 +183,12 @@ class BoundedHTTPServer:
 
     At the total cap, a client from an address new to the listener, or holding at least two
     fewer connections than the busiest address, still gets in: the busiest address's oldest
-    connection is closed for it. So an attack from many addresses cannot keep anyone out."""
+    connection is closed for it. So an attack from many addresses cannot keep anyone out.
+
+    The caps count open connections: a finished one (its whole answer with the kernel) only
+    lingers to read what its client still sends, and is closed, not counted, when a new
+    connection needs its place. A client asking again the moment it has its answer is never
+    refused for the connection it just finished, and what is held stays within the caps."""
 
     def __init__(self, name: str, service: Service, limits: Limits) -> None:
         self.name = name
@@ -262,35 +274,47 @@ class BoundedHTTPServer:
     # ------------------------------------------------------------------ admission (loop thread)
 
     def _admit(self, connection: _Connection) -> str | None:
-        """None when `connection` may stay; else why it is closed at once."""
+        """None when `connection` may stay; else why it is closed at once. Decided on what is
+        open now: finished connections are not counted (see the class)."""
         mine = self._open.get(connection.key, [])
+        busy = {key: [c for c in held if not c.finished] for key, held in self._open.items()}
+        holding = len(busy.get(connection.key, []))
+        if holding >= self.limits.per_client:
+            return f"{holding} already open from {connection.key}, the most one address may hold"
         if len(mine) >= self.limits.per_client:
-            return f"{len(mine)} already open from {connection.key}, the most one address may hold"
-        if self._total >= self.limits.connections:
-            victim = self._victim(len(mine))
+            self._close_finished(mine)
+        if sum(len(held) for held in busy.values()) >= self.limits.connections:
+            victim = self._victim(busy, holding)
             if victim is None:
                 return f"{self._total} already open, the most it holds"
             victim.evicted = True
             victim.transport.abort()
             self._forget(victim)
+        if self._total >= self.limits.connections:
+            self._close_finished([c for held in self._open.values() for c in held])
         self._open.setdefault(connection.key, []).append(connection)
         self._total += 1
         return None
 
-    def _victim(self, holding: int) -> _Connection | None:
-        """The oldest connection of the address holding the most, when making room for a client
-        holding `holding` leaves things fairer: that address holds at least two more (one more
-        for an address new to the listener)."""
+    def _close_finished(self, connections: list[_Connection]) -> None:
+        """Closes the oldest finished one of `connections` (there is one: the caller counted
+        them): closed, not reset, so that its answer still reaches its client."""
+        oldest = min((c for c in connections if c.finished), key=lambda c: c.serial)
+        self._forget(oldest)
+        oldest.transport.close()
+
+    @staticmethod
+    def _victim(busy: dict[str, list[_Connection]], holding: int) -> _Connection | None:
+        """The oldest open connection of the address holding the most, when making room for a
+        client holding `holding` leaves things fairer: that address holds at least two more
+        (one more for an address new to the listener)."""
         least = holding + 2 if holding else 1
         candidates = [
-            c
-            for connections in self._open.values()
-            if len(connections) >= least
-            for c in connections
+            c for connections in busy.values() if len(connections) >= least for c in connections
         ]
         if not candidates:
             return None
-        return max(candidates, key=lambda c: (len(self._open[c.key]), -c.serial))
+        return max(candidates, key=lambda c: (len(busy[c.key]), -c.serial))
 
     def _forget(self, connection: _Connection) -> None:
         mine = self._open.get(connection.key, [])
@@ -362,17 +386,17 @@ class BoundedHTTPServer:
             ) from None
         except asyncio.LimitOverrunError:
             response = self._refused_head(client, 431, "the request head is too long")
-            await self._send(reader, writer, response, "GET", start)
+            await self._send(connection, reader, writer, response, "GET", start)
             return
         request = self._parse(head, client)
         if isinstance(request, Response):
-            await self._send(reader, writer, request, "GET", start)
+            await self._send(connection, reader, writer, request, "GET", start)
             return
         if request.method in limits.body_methods:
             response = await self._with_body(request, reader, writer, start)
         else:
             response = self._guarded(client, lambda: self.service.answer(request))
-        await self._send(reader, writer, response, request.method, start)
+        await self._send(connection, reader, writer, response, request.method, start)
 
     def _parse(self, head: bytes, client: str) -> Request | Response:
         """The request in `head`, or the answer that refuses it (said here: no service saw it)."""
@@ -466,6 +490,7 @@ class BoundedHTTPServer:
 
     async def _send(
         self,
+        connection: _Connection,
         reader: asyncio.StreamReader,
         writer: asyncio.StreamWriter,
         response: Response,
@@ -491,14 +516,19 @@ class BoundedHTTPServer:
             lines += [f"Content-Type: {response.content_type}", f"Content-Length: {len(body)}"]
         if method == "HEAD":
             body = b""
+        streamed = stream is not None and method != "HEAD" and code != 204
+        # Before the bytes go: once the client can have them all, this no longer counts.
+        connection.answered = not streamed
         writer.write(("\r\n".join(lines) + "\r\n\r\n").encode("latin-1") + body)
         loop = asyncio.get_running_loop()
         try:
             await asyncio.wait_for(
                 writer.drain(), max(self.limits.deadline - (loop.time() - start), LINGER)
             )
-            if stream is not None and method != "HEAD" and code != 204:
+            if streamed:
+                assert stream is not None
                 await self._stream(reader, writer, response, stream)
+                connection.answered = True
         finally:
             if stream is not None:
                 stream.close()

@@ -56,13 +56,55 @@ class Receiver:
         return json.dumps(event.as_json()).encode()
 
 
-def parse_receiver(text: str, index: int = 1) -> Receiver:
+NOTIFY_ENV = "ROBOTCONF_NOTIFY"  # receiver URLs, whitespace-separated: the same as --notify
+MAX_NOTIFY_FILE_BYTES = 64 * 1024  # --notify-file: some hundreds of URLs, far more than a lab has
+
+
+@dataclass(frozen=True)
+class GivenUrl:
+    """A receiver URL as given, and where (for errors that name the place, never the URL)."""
+
+    text: str = field(repr=False)
+    where: str
+
+
+def notify_file_urls(text: str, path: str) -> list[GivenUrl]:
+    """The URLs of a --notify-file's text: one per line; blank lines and lines starting with
+    `#` are skipped, spaces around a URL dropped. Each is named `PATH:LINE`."""
+    found = []
+    for number, line in enumerate(text.splitlines(), 1):
+        url = line.strip()
+        if url and not url.startswith("#"):
+            found.append(GivenUrl(url, f"--notify-file {path}:{number}"))
+    return found
+
+
+def given_urls(
+    flags: Sequence[str], from_file: Sequence[GivenUrl], environment: str | None
+) -> list[GivenUrl]:
+    """Every receiver, from --notify, --notify-file and ROBOTCONF_NOTIFY together (a union, as
+    the environment and flags combine elsewhere), each URL once, in that order."""
+    given = [GivenUrl(url, f"--notify #{n}") for n, url in enumerate(flags, 1)]
+    given += from_file
+    words = (environment or "").split()
+    given += [GivenUrl(url, f"${NOTIFY_ENV} #{n}") for n, url in enumerate(words, 1)]
+    seen: set[str] = set()
+    once = []
+    for url in given:
+        if url.text not in seen:
+            seen.add(url.text)
+            once.append(url)
+    return once
+
+
+def parse_receiver(text: str, index: int = 1, where: str | None = None) -> Receiver:
     """`http(s)://[user:password@]host[:port]/…`, or `slack:https://…` for a Slack-compatible
     `{"text": …}` body. ValueError with a one-line reason, which never repeats any part of
-    the URL: a broken one may hold its password where its host or port should be."""
+    the URL: a broken one may hold its password where its host or port should be. `where`
+    names it in errors (default `--notify #INDEX`)."""
     slack = text.startswith(SLACK)
     url = text[len(SLACK) :] if slack else text
-    where = f"--notify #{index}"
+    where = where or f"--notify #{index}"
     # urlsplit drops tabs and line breaks silently, and http.client refuses what is not
     # ASCII or holds a space at the first POST, quoting the URL: both are refused here.
     if not url.isascii() or any(c <= " " or c == "\x7f" for c in url):

@@ -10,7 +10,7 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from contract.models import is_robot_id
+from contract.models import file_name_problem, is_robot_id
 
 USERNAME = "operator"  # the operator's commands (the desk); up's reconciler and robots have theirs
 RECONCILER = "reconciler"
@@ -42,7 +42,7 @@ def broker_login(folder: Path, username: str = USERNAME) -> BrokerLogin:
     """The login of `username` on the broker whose files are in `folder` (0700): its password
     file (`<user>.password`, 0600) is made once with a random password, and kept, so that agents
     and the operator's commands keep working across `up`s."""
-    if not is_robot_id(username):  # a file name too: never a path
+    if file_name_problem(username) is not None:  # a file name too: never a path
         raise ValueError(f"{username!r} is not a user name of the embedded broker")
     folder.mkdir(parents=True, exist_ok=True)
     os.chmod(folder, 0o700)

@@ -37,6 +37,8 @@ from agent.workdir import HOLD_FILE, LOCK_FILE, WorkdirLock
 from configurator.render import FleetRender
 from configurator.source import SourceError
 from contract.errors import CliError, ExitCode
+from contract.files import read_regular, write_atomic
+from contract.models import file_name
 from contract.mqtt import Connection
 from contract.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from contract.wire import (
@@ -123,7 +125,8 @@ def _git_repo(root: Path) -> Any:
 
 
 def prepare(root: Path, branch: str | None, workdir: str | None) -> UpSetup:
-    """Checks the repository and says what will be applied; raises CliError."""
+    """Checks the repository and says what will be applied, and makes up's state folders
+    ignore themselves in git before anything is kept there; raises CliError."""
     root = root.absolute()
     if not (root / "configs").is_dir():
         raise CliError(f"{root} has no configs/ folder; run robotconf up in a lab repository")
@@ -157,7 +160,38 @@ def prepare(root: Path, branch: str | None, workdir: str | None) -> UpSetup:
             "fix it (robotconf validate), commit, and run robotconf up again"
         )
     folder = Path(workdir).absolute() if workdir else root / ".robotconf" / "up"
+    # Before anything is written there: keys, passwords and tokens are never committed.
+    ignore_itself(root / ".robotconf")  # desk.json's folder, whatever --workdir says
+    if not folder.is_relative_to(root / ".robotconf"):
+        ignore_itself(folder)
     return UpSetup(root, branch, head, desired.fleet, folder, notes, builder)
+
+
+IGNORE_ALL = "*"  # a state folder's .gitignore: itself and all it holds, as a virtualenv's
+MAX_GITIGNORE_BYTES = 64 * 1024
+
+
+def ignore_itself(folder: Path) -> None:
+    """Makes `folder` ignore itself in git wherever it is (a `.gitignore` of `*` inside it, as
+    virtualenvs do), so that `git add -A` in a lab's own repository never commits up's signing
+    key, broker passwords or token. A `.gitignore` already there is kept; one without a `*`
+    line gets one added (its own lines kept). CliError when it cannot be written."""
+    path = folder / ".gitignore"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            text = read_regular(path, MAX_GITIGNORE_BYTES).decode("utf-8", "replace")
+        except FileNotFoundError:
+            text = None
+        if text is not None and IGNORE_ALL in (line.strip() for line in text.splitlines()):
+            return
+        before = "" if not text or text.endswith("\n") else "\n"
+        added = (text or "") + before + IGNORE_ALL + "\n"
+        write_atomic(path, added.encode("utf-8"), 0o644)
+    except OSError as exc:
+        raise CliError(
+            f"cannot make {path} ignore up's files (keys, passwords): {exc.strerror or exc}"
+        ) from None
 
 
 def agent_yaml(
@@ -336,7 +370,7 @@ class Agents:
             if not self._ros2:
                 install_ros2(self.workdir / "bin")  # once: an agent may be running it
                 self._ros2 = True
-            folder = self.workdir / robot_id
+            folder = self.workdir / file_name("robot id", robot_id)  # validated: RC501
             folder.mkdir(parents=True, exist_ok=True)
             config = folder / "agent.yaml"
             settings = agent_yaml(

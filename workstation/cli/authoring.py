@@ -15,6 +15,7 @@ from configurator.schemas import dump, generate, modeline_ref
 from configurator.workspace import check
 from contract.diagnostics import did_you_mean, format_text
 from contract.errors import CliError, ExitCode
+from contract.models import file_name, file_name_problem
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.draft import from_broker, from_file, robot_namespace, usable
 from workstation.cli.options import repo_option
@@ -75,11 +76,14 @@ def autofill(
     """Write a capability configuration that fits a template, or a live robot (--robot, its
     reported interfaces), or both: per action, the first logic they serve, or with --all
     every such logic (the action then lists them: `Follow: [follow_with_poses,
-    follow_with_bluetooth]`); the file validates."""
+    follow_with_bluetooth]`); the file validates. Every name given may become a file name
+    (letters, digits, '_', '.', '-'; 1 to 64, starting with a letter or digit), else nothing
+    is read or written."""
     if template is None and robot_id is None:
         raise CliError("give --template, --robot, or both", ExitCode.TOOL)
     if robot_id is None and from_path is not None:
         raise CliError("--from reads a robot's interfaces: give --robot too", ExitCode.TOOL)
+    name = _file_name(platform_name, scheme, template, robot_id, name)
     found = check(repo).repo
     problems = _unknown_names(found, platform_name, scheme, template)
     if problems:
@@ -93,7 +97,6 @@ def autofill(
         robot_ns, _ = robot_namespace(found, robot_id, namespace)
         bound = found.platforms[platform_name].schemes[scheme].model
         robot_fit = interfaces_fit(bound, robot_ns, reported)
-    name = name or f"{template or robot_id}-{scheme}"
     target = repo / "configs" / "capabilities" / f"{name}.yaml"
     if target.exists() and not force:
         raise CliError(f"{target} exists; choose another --name or pass --force", ExitCode.FINDINGS)
@@ -114,6 +117,29 @@ def autofill(
         f"written by robotconf autofill for {fitted} ({platform_name}, {scheme})",
     )
     return _write_and_prove(repo, target, text, result)
+
+
+def _file_name(
+    platform_name: str, scheme: str, template: str | None, robot_id: str | None, name: str | None
+) -> str:
+    """The configuration's name, every name it may be made of checked first: each may become a
+    file name (contract.models.file_name), the one chosen too."""
+    given = {
+        "--platform": platform_name,
+        "--scheme": scheme,
+        "--template": template,
+        "--robot": robot_id,
+        "--name": name,
+    }
+    for what, value in given.items():
+        if value is not None:
+            file_name(what, value)
+    if name is not None:
+        return name
+    made = f"{template or robot_id}-{scheme}"
+    if file_name_problem(made) is not None:
+        raise CliError(f"the configuration's name {made} is too long (64 at most): give --name")
+    return made
 
 
 def _unknown_names(

@@ -28,6 +28,7 @@ from contract.diagnostics import Diagnostic, did_you_mean, format_text
 from contract.errors import CliError, ExitCode
 from contract.files import read_regular, write_atomic
 from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
+from contract.models import file_name
 from contract.safejson import PayloadError, parse_object
 from contract.textsafe import printable
 from contract.topics import Role, subscriptions
@@ -143,18 +144,12 @@ def _targets(
 ) -> list[Path]:
     """The two files to write: named safely, on a platform that exists, not overwritten
     without `force`."""
-    if platform not in known.platforms:
+    template, scheme = file_name("--template", names[0]), file_name("--scheme", names[1])
+    if file_name("--platform", platform) not in known.platforms:
         raise CliError(
             f"unknown platform '{platform}'{did_you_mean(platform, known.platforms)}",
             ExitCode.FINDINGS,
         )
-    template, scheme = names
-    for what, name in (("--template", template), ("--scheme", scheme)):
-        if not is_robot_id(name):
-            raise CliError(
-                f"{what} {name!r} cannot name a file: letters, digits, '_', '.', '-' "
-                "(at most 64), starting with a letter or digit",
-            )
     base = repo / "models" / "platforms" / platform
     paths = [
         base / "robot-templates" / f"{template}.yaml",

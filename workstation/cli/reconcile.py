@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
@@ -12,8 +13,17 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from contract.errors import CliError, ExitCode
+from contract.files import read_regular
 from contract.signing import SigningKeyError
+from contract.textsafe import printable
 from reconciler.lifecycle import log_to_stderr, on_stop_signals, parse_address
+from reconciler.notify import (
+    MAX_NOTIFY_FILE_BYTES,
+    NOTIFY_ENV,
+    GivenUrl,
+    given_urls,
+    notify_file_urls,
+)
 from reconciler.signer import make_signer, make_verifier
 from reconciler.source import BranchSource, LocalBranch, RemoteBranch
 from workstation.cli.broker_options import BrokerOptions, broker_options
@@ -49,17 +59,40 @@ def keep_desired(source: BranchSource) -> Callable[[str, Mapping[str, DesiredRob
     return None
 
 
+def notify_urls(notify: tuple[str, ...], notify_file: Path | None) -> list[GivenUrl]:
+    """The receivers of --notify, --notify-file (read bounded, a regular file) and
+    $ROBOTCONF_NOTIFY together: the last two keep URLs (secrets) off the command line."""
+    from_file: list[GivenUrl] = []
+    if notify_file is not None:
+        try:
+            raw = read_regular(notify_file, MAX_NOTIFY_FILE_BYTES, follow=True)
+            text = raw.decode("utf-8")
+        except OSError as exc:
+            raise CliError(f"--notify-file {notify_file}: {exc.strerror or exc}") from None
+        except UnicodeDecodeError:
+            raise CliError(f"--notify-file {notify_file} is not UTF-8 text") from None
+        from_file = notify_file_urls(text, printable(str(notify_file)))
+    return given_urls(notify, from_file, os.environ.get(NOTIFY_ENV))
+
+
 def make_telemetry(
-    connection: Connection, prefix: str, notify: tuple[str, ...], metrics_at: str | None
+    connection: Connection,
+    prefix: str,
+    notify: tuple[str, ...],
+    metrics_at: str | None,
+    notify_file: Path | None = None,
 ) -> Telemetry:
-    """Alerts and metrics when asked for, and the timeline's events always (`start_ledger`
-    hands them to the ledger); a bad URL or address, or a port that cannot be listened on, is
-    a one-line error."""
+    """Alerts (to the receivers of notify_urls) and metrics when asked for, and the timeline's
+    events always (`start_ledger` hands them to the ledger); a bad URL or address, or a port
+    that cannot be listened on, is a one-line error."""
     from reconciler.notify import Notifier, parse_receiver
     from reconciler.telemetry import Telemetry
 
+    given = notify_urls(notify, notify_file)
     try:
-        receivers = [parse_receiver(url, index) for index, url in enumerate(notify, 1)]
+        receivers = [
+            parse_receiver(url.text, index, url.where) for index, url in enumerate(given, 1)
+        ]
     except ValueError as exc:
         raise CliError(str(exc)) from None
     metrics = None
@@ -276,6 +309,14 @@ def start_ui(
     'sent as HTTP Basic authentication); slack:URL posts a Slack-compatible {"text": ...} instead',
 )
 @click.option(
+    "--notify-file",
+    type=click.Path(path_type=Path, dir_okay=False),
+    default=None,
+    metavar="FILE",
+    help="receiver URLs as --notify takes them, one a line (# comments), kept out of ps; "
+    "$ROBOTCONF_NOTIFY adds more (whitespace-separated); all of them are used",
+)
+@click.option(
     "--metrics",
     "metrics_at",
     default=None,
@@ -309,6 +350,7 @@ def reconcile(
     signing_key: Path | None,
     cache_dir: str | None,
     notify: tuple[str, ...],
+    notify_file: Path | None,
     metrics_at: str | None,
     webhook_at: str | None,
     webhook_secret_file: Path | None,
@@ -328,7 +370,7 @@ def reconcile(
     webhook = webhook_options(webhook_at, webhook_secret_file)
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
     kept = ledger_settings(mqtt.prefix, **ledger_options)
-    telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at)
+    telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at, notify_file)
     telemetry.keep_desired = keep_desired(source)
     log_to_stderr("reconciler")
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):

@@ -16,6 +16,7 @@ from configurator.workspace import check
 from contract.diagnostics import format_text
 from contract.errors import CliError, ExitCode
 from contract.files import write_atomic
+from contract.models import file_name
 from contract.signing import SigningKeyError, generate_keys
 from contract.wire import DEFAULT_PREFIX, validate_prefix
 from workstation.cli.options import repo_option, rev_option
@@ -120,7 +121,11 @@ def broker_config(
         prefix = validate_prefix(prefix)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    users = ServiceUsers(reconciler_user, viewer_user, operator_user)
+    users = ServiceUsers(  # each names its password file and an ACL line
+        file_name("--reconciler-user", reconciler_user),
+        file_name("--viewer-user", viewer_user),
+        file_name("--operator-user", operator_user),
+    )
     robots = _fleet_robots(repo, rev, users)
     listener = Listener(
         port=port,

@@ -128,3 +128,38 @@ def test_the_namespace_comes_from_the_fleet(lab: Lab, tmp_path: Path) -> None:
     other = lab.run(*args, "--robot", "tb3-01", "--namespace", "tb3_09", "--name", "ns9")
     assert "robot lacks topic /tb3_09/odom" in other.stdout
     assert "NavigateToLocation" not in actions(lab, "ns9")
+
+
+def test_a_name_that_cannot_be_a_file_is_refused_before_anything_is_read_or_written(
+    lab: Lab, tmp_path: Path
+) -> None:
+    """The robot id (the file's default name), --name, --template and --scheme are checked by
+    the one rule of file names (contract.models.file_name): nothing lands outside the folder,
+    nor in a file named with a line break or a terminal escape."""
+    path = lab.root / "tb3-04.json"
+    path.write_text(json.dumps(report()))
+    outside = tmp_path / "outside"
+    before = sorted(p.name for p in lab.path("configs/capabilities").iterdir())
+    cases = [
+        ("--robot", "../../x"),
+        ("--robot", str(outside)),
+        ("--robot", "tb3\nplatform: evil"),
+        ("--robot", "\x1b]0;owned\x07tb3"),
+        ("--name", "../escape"),
+        ("--template", "../../t"),
+        ("--scheme", ".hidden"),
+    ]
+    for option, bad in cases:
+        args = ["--platform", "ROS2", "--scheme", "real-world", "--from", str(path)]
+        args += ["--robot", "tb3-04"] if option != "--robot" else []
+        done = lab.run("autofill", *args, option, bad)
+        assert done.returncode == 2, (bad, done.stdout, done.stderr)
+        [line] = done.stderr.splitlines()
+        assert line.startswith(f"robotconf: {option} '") and "cannot name a file" in line
+        assert "\x1b" not in line and "\x07" not in line
+    assert sorted(p.name for p in lab.path("configs/capabilities").iterdir()) == before
+    assert not outside.exists() and not (lab.root.parent / "x.yaml").exists()
+    # Each part may be a file name and the made name (ROBOT-SCHEME) still too long for one.
+    long_robot = ("--robot", "t" * 60, "--platform", "ROS2", "--scheme", "real-world")
+    done = lab.run("autofill", *long_robot, "--from", str(path))
+    assert done.returncode == 2 and "give --name" in done.stderr

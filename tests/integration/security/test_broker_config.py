@@ -221,6 +221,21 @@ def test_broker_config_check_notices_a_new_robot(tmp_path: Path) -> None:
     assert "tb3-99:$7$" in (out / "passwd").read_text()
 
 
+def test_a_service_user_that_cannot_be_a_file_name_is_refused(tmp_path: Path) -> None:
+    """A service user names its password file and an ACL line: `../x` would write outside
+    the secrets folder, a line break another ACL rule. Refused before anything is written."""
+    from tests.support.lab import Lab
+
+    lab = Lab(tmp_path / "lab")
+    out = tmp_path / "broker"
+    for bad in ("../../escaped", "viewer\nuser intruder"):
+        args = ["broker-config", "--repo", str(lab.root), "--out", str(out), "--viewer-user", bad]
+        done = subprocess.run([ROBOTCONF, *args], capture_output=True, text=True)
+        assert done.returncode == 2 and "--viewer-user '" in done.stderr, done.stderr
+        assert "cannot name a file" in done.stderr and len(done.stderr.splitlines()) == 1
+    assert not out.exists() and not (tmp_path / "escaped.password").exists()
+
+
 def test_a_robot_cannot_take_another_robots_session(broker: Secured) -> None:
     """Connecting with robot B's client id under robot A's credentials must neither knock B
     off nor set off B's Last Will (issue 10, item 8): the robots' listener makes every client

@@ -323,7 +323,7 @@ def test_to_yaml_writes_a_list_only_for_several_logics() -> None:
     )
     text = to_yaml(config, "../../schemas/capability.schema.json", "test")
     assert text.endswith(
-        'actions:\n  AskHelp: ask_help_broadcast\n  Follow:\n    - a\n    - "b: c"\n'
+        "actions:\n  AskHelp: ask_help_broadcast\n  Follow:\n    - a\n    - 'b: c'\n"
     )
 
 
