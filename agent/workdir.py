@@ -6,13 +6,13 @@ Everything the agent must remember across its own restarts lives here, nowhere e
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import math
 import os
 import threading
 from pathlib import Path
 
 from contract.files import write_atomic
+from contract.pidlock import PidLock
 
 __all__ = ["write_atomic"]  # kept here too: the agent's modules import it from its workdir
 
@@ -173,53 +173,15 @@ def _read_entries(path: Path) -> list[tuple[float, str]]:
     return [(n, word) for n, word in entries if math.isfinite(n)]
 
 
-class WorkdirLock:
+class WorkdirLock(PidLock):
     """One agent per work directory: a second one would take the first one's brain for an orphan."""
 
     def __init__(self, workdir: Path) -> None:
-        self._path = workdir / LOCK_FILE
-        self._fd: int | None = None
+        super().__init__(workdir / LOCK_FILE)
 
     def acquire(self) -> str | None:
         """None when acquired, else why not."""
-        fd = os.open(self._path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
-            os.close(fd)
-            return f"another agent (pid {holder}) is using {self._path.parent}"
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
-        self._fd = fd
-        return None
-
-    def holder(self) -> int | None:
-        """The pid of the agent holding this lock (0 if it has not written it yet), None when
-        nobody does: the kernel releases the lock of a dead agent, so no lock is ever stale."""
-        try:
-            return lock_holder(self._path)
-        except FileNotFoundError:
+        holder = self.take()
+        if holder is None:
             return None
-
-    def release(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
-
-
-def lock_holder(path: Path) -> int | None:
-    """The pid written in a held flock file (0 if not written yet), None when nobody holds it:
-    the kernel drops the lock of a dead holder, so a held lock is never stale. Raises OSError
-    when the file cannot be opened."""
-    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except OSError:
-            raw = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-            return int(raw) if raw.isdigit() else 0
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        return None
-    finally:
-        os.close(fd)
+        return f"another agent (pid {holder}) is using {self.path.parent}"

@@ -601,3 +601,29 @@ async def _client_gone(reader: asyncio.StreamReader) -> None:
             if not data:
                 return
             left -= len(data)
+
+
+class EdgeListener:
+    """A listener the edge answers for, as its owner (the webhook, the metrics) shows it: served
+    with `_listen`, then its port, its open connections, and `close`."""
+
+    _edge: BoundedHTTPServer | None = None
+
+    def _listen(self, name: str, service: Service, limits: Limits, host: str, port: int) -> None:
+        """Listens now (OSError when it cannot) and answers on a thread of its own."""
+        self._edge = BoundedHTTPServer(name, service, limits)
+        self._edge.listen(host, port)
+
+    @property
+    def port(self) -> int:
+        assert self._edge is not None
+        return self._edge.port
+
+    @property
+    def open_connections(self) -> int:
+        return self._edge.open_connections if self._edge is not None else 0
+
+    def close(self) -> None:
+        if self._edge is not None:
+            self._edge.close()
+            self._edge = None

@@ -30,7 +30,7 @@ from contract.notes import VerdictNote
 from contract.wire import ReconcilerReason, RolloutStatus
 from contract.wire import Verdict as WaveVerdict
 from reconciler.decide import state_of
-from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
+from reconciler.http_edge import EdgeListener, Limits, Request, Response
 from reconciler.notify import OUTCOMES
 from reconciler.outcomes import MAX_LABEL_VALUES, NO_SCENARIO, OTHER, BoundedLabels
 from reconciler.verdicts import Verdict
@@ -47,7 +47,7 @@ COUNTED = 64
 LIMITS = Limits(connections=64, per_client=8, head=5.0, silence=5.0, deadline=10.0)
 
 
-class Metrics:
+class Metrics(EdgeListener):
     """The reconciler's metrics, and the HTTP server that serves them once `serve`d."""
 
     def __init__(self) -> None:
@@ -109,7 +109,6 @@ class Metrics:
         self._known_series()
         self._applied: str | None = None
         self._lock = threading.Lock()
-        self._server: BoundedHTTPServer | None = None
 
     def _outcome_series(self) -> None:
         """What the outcome ledger counts (`reconciler/ledger_feed.py`)."""
@@ -190,22 +189,7 @@ class Metrics:
 
     def serve(self, host: str, port: int, limits: Limits = LIMITS) -> None:
         """Listens now (OSError when it cannot) and serves on a thread of its own."""
-        self._server = BoundedHTTPServer("metrics", _Scrapes(self.registry), limits)
-        self._server.listen(host, port)
-
-    @property
-    def port(self) -> int:
-        assert self._server is not None
-        return self._server.port
-
-    @property
-    def open_connections(self) -> int:
-        return self._server.open_connections if self._server is not None else 0
-
-    def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
-            self._server = None
+        self._listen("metrics", _Scrapes(self.registry), limits, host, port)
 
     def step(
         self,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from contract.files import NotRegularFile, read_regular
 from contract.textsafe import printable
-from reconciler.http_edge import BoundedHTTPServer, Limits, Request, Response
+from reconciler.http_edge import EdgeListener, Limits, Request, Response
 from reconciler.webhook import MAX_BODY, Answer, Outcome, judge, refused, server_of
 
 log = logging.getLogger("robotconf.reconciler")
@@ -51,7 +51,7 @@ def read_secret(path: Path) -> bytes:
     return secret
 
 
-class WebhookServer:
+class WebhookServer(EdgeListener):
     """Listens once `serve`d; a push of `branch` calls `on_push` (it must return at once), and
     every answer's server and outcome are told to `on_answer` (metrics) when given."""
 
@@ -69,26 +69,10 @@ class WebhookServer:
         self.limits = limits
         self._on_push = on_push
         self._on_answer = on_answer
-        self._edge: BoundedHTTPServer | None = None
 
     def serve(self, host: str, port: int) -> None:
         """Listens now (OSError when it cannot) and answers on a thread of its own."""
-        self._edge = BoundedHTTPServer("webhook", self, self.limits)
-        self._edge.listen(host, port)
-
-    @property
-    def port(self) -> int:
-        assert self._edge is not None
-        return self._edge.port
-
-    @property
-    def open_connections(self) -> int:
-        return self._edge.open_connections if self._edge is not None else 0
-
-    def close(self) -> None:
-        if self._edge is not None:
-            self._edge.close()
-            self._edge = None
+        self._listen("webhook", self, self.limits, host, port)
 
     # ------------------------------------------------------------------ the edge's Service
 

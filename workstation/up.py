@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import fcntl
 import itertools
 import json
 import logging
@@ -40,6 +39,7 @@ from contract.errors import CliError, ExitCode
 from contract.files import read_regular, write_atomic
 from contract.models import file_name
 from contract.mqtt import Connection
+from contract.pidlock import PidLock
 from contract.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
 from contract.wire import (
     BROKER_ENV,
@@ -245,35 +245,22 @@ def agent_yaml(
     return config
 
 
-class UpLock:
+class UpLock(PidLock):
     """One `up` per work directory. A flock: the kernel releases it when `up` dies, so the lock
     of a crashed `up` is never stale."""
 
     def __init__(self, workdir: Path) -> None:
-        self.path = workdir / "up.lock"
-        self._fd: int | None = None
+        super().__init__(workdir / "up.lock")
 
     def acquire(self) -> None:
         """Raises CliError when another `up` holds it."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
-            os.close(fd)
+        holder = self.take()
+        if holder is not None:
             raise CliError(
                 f"another robotconf up (pid {holder}) is running with {self.path.parent}; "
                 "stop it first, or give this one its own --workdir"
-            ) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
-        self._fd = fd
-
-    def release(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
+            )
 
 
 def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:

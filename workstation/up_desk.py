@@ -113,7 +113,7 @@ def _read(path: Path) -> UpDesk | None:
 def _running(desk: UpDesk) -> bool:
     """True while the `up` that wrote `desk` holds its lock: the kernel drops a flock when its
     holder dies, so a killed `up` is never taken for a running one."""
-    from agent.workdir import lock_holder
+    from contract.pidlock import lock_holder
 
     try:
         return lock_holder(desk.lock) == desk.pid

@@ -7,28 +7,15 @@ import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import click
 
 from contract.errors import CliError
 from contract.logsafe import escape_stray_records
-from contract.mqtt import NOTHING_LISTENS, Connection
+from contract.mqtt import Connection
 from contract.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX, validate_prefix
 from workstation.cli.options import F
-
-if TYPE_CHECKING:
-    from reconciler.retained import RetainedView
-
-# What to do when nothing listens at the broker's address, and when something there turned
-# the connection away: said by every desk command alike.
-START_ONE = (
-    "is the broker running? (`./dev up` or `robotconf up` starts one; --broker URL names another)"
-)
-CHECK_LISTENER = (
-    "is that a broker's listener, and does it speak what --broker's scheme says "
-    "(mqtt:// plain, mqtts:// TLS)?"
-)
 
 
 def prefix_option(command: F) -> F:
@@ -91,39 +78,6 @@ _BROKER_FIELDS = (
     "key_file",
     "insecure",
 )
-
-
-def refused(url: str, reason: str) -> CliError:
-    """The broker turned this client away: waiting longer would not change that."""
-    return CliError(
-        f"the broker at {url} refused the connection ({reason}): check --username and "
-        "--password-file (for robotconf up's broker, give no broker options: run the command "
-        "in up's repository, or with --repo)"
-    )
-
-
-def wait_for_broker(view: RetainedView, wait: float) -> None:
-    """Returns once `view` holds the broker's retained messages. Raises a one-line CliError at
-    once when the broker refuses the login or cannot be connected to (refused, reset, closed),
-    and after `wait` seconds only when the network stays silent: the one place every desk
-    command (status, logs, restart, rollout, promote, draft) says the broker is not there."""
-    if view.wait_synced(wait, or_refused=True):
-        return
-    raise broker_missing(view, wait)
-
-
-def broker_missing(view: RetainedView, wait: float) -> CliError:
-    """Why `view` has nothing after `wait_for_broker` gave up, and what to do about it."""
-    url = view.connection.address.url
-    if view.refused is not None:
-        return refused(url, view.refused)
-    if view.closed is not None:
-        hint = START_ONE if view.closed == NOTHING_LISTENS else CHECK_LISTENER
-        return CliError(f"cannot connect to the broker at {url} ({view.closed}): {hint}")
-    return CliError(
-        f"no answer from the broker at {url} within {wait:g} s ({view.silence()}): is it "
-        "running and reachable from here? (--broker URL, --wait S)"
-    )
 
 
 def _given(name: str) -> bool:

@@ -35,8 +35,9 @@ from contract.topics import Role, subscriptions
 from contract.wire import Topics
 from contract.yamlio import MAX_FILE_BYTES
 from reconciler.retained import RetainedView, read_object
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options, wait_for_broker
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.options import repo_option
+from workstation.desk.broker import wait_for_broker
 
 SHOWN = 20  # interfaces left out for a reason, listed one by one (a hostile report has 4,096)
 

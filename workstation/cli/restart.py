@@ -1,29 +1,22 @@
-"""`robotconf restart ROBOT`: start a robot's brain again from the desk, without a commit."""
+"""`robotconf restart ROBOT`: start a robot's brain again from the desk, without a commit (the
+desk's request_restart, workstation/desk/restart.py); who asks, and the --signing-key option."""
 
 from __future__ import annotations
 
 import getpass
-import queue
 import re
-import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import click
 
 from configurator.types import is_robot_id
 from contract.errors import CliError, ExitCode
-from contract.launch import REQUESTER_PATTERN, RestartRequest
-from contract.mqtt import Connection
+from contract.launch import REQUESTER_PATTERN
 from contract.textsafe import printable
-from contract.wire import AgentState, AgentStatus
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.desk import online_robot
 from workstation.cli.options import F, repo_option
-from workstation.desk import RobotDesk
-
-if TYPE_CHECKING:
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+from workstation.desk.restart import request_restart
+from workstation.desk.signing import private_key
 
 _REQUESTER = re.compile(REQUESTER_PATTERN)
 
@@ -45,32 +38,6 @@ def requester(given: str | None, username: str | None) -> str:
     return name
 
 
-def _confirmed(desk: RobotDesk, issued_at: float, wait: float) -> AgentStatus | None:
-    """The robot's first status that records this restart, within `wait` seconds."""
-    deadline = time.monotonic() + wait
-    while (left := deadline - time.monotonic()) > 0:
-        try:
-            status = desk.statuses.get(timeout=min(left, 0.5))
-        except queue.Empty:
-            continue
-        if status.restart_requested_at == issued_at:
-            return status
-    return None
-
-
-def private_key(path: Path | None) -> Ed25519PrivateKey | None:
-    """The key restarts are signed with, if one is given; a key that cannot be read is a
-    one-line error."""
-    if path is None:
-        return None
-    from contract.signing import SigningKeyError, load_private_key
-
-    try:
-        return load_private_key(path)
-    except SigningKeyError as exc:
-        raise CliError(str(exc), ExitCode.TOOL) from None
-
-
 def signing_key_option(command: F) -> F:
     """--signing-key, as `restart` and `ui` (whose operators restart robots) take it."""
     return click.option(
@@ -80,58 +47,6 @@ def signing_key_option(command: F) -> F:
         help="the Launch Requests' private key: needed when the robots verify signatures "
         "(default: a running robotconf up's, when no broker is given)",
     )(command)
-
-
-def _send_restart(
-    desk: RobotDesk, robot_id: str, by: str, key: Ed25519PrivateKey | None, timeout: float
-) -> float:
-    """Publish the restart request, signed with `key` if any; when it was issued."""
-    # Microseconds, as `sign` stamps them: the status that confirms it names the same time.
-    issued_at = round(time.time(), 6)
-    request = RestartRequest(robot_id=robot_id, requested_by=by, issued_at=issued_at)
-    if key is not None:
-        from contract.signing import sign
-
-        request = sign(request, key, issued_at)
-    if not desk.send(desk.topics.restart(robot_id), request.payload(), timeout):
-        raise CliError(
-            f"the broker did not take the restart request "
-            f"({desk.view.last_error or 'no acknowledgement'})"
-        )
-    return request.issued_at
-
-
-def request_restart(
-    connection: Connection,
-    prefix: str,
-    robot_id: str,
-    by: str,
-    key: Ed25519PrivateKey | None,
-    wait: float,
-) -> AgentStatus:
-    """Asks `robot_id`'s agent to restart its brain (signed with `key` when given) and waits
-    up to `wait` seconds for the status that confirms it: the one way `robotconf restart` and
-    the UI's operators restart a robot. Blocks; raises CliError saying why it did not happen
-    (robot unknown, offline or idle, broker silent, no confirmation)."""
-    with RobotDesk(connection, prefix, robot_id, logs=False) as desk:
-        robot = online_robot(desk, min(wait, 10.0), "a restart would be lost")
-        status = robot.status
-        if status is None or status.state is AgentState.IDLE:
-            raise CliError(
-                f"nothing to restart: {robot_id} has no launch request (it is idle)",
-                ExitCode.FINDINGS,
-            )
-        issued_at = _send_restart(desk, robot_id, by, key, min(wait, 10.0))
-        confirmed = _confirmed(desk, issued_at, wait)
-    if confirmed is None:
-        raise CliError(
-            f"{robot_id} did not confirm the restart within {wait:g} s: its agent refused it "
-            "(unsigned or wrongly signed where it verifies, clocks more than 5 minutes apart) "
-            f"or never got it (the ACL lets only operators and the reconciler ask); "
-            f"robotconf logs {robot_id} shows why",
-            ExitCode.FINDINGS,
-        )
-    return confirmed
 
 
 @click.command("restart")

@@ -19,10 +19,11 @@ from contract.wire import Topics
 from reconciler.lifecycle import on_stop_signals
 from reconciler.retained import RetainedView
 from reconciler.verdicts import FleetStatus
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options, wait_for_broker
+from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.fleet_view import fleet_status_view
 from workstation.cli.options import repo_option, rev_option
 from workstation.cli.terminal import is_terminal, plain_text, show, terminal_console
+from workstation.desk.broker import wait_for_broker
 from workstation.fleet_status import (
     DesiredCache,
     confirm_loss,

@@ -11,8 +11,8 @@ from typing import Protocol
 from contract.errors import CliError
 from contract.mqtt import Connection
 from contract.wire import LogsChunk
-from workstation.cli.logs import log_chunks, shown
-from workstation.desk import RobotDesk
+from workstation.desk.logs import log_chunks, shown
+from workstation.desk.robot import RobotDesk
 
 log = logging.getLogger("robotconf.ui")
 

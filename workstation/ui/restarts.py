@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Literal
 from contract.errors import CliError
 from contract.mqtt import Connection
 from contract.textsafe import printable
-from workstation.cli.restart import request_restart
+from workstation.desk.restart import request_restart
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Literal
 from contract.errors import CliError
 from contract.mqtt import Connection
 from contract.textsafe import printable
-from workstation.cli.rollout import Action, send_action
+from workstation.desk.rollout import Action, send_action
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey

@@ -12,7 +12,7 @@ from contract.errors import CliError
 from contract.mqtt import Connection
 from reconciler.http_edge import BoundedHTTPServer
 from reconciler.lifecycle import parse_address
-from workstation.cli.restart import private_key
+from workstation.desk.signing import private_key
 from workstation.ui import DEFAULT_LISTEN
 from workstation.ui.actions import Actions
 from workstation.ui.auth import OperatorAuth

@@ -1,5 +1,6 @@
-"""The desk's side of `robotconf logs` and `robotconf restart`: one broker client on one robot's
-topics that tells what the broker knows of it, sends it a request and hands back its answers.
+"""The desk's client on one robot: one broker client on its topics that tells what the broker
+knows of it, finds it online (or says why not), sends it a request and hands back its answers;
+the logs and the restarts (workstation/desk/logs.py, restart.py) stand on it.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import TypeVar
 
 from pydantic import ValidationError
 
+from contract.errors import CliError, ExitCode
 from contract.mqtt import Connection
 from contract.safejson import PayloadError
 from contract.textsafe import printable
@@ -19,6 +21,7 @@ from contract.topics import Role, subscriptions
 from contract.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
 from reconciler.observed import RobotSeen, parse_retained
 from reconciler.retained import RetainedView, read_object, take_snapshot
+from workstation.desk.broker import wait_for_broker
 
 # Answers are bounded by the agent; anything much larger is not one of its answers.
 MAX_ANSWER_BYTES = MAX_LOG_MESSAGE_BYTES + 4096
@@ -106,6 +109,22 @@ class RobotDesk:
                 _put(self.statuses, status)
         except (PayloadError, ValidationError, ValueError):
             return  # not an answer of an agent: nothing to show
+
+
+def online_robot(desk: RobotDesk, wait: float, why_online: str) -> RobotSeen:
+    """The robot as the broker knows it, once its retained topics are read; raises CliError
+    when the broker does not answer, knows nothing of the robot, or has it offline."""
+    url = desk.connection.address.url
+    wait_for_broker(desk.view, wait)
+    robot = desk.robot()
+    if robot is None:
+        raise CliError(desk.unknown(wait).message(url), ExitCode.FINDINGS)
+    if not robot.online:
+        raise CliError(
+            f"{desk.robot_id} is offline: {why_online} (robotconf status {desk.robot_id})",
+            ExitCode.FINDINGS,
+        )
+    return robot
 
 
 def _put(target: queue.Queue[T], item: T) -> None:
