@@ -75,6 +75,9 @@ class RolloutInput:
     watching_since: float = 0.0
     # robot -> when the reconciler first saw it dark (offline, or its status gone) since then
     dark_since: Mapping[str, float] = field(default_factory=dict)
+    # How the statuses' read is known to lack messages the broker dropped (its queue limit),
+    # or None: then a robot without any status is unknown, not offline, and not dark.
+    statuses_lost: str | None = None
     # Robots whose new request is held back for drift (drift: hold): not sent it, they count
     # as absent — pending, never failed; the wave goes on without them at its timeout.
     held: frozenset[str] = frozenset()
@@ -456,6 +459,13 @@ class _Rollout:
             why = f"wave '{name}' verifying: {found.message}"
         if self.busy_why and state == "Progressing":
             why = f"{why}; {self.busy_why}" if why else self.busy_why
+        lost = self.seen.statuses_lost
+        if lost is not None and state == "Progressing":
+            said = (
+                "robots without a status are waited for, not offline: the broker dropped "
+                f"status messages ({lost})"
+            )
+            why = f"{why}; {said}" if why else said
         return state, why
 
     def halted(self, previous: RolloutStatus) -> RolloutStep:
@@ -691,6 +701,7 @@ class _Rollout:
         digest = self.seen.head.requests[robot].digest
         since = self.seen.running_since.get(robot)
         dark_at = self.seen.dark_since.get(robot, memory.watching_since) + DARK_GRACE
+        unknown = self._unknown(robot, statuses)
         health = (
             Health.ABSENT
             if robot in self.seen.held
@@ -700,13 +711,13 @@ class _Rollout:
                 digest,
                 self.seen.launches.get(robot) == digest,
                 since,
-                now >= dark_at,
+                now >= dark_at and not unknown,
                 now,
                 policy.healthy_after,
                 memory,
             )
         )
-        if health is Health.ABSENT and robot not in self.seen.held:
+        if health is Health.ABSENT and robot not in self.seen.held and not unknown:
             health = self._offline(robot, now >= dark_at, memory)
             if health is Health.ABSENT and policy.offline != "wait":
                 soon(dark_at)  # dark a moment ago (a reconnecting agent): offline once it lasts
@@ -790,6 +801,12 @@ class _Rollout:
                 judged[robot] = Health.FAILED
                 memory.failed.add(robot)
 
+    def _unknown(self, robot: str, statuses: Mapping[str, AgentStatus]) -> bool:
+        """A robot without any status while the read is known to lack messages the broker
+        dropped: its status may be one of them. It is waited for (absent: until wave_timeout,
+        never failed for it), not taken for offline or dark."""
+        return self.seen.statuses_lost is not None and robot not in statuses
+
     def _offline(self, robot: str, lasted: bool, memory: WaveMemory) -> Health:
         """A robot never seen online since its wave published its request, dark now: what
         `rollout.offline` makes of it once it has been dark for DARK_GRACE. One seen since (online
@@ -844,6 +861,8 @@ class _Rollout:
             status = statuses.get(robot)
             if robot in judged or self.waves.get(robot, self.count) > wave or is_online(status):
                 continue
+            if self._unknown(robot, statuses):
+                continue  # its status may be one the broker dropped: not known to be off
             if status is None or status.digest != head.requests[robot].digest:
                 behind.add(robot)
         return behind
