@@ -67,10 +67,11 @@ def test_a_power_cut_while_deferred_leaves_no_hold_on_the_next_brain(
     first = run_held(agent, watch, mosquitto, request.payload(), request.digest)
     waiting = defer_a_new_request(agent, watch, mosquitto, first, 1)
     kill_agent(agent)  # the power goes: agent and brain, SIGKILL
-    assert first.pid is not None
+    brain = first.pid
+    assert brain is not None
     with contextlib.suppress(ProcessLookupError):
-        os.killpg(first.pid, signal.SIGKILL)
-    wait_for(lambda: not is_alive(first.pid), "the brain dead")
+        os.killpg(brain, signal.SIGKILL)
+    wait_for(lambda: not is_alive(brain), "the brain dead")
     # What the dead brain held with: a whole tree (a brain's scratch), not a file.
     hold = agent.workdir / "brain.hold"
     with contextlib.suppress(FileNotFoundError):
