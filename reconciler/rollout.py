@@ -293,6 +293,7 @@ class _Rollout:
         self.noted: list[VerdictNote] = []  # verdicts reached in this step
         self.busy_held: set[str] = set()  # robots whose group waits for a busy member
         self.busy_why = ""  # which group waits for whom, for the status
+        self.unknown: list[str] = []  # the wave's robots whose status may have been dropped
 
     def _with_verdicts(self, step: RolloutStep) -> RolloutStep:
         step.verdicts = self.noted
@@ -460,10 +461,11 @@ class _Rollout:
         if self.busy_why and state == "Progressing":
             why = f"{why}; {self.busy_why}" if why else self.busy_why
         lost = self.seen.statuses_lost
-        if lost is not None and state == "Progressing":
+        if lost is not None and self.unknown and state == "Progressing":
             said = (
-                "robots without a status are waited for, not offline: the broker dropped "
-                f"status messages ({lost})"
+                f"{len(self.unknown)} robot(s) without a status ({', '.join(self.unknown[:3])}"
+                f"{', ...' if len(self.unknown) > 3 else ''}) waited for, not offline: the "
+                f"broker dropped status messages ({lost})"
             )
             why = f"{why}; {said}" if why else said
         return state, why
@@ -683,6 +685,7 @@ class _Rollout:
         times: list[float] = []  # when a judgment changes with time
         for robot in members:
             judged[robot] = self._judge_robot(robot, statuses, memory, deadline, times.append)
+        self.unknown = [r for r in members if self._unknown(r, statuses)]
         self._fail_groups(judged, memory)
         if held_until is not None:
             times.append(held_until)  # the group goes at its max_defer at the latest
