@@ -10,6 +10,7 @@ import fcntl
 import math
 import os
 import shutil
+import sys
 import threading
 import time
 from pathlib import Path
@@ -64,21 +65,24 @@ def remove_hold(path: Path) -> str | None:
 def _remove_hold_tree(path: Path) -> str | None:
     failed: list[str] = []
 
-    def note(function: object, name: str, info: tuple[type, BaseException, object]) -> None:
-        failed.append(f"{name}: {getattr(info[1], 'strerror', None) or info[1]}")
+    def note(name: str, exc: BaseException) -> None:
+        failed.append(f"{name}: {getattr(exc, 'strerror', None) or exc}")
 
-    if shutil.rmtree.avoids_symlink_attacks:  # Linux: an fd-based walk
-        shutil.rmtree(path, onerror=note)
-    else:
+    if not shutil.rmtree.avoids_symlink_attacks:  # Linux has the fd-based walk
         failed.append("no safe way to remove a tree here")
+    elif sys.version_info >= (3, 12):
+        shutil.rmtree(path, onexc=lambda _f, name, exc: note(name, exc))
+    else:
+        shutil.rmtree(path, onerror=lambda _f, name, info: note(name, info[1]))
     if not os.path.lexists(path):
         return None
+    why = failed[0] if failed else "made again meanwhile"
     aside = path.with_name(f"{path.name}.stale-{time.time_ns()}")
     try:
         os.rename(path, aside)
     except OSError as exc:
-        return f"cannot remove the hold directory {path}: {exc.strerror} ({failed[0]})"
-    return f"cannot remove all of the hold directory {path} ({failed[0]}): renamed to {aside.name}"
+        return f"cannot remove the hold directory {path}: {exc.strerror} ({why})"
+    return f"cannot remove all of the hold directory {path} ({why}): renamed to {aside.name}"
 
 
 class SeqStore:
