@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shlex
@@ -236,9 +237,7 @@ def test_what_a_source_leaves_behind_is_killed_with_each_reading(
         encoding="utf-8",
     )
     command = [sys.executable, str(script)]
-    make_agent(interfaces={"interval": 0.2, "command": command}).start()
-    report = seen.wait("reported", lambda r: bool(r.topics))
-    assert names(report) == [("/leaky", "std_msgs/msg/Empty")] and report.error is None
+    agent = make_agent(interfaces={"interval": 0.2, "command": command}).start()
 
     def pids() -> list[int]:
         try:
@@ -246,10 +245,21 @@ def test_what_a_source_leaves_behind_is_killed_with_each_reading(
         except (FileNotFoundError, ValueError):
             return []
 
-    # Three readings done: the daemons of the first two had their readings end.
-    done = wait_for(lambda: pids()[:2] if len(pids()) >= 3 else None, "three readings")
-    wait_for(lambda: not any(is_alive(pid) for pid in done), "the daemons killed")
-    assert seen.reports()[-1].error is None  # the group's end is no failure of the reading
+    try:
+        report = seen.wait("reported", lambda r: bool(r.topics))
+        assert names(report) == [("/leaky", "std_msgs/msg/Empty")] and report.error is None
+        # Three readings done: the daemons of the first two had their readings end.
+        done = wait_for(lambda: pids()[:2] if len(pids()) >= 3 else None, "three readings")
+        wait_for(lambda: not any(is_alive(pid) for pid in done), "the daemons killed")
+        assert seen.reports()[-1].error is None  # the group's end is no failure of the reading
+        # The agent stopped mid-interval or mid-reading: no daemon outlives it either.
+        agent.signal(signal.SIGTERM)
+        assert agent.wait() == 0
+        wait_for(lambda: not any(is_alive(pid) for pid in pids()), "every daemon gone")
+    finally:
+        for pid in pids():  # a failed run leaves none behind either
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
 
 
 def test_a_failing_source_is_reported_with_its_reason_and_the_brain_keeps_running(
