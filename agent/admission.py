@@ -127,20 +127,37 @@ class RestartMemory:
         return self if kept == self.ahead else RestartMemory(self.watermark, kept)
 
 
+# Seconds a signed request may be dated ahead of this robot's clock. The replay watermark is
+# the newest issue time accepted, so it can never run further ahead of the robot's clock than
+# this: a reconciler whose clock ran fast locks the requests of a correct clock out for this
+# long at most (instead of until real time catches up), and the watermark is never lowered,
+# so no replay is let in. Far beyond NTP's error, far below a lock-out that matters.
+MAX_ISSUED_AHEAD = 30.0
+
+
 @dataclass(frozen=True)
 class Freshness:
-    """What a signed request must not be older than: no rollback by replaying an old one."""
+    """What a signed request must not be older than: no rollback by replaying an old one; and
+    how far ahead of this robot's clock it may be dated (`now`: wall time; None: unchecked)."""
 
     newest_issued_at: float | None  # of the newest signed request this robot accepted
     running_digest: str | None  # the request it runs now: re-sending that one is harmless
+    now: float | None = None
 
 
 def _stale(issued_at: float | None, digest: str | None, freshness: Freshness | None) -> str | None:
-    if freshness is None or freshness.newest_issued_at is None or issued_at is None:
-        return None
-    if issued_at >= freshness.newest_issued_at:
+    if freshness is None or issued_at is None:
         return None
     if digest is not None and digest == freshness.running_digest:
+        return None
+    now = freshness.now
+    if now is not None and issued_at > now + MAX_ISSUED_AHEAD:
+        return (
+            f"request issued at {_iso(issued_at)}, ahead of this robot's clock ({_iso(now)}) "
+            f"by more than {MAX_ISSUED_AHEAD:g} s: the reconciler's clock or this robot's is "
+            "wrong (check NTP); accepting it would lock out the requests that follow"
+        )
+    if freshness.newest_issued_at is None or issued_at >= freshness.newest_issued_at:
         return None
     return (
         f"replayed request: issued at {_iso(issued_at)}, before the newest one this "

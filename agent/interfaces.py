@@ -240,12 +240,28 @@ class Child:
 
     def finished(self, now: float) -> int | None:
         """The exit code once the output is closed and the process has exited; None before.
-        A process that closed its output but lives on is looked at again soon (`recheck_at`)."""
+        A process that closed its output but lives on is looked at again soon (`recheck_at`).
+        What the source left behind in its group (a daemon it forked, its output elsewhere)
+        is killed with it: a reading never leaves a process, success or not."""
         if self.open_fds:
             return None
-        code = self.popen.poll()
-        self.recheck_at = now + REAP_RECHECK if code is None else None
-        return code
+        if not self._exited():
+            self.recheck_at = now + REAP_RECHECK
+            return None
+        self.recheck_at = None
+        # The leader is a zombie until polled: its pid, and so its group's id, is still ours.
+        process.signal_group(self.popen.pid, signal.SIGKILL)
+        return self.popen.wait()
+
+    def _exited(self) -> bool:
+        """Whether the leader has exited, looked at without reaping it (WNOWAIT)."""
+        if self.popen.returncode is not None:
+            return True
+        try:
+            found = os.waitid(os.P_PID, self.popen.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return True  # reaped elsewhere: `wait` gives its code
+        return found is not None
 
     def kill(self) -> None:
         """The whole session's group, then the leader reaped (bounded: a process stuck in the

@@ -320,7 +320,9 @@ class Agent:
         payload = event.payload
         desired = self.supervisor.desired
         freshness = admission.Freshness(
-            self.issued.newest, desired.request.digest if desired is not None else None
+            self.issued.newest,
+            desired.request.digest if desired is not None else None,
+            time.time(),
         )
         outcome = admission.interpret(payload, self.description, self.verify, freshness)
         sup = self.supervisor

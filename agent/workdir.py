@@ -8,7 +8,10 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import shutil
+import sys
 import threading
+import time
 from pathlib import Path
 
 from contract.files import write_atomic
@@ -43,20 +46,43 @@ def hold_exists(path: Path) -> bool:
 
 
 def remove_hold(path: Path) -> str | None:
-    """Removes a hold a previous brain left (it must not defer its successor's first stop);
-    what went wrong, if anything. A directory is removed only when empty: never a tree."""
+    """Removes a hold a previous brain left, of any kind (it must not defer its successor's
+    first stop); what went wrong, if anything. A symlink is removed, never followed; a
+    directory with all it holds, its descriptors walked without following a symlink (the
+    brain's own scratch, in the agent's own work directory). A tree that cannot be removed
+    is renamed aside (`brain.hold.stale-*`, said in the answer), so the brain is not born held."""
     try:
         os.unlink(path)
     except FileNotFoundError:
         return None
     except IsADirectoryError:
-        try:
-            os.rmdir(path)
-        except OSError as exc:
-            return f"cannot remove the hold directory {path}: {exc.strerror}"
+        return _remove_hold_tree(path)
     except OSError as exc:
         return f"cannot remove the hold file {path}: {exc.strerror}"
     return None
+
+
+def _remove_hold_tree(path: Path) -> str | None:
+    failed: list[str] = []
+
+    def note(name: str, exc: BaseException) -> None:
+        failed.append(f"{name}: {getattr(exc, 'strerror', None) or exc}")
+
+    if not shutil.rmtree.avoids_symlink_attacks:  # Linux has the fd-based walk
+        failed.append("no safe way to remove a tree here")
+    elif sys.version_info >= (3, 12):
+        shutil.rmtree(path, onexc=lambda _f, name, exc: note(name, exc))
+    else:
+        shutil.rmtree(path, onerror=lambda _f, name, info: note(name, info[1]))
+    if not os.path.lexists(path):
+        return None
+    why = failed[0] if failed else "made again meanwhile"
+    aside = path.with_name(f"{path.name}.stale-{time.time_ns()}")
+    try:
+        os.rename(path, aside)
+    except OSError as exc:
+        return f"cannot remove the hold directory {path}: {exc.strerror} ({why})"
+    return f"cannot remove all of the hold directory {path} ({why}): renamed to {aside.name}"
 
 
 class SeqStore:

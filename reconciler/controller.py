@@ -488,6 +488,7 @@ class Controller:
             active=self._sample_active(fetch),
             previous_rollout=previous.rollout if previous is not None else None,
             statuses=self._follow_health(rollout, now),
+            statuses_lost=self.health.lost if self.health is not None else None,
             running_since={robot: seen for robot, (_, seen) in self._running_since.items()},
             now=now,
             wave_record=self._wave_record,

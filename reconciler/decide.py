@@ -67,6 +67,7 @@ class Observation:
     wave_record: WaveRecord | None = None
     watching_since: float = 0.0
     dark_since: Mapping[str, float] = field(default_factory=dict)  # robot -> first seen dark
+    statuses_lost: str | None = None  # how the statuses' read is known to lack messages
     # The robots' readable interfaces reports, followed while fleet.yaml says `drift: hold`
     # (None: not followed; a robot absent reports nothing readable: never held).
     interfaces: Mapping[str, Reported] | None = None
@@ -277,6 +278,7 @@ def _rollout_input(
         record=seen.wave_record,
         watching_since=seen.watching_since,
         dark_since=seen.dark_since,
+        statuses_lost=seen.statuses_lost,
         held=held,
         evidence=seen.evidence,
         baseline=seen.baseline,

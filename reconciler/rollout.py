@@ -75,6 +75,9 @@ class RolloutInput:
     watching_since: float = 0.0
     # robot -> when the reconciler first saw it dark (offline, or its status gone) since then
     dark_since: Mapping[str, float] = field(default_factory=dict)
+    # How the statuses' read is known to lack messages the broker dropped (its queue limit),
+    # or None: then a robot without any status is unknown, not offline, and not dark.
+    statuses_lost: str | None = None
     # Robots whose new request is held back for drift (drift: hold): not sent it, they count
     # as absent — pending, never failed; the wave goes on without them at its timeout.
     held: frozenset[str] = frozenset()
@@ -290,6 +293,7 @@ class _Rollout:
         self.noted: list[VerdictNote] = []  # verdicts reached in this step
         self.busy_held: set[str] = set()  # robots whose group waits for a busy member
         self.busy_why = ""  # which group waits for whom, for the status
+        self.unknown: list[str] = []  # the wave's robots whose status may have been dropped
 
     def _with_verdicts(self, step: RolloutStep) -> RolloutStep:
         step.verdicts = self.noted
@@ -456,6 +460,14 @@ class _Rollout:
             why = f"wave '{name}' verifying: {found.message}"
         if self.busy_why and state == "Progressing":
             why = f"{why}; {self.busy_why}" if why else self.busy_why
+        lost = self.seen.statuses_lost
+        if lost is not None and self.unknown and state == "Progressing":
+            said = (
+                f"{len(self.unknown)} robot(s) without a status ({', '.join(self.unknown[:3])}"
+                f"{', ...' if len(self.unknown) > 3 else ''}) waited for, not offline: the "
+                f"broker dropped status messages ({lost})"
+            )
+            why = f"{why}; {said}" if why else said
         return state, why
 
     def halted(self, previous: RolloutStatus) -> RolloutStep:
@@ -673,6 +685,7 @@ class _Rollout:
         times: list[float] = []  # when a judgment changes with time
         for robot in members:
             judged[robot] = self._judge_robot(robot, statuses, memory, deadline, times.append)
+        self.unknown = [r for r in members if self._unknown(r, statuses)]
         self._fail_groups(judged, memory)
         if held_until is not None:
             times.append(held_until)  # the group goes at its max_defer at the latest
@@ -691,6 +704,7 @@ class _Rollout:
         digest = self.seen.head.requests[robot].digest
         since = self.seen.running_since.get(robot)
         dark_at = self.seen.dark_since.get(robot, memory.watching_since) + DARK_GRACE
+        unknown = self._unknown(robot, statuses)
         health = (
             Health.ABSENT
             if robot in self.seen.held
@@ -700,13 +714,13 @@ class _Rollout:
                 digest,
                 self.seen.launches.get(robot) == digest,
                 since,
-                now >= dark_at,
+                now >= dark_at and not unknown,
                 now,
                 policy.healthy_after,
                 memory,
             )
         )
-        if health is Health.ABSENT and robot not in self.seen.held:
+        if health is Health.ABSENT and robot not in self.seen.held and not unknown:
             health = self._offline(robot, now >= dark_at, memory)
             if health is Health.ABSENT and policy.offline != "wait":
                 soon(dark_at)  # dark a moment ago (a reconnecting agent): offline once it lasts
@@ -790,6 +804,12 @@ class _Rollout:
                 judged[robot] = Health.FAILED
                 memory.failed.add(robot)
 
+    def _unknown(self, robot: str, statuses: Mapping[str, AgentStatus]) -> bool:
+        """A robot without any status while the read is known to lack messages the broker
+        dropped: its status may be one of them. It is waited for (absent: until wave_timeout,
+        never failed for it), not taken for offline or dark."""
+        return self.seen.statuses_lost is not None and robot not in statuses
+
     def _offline(self, robot: str, lasted: bool, memory: WaveMemory) -> Health:
         """A robot never seen online since its wave published its request, dark now: what
         `rollout.offline` makes of it once it has been dark for DARK_GRACE. One seen since (online
@@ -844,6 +864,8 @@ class _Rollout:
             status = statuses.get(robot)
             if robot in judged or self.waves.get(robot, self.count) > wave or is_online(status):
                 continue
+            if self._unknown(robot, statuses):
+                continue  # its status may be one the broker dropped: not known to be off
             if status is None or status.digest != head.requests[robot].digest:
                 behind.add(robot)
         return behind

@@ -1,5 +1,6 @@
 """The UI's restarts: each operator's request sent and confirmed on a thread of its own (as
-`robotconf restart` does it, so the page is never held), and what came of it per robot."""
+`robotconf restart` does it, so the page is never held), and what came of it per robot; each
+ask and its outcome a line of the UI's log."""
 
 from __future__ import annotations
 
@@ -74,6 +75,9 @@ class Restarts:
                 return "busy"
             self._pending += 1
             self._record(Outcome(robot_id, "pending", by, time.time()))
+        # The audit line comes before anything is sent: a UI killed mid-restart loses no
+        # record of who asked (what the robot did is its status's and its brain.log's).
+        log.info("ui: restart of %s asked by %s", robot_id, by)
         threading.Thread(
             target=self._restart, args=(robot_id, by), name=f"ui-restart-{robot_id}", daemon=True
         ).start()
@@ -93,6 +97,7 @@ class Restarts:
         except Exception as exc:  # one restart fails, never the UI
             log.error("ui: the restart of %s failed: %s", robot_id, printable(repr(exc))[:300])
             done = Outcome(robot_id, "failed", by, at, "internal error (see the UI's log)")
+        log.info("ui: restart of %s asked by %s: %s: %s", robot_id, by, done.state, done.text)
         with self._lock:
             self._pending -= 1
             self._record(done)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shlex
@@ -217,6 +218,48 @@ def test_a_command_replaces_ros2_and_gets_the_brains_environment(
     assert names(report) == [("/tag_x7", "sensor_msgs/LaserScan")]  # a ROS 1 type is kept
     assert names(report, "actions") == [("/move_base", "move_base_msgs/MoveBaseAction")]
     assert report.services == [] and report.source == shlex.join(command)
+
+
+def test_what_a_source_leaves_behind_is_killed_with_each_reading(
+    make_agent: AgentFactory, seen: InterfacesWatch, tmp_path: Path
+) -> None:
+    """A source that forks a daemon (its output elsewhere) and succeeds: each reading ends
+    with its whole process group, so no process is left behind per interval."""
+    left = tmp_path / "left-behind.pids"
+    script = tmp_path / "leaky_source.py"
+    script.write_text(
+        "import json, subprocess, sys\n"
+        "daemon = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'],\n"
+        "    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
+        f"with open({str(left)!r}, 'a') as log:\n"
+        "    log.write(f'{daemon.pid}\\n')\n"
+        "print(json.dumps({'topics': [{'name': '/leaky', 'type': 'std_msgs/msg/Empty'}]}))\n",
+        encoding="utf-8",
+    )
+    command = [sys.executable, str(script)]
+    agent = make_agent(interfaces={"interval": 0.2, "command": command}).start()
+
+    def pids() -> list[int]:
+        try:
+            return [int(line) for line in left.read_text(encoding="utf-8").split()]
+        except (FileNotFoundError, ValueError):
+            return []
+
+    try:
+        report = seen.wait("reported", lambda r: bool(r.topics))
+        assert names(report) == [("/leaky", "std_msgs/msg/Empty")] and report.error is None
+        # Three readings done: the daemons of the first two had their readings end.
+        done = wait_for(lambda: pids()[:2] if len(pids()) >= 3 else None, "three readings")
+        wait_for(lambda: not any(is_alive(pid) for pid in done), "the daemons killed")
+        assert seen.reports()[-1].error is None  # the group's end is no failure of the reading
+        # The agent stopped mid-interval or mid-reading: no daemon outlives it either.
+        agent.signal(signal.SIGTERM)
+        assert agent.wait() == 0
+        wait_for(lambda: not any(is_alive(pid) for pid in pids()), "every daemon gone")
+    finally:
+        for pid in pids():  # a failed run leaves none behind either
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
 
 
 def test_a_failing_source_is_reported_with_its_reason_and_the_brain_keeps_running(

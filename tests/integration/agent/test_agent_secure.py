@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import datetime
+import signal
 import subprocess
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +20,7 @@ from cryptography.x509.oid import NameOID
 from contract.mqtt import Connection
 from contract.signing import generate_keys, load_private_key, sign
 from contract.wire import AgentState, Topics
+from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto
 from tests.support.tlsutil import make_pki
@@ -183,3 +186,42 @@ def test_wrong_password_is_reported_and_retried(tmp_path: Path, secured: Secured
         assert agent.proc is not None and agent.proc.poll() is None  # still trying
     finally:
         agent.cleanup()
+
+
+def test_a_fast_reconcilers_request_is_refused_and_locks_nothing_out(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    """A signed request dated an hour ahead of the robot's clock is refused (it would have
+    set the replay watermark an hour ahead); the next one, from a correct clock, runs; and a
+    replay of an accepted request is still refused, across an agent restart too."""
+    keys = generate_keys(tmp_path / "keys")
+    private = load_private_key(keys.private)
+    agent = make_agent(public_key=str(keys.public)).start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    first = sign(make_request(variant=1), private)
+    publish(mosquitto.url, LAUNCH, first.payload())
+    watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=first.digest)
+    fast = sign(make_request(variant=2), private, issued_at=time.time() + 3600)
+    publish(mosquitto.url, LAUNCH, fast.payload())
+    refused = watch.wait_for(
+        ROBOT,
+        lambda s: s.state == AgentState.REJECTED and "ahead of this robot's clock" in s.message,
+        "the request from a fast clock refused",
+        agent=agent,
+    )
+    assert "check NTP" in refused.message
+    correct = sign(make_request(variant=3), private)
+    publish(mosquitto.url, LAUNCH, correct.payload())
+    running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=correct.digest)
+    agent.note_brain(running.pid)
+    agent.signal(signal.SIGKILL)  # the watermark is on disk: a restart forgets nothing
+    agent.wait()
+    agent.start()
+    watch.wait_for(ROBOT, lambda s: s.seq > running.seq, "the agent back", agent=agent)
+    publish(mosquitto.url, LAUNCH, first.payload())
+    watch.wait_for(
+        ROBOT,
+        lambda s: s.state == AgentState.REJECTED and "replayed request" in s.message,
+        "the replayed request refused",
+        agent=agent,
+    )

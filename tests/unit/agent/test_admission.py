@@ -8,9 +8,18 @@ from typing import Any
 
 import pytest
 
-from agent.admission import Accept, Clear, Freshness, Reject, Verifier, interpret
+from agent.admission import (
+    MAX_ISSUED_AHEAD,
+    Accept,
+    Admission,
+    Clear,
+    Freshness,
+    Reject,
+    Verifier,
+    interpret,
+)
 from agent.workdir import IssuedStore
-from contract.launch import StopRequest, canonical_json
+from contract.launch import LaunchRequest, StopRequest, canonical_json
 from contract.signing import (
     generate_keys,
     load_private_key,
@@ -162,6 +171,50 @@ def test_an_older_signed_request_is_a_replay_unless_it_is_the_running_one(tmp_pa
     # Even after the robot was stopped, the old request cannot bring it back.
     stopped = Freshness(newest_issued_at=2000.0, running_digest=None)
     assert isinstance(interpret(old.payload(), ROBOT, check, stopped), Reject)
+
+
+def test_a_fast_clock_cannot_lock_out_later_requests_and_replays_stay_refused(
+    tmp_path: Path,
+) -> None:
+    """A request dated more than MAX_ISSUED_AHEAD ahead of the robot's clock is refused, so the
+    watermark never runs far ahead: a correct clock's next request is accepted; a replay of
+    what was accepted is refused as before."""
+    pair = generate_keys(tmp_path)
+    public, private = load_public_key(pair.public), load_private_key(pair.private)
+
+    def check(data: dict[str, Any]) -> str | None:
+        return verify_object(data, public)
+
+    now = 1_700_000_000.0
+    store = IssuedStore(tmp_path / "newest")
+
+    def admit(request: LaunchRequest, at: float, running: str | None = None) -> Admission:
+        outcome = interpret(request.payload(), ROBOT, check, Freshness(store.newest, running, at))
+        if isinstance(outcome, Accept):
+            store.accepted(outcome.request.issued_at)
+        return outcome
+
+    # A reconciler an hour fast: refused, and the watermark does not move.
+    fast = sign(make_request(variant=1), private, issued_at=now + 3600)
+    refused = admit(fast, now)
+    assert isinstance(refused, Reject) and "ahead of this robot's clock" in refused.reason
+    assert "check NTP" in refused.reason and store.newest is None
+    # Its clock fixed, its next request is accepted at once.
+    fixed = sign(make_request(variant=2), private, issued_at=now + 5)
+    assert isinstance(admit(fixed, now + 4), Accept) and store.newest == now + 5
+    # A little ahead (within the bound) is accepted, and locks out at most that long:
+    # a correct clock's request MAX_ISSUED_AHEAD later is newer than the watermark.
+    ahead = sign(make_request(variant=3), private, issued_at=now + 100 + 29)
+    assert isinstance(admit(ahead, now + 100), Accept)
+    after = sign(make_request(variant=4), private, issued_at=now + 100 + MAX_ISSUED_AHEAD)
+    assert isinstance(admit(after, now + 100 + MAX_ISSUED_AHEAD - 0.5), Accept)
+    # Replays of what was accepted stay refused, whenever they come.
+    for old in (fixed, ahead):
+        for at in (now + 200, now + 10**6):
+            replayed = admit(old, at, running=after.digest)
+            assert isinstance(replayed, Reject) and "replayed request" in replayed.reason
+    # The running request re-sent (a retained redelivery) stays harmless.
+    assert isinstance(admit(after, now + 10**6, running=after.digest), Accept)
 
 
 def test_the_newest_issue_time_survives_an_agent_restart(tmp_path: Path) -> None:

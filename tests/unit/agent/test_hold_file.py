@@ -22,7 +22,9 @@ def test_anything_at_the_path_holds_and_nothing_is_followed(tmp_path: Path) -> N
     assert not hold_exists(tmp_path / "a-file" / "below")  # under a file: nothing there
 
 
-def test_a_stale_hold_is_removed_but_never_a_tree_or_a_symlinks_target(tmp_path: Path) -> None:
+def test_a_stale_hold_of_any_kind_is_removed_but_never_a_symlinks_target(
+    tmp_path: Path,
+) -> None:
     target = tmp_path / "precious"
     target.write_text("keep")
     hold = tmp_path / "brain.hold"
@@ -31,9 +33,14 @@ def test_a_stale_hold_is_removed_but_never_a_tree_or_a_symlinks_target(tmp_path:
     assert target.read_text() == "keep"
     hold.mkdir()
     assert remove_hold(hold) is None and not hold.exists()
-    hold.mkdir()
-    (hold / "inside").touch()
-    problem = remove_hold(hold)
-    assert problem is not None and "cannot remove the hold directory" in problem
-    assert (hold / "inside").exists()
+    # A tree the brain left (a stale hold of any kind): removed, never walked out of.
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "kept").write_text("keep")
+    (hold / "deep" / "deeper").mkdir(parents=True)
+    (hold / "deep" / "note").write_text("mine")
+    os.symlink(outside, hold / "deep" / "link")
+    assert remove_hold(hold) is None and not os.path.lexists(hold)
+    assert (outside / "kept").read_text() == "keep"
+    assert not hold_exists(hold)
     assert remove_hold(tmp_path / "absent") is None

@@ -4,6 +4,7 @@ reason, and a source that leaves a process behind without holding its output."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import select
@@ -93,14 +94,27 @@ def test_a_reason_never_carries_a_secret_of_the_environment(
 def test_a_process_left_behind_without_the_output_does_not_hold_the_reading(
     probes: list[InterfaceProbe], tmp_path: Path
 ) -> None:
-    """As `ros2` leaves its daemon: the reading ends with the command, the daemon lives on."""
-    pid_file = tmp_path / "daemon.pid"
+    """The reading ends with the command, and with its process group: what it left behind
+    there dies with it (no process leaked per interval). A daemon that made a session of its
+    own (ros2cli's `_ros2_daemon` since Humble: `setsid`) is no part of the reading and
+    lives on."""
+    grouped, detached = tmp_path / "grouped.pid", tmp_path / "detached.pid"
     listed = json.dumps({"topics": [{"name": "/scan", "type": "sensor_msgs/msg/LaserScan"}]})
-    script = f"sleep 60 </dev/null >/dev/null 2>&1 & echo $! > {pid_file}; echo '{listed}'"
+    quiet = "</dev/null >/dev/null 2>&1"
+    script = (
+        f"sleep 60 {quiet} & echo $! > {grouped}; "
+        f"setsid sleep 60 {quiet} & echo $! > {detached}; echo '{listed}'"
+    )
     report = drive(probe_of(probes, tmp_path, ["sh", "-c", script]))
-    daemon = int(pid_file.read_text())
+    left, daemon = int(grouped.read_text()), int(detached.read_text())
     try:
         assert report.error is None and [t.name for t in report.topics] == ["/scan"]
+        deadline = time.monotonic() + 10  # SIGKILL sent: it is gone once scheduled
+        while is_alive(left) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not is_alive(left)
         assert is_alive(daemon)
     finally:
-        os.kill(daemon, 9)
+        for pid in (left, daemon):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, 9)

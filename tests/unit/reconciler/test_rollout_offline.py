@@ -133,6 +133,7 @@ def step(  # the memory tests' step, with the robots' dark times
     now: float = T0,
     dark_since: dict[str, float] | None = None,
     watching_since: float = 0.0,
+    lost: str | None = None,
 ) -> RolloutStep:
     since = {r: T0 for r, s in statuses.items() if s.digest == head.requests[r].digest}
     return roll_out(
@@ -147,8 +148,49 @@ def step(  # the memory tests' step, with the robots' dark times
             previous.record if previous else None,
             watching_since,
             dark_since or {},
+            statuses_lost=lost,
         )
     )
+
+
+LOST = "its sync marker was dropped after 1,000 retained message(s)"
+
+
+def test_a_robot_whose_status_the_broker_dropped_is_waited_for_not_offline(lab: Lab) -> None:
+    """The statuses' read is known to lack messages (a queue limit): a robot without any
+    status may be one of them, so it is neither skipped as offline nor failed as dark; it is
+    waited for until the wave's timeout, like any robot not heard from."""
+    stable, head = two(lab, "skip")
+    unread = running(stable, ROBOTS[1:])  # the canary's status is not in the read
+    before = step(head, stable, held(stable), unread)
+    assert before.status is not None and before.status.offline == CANARY  # not known lossy
+    first = step(head, stable, held(stable), unread, lost=LOST)
+    assert first.status is not None and first.status.wave == 0
+    assert first.status.offline == [] and first.status.pending == CANARY
+    assert "1 robot(s) without a status (tb3-01) waited for, not offline" in first.status.message
+    assert "the broker dropped status messages" in first.status.message
+    assert first.recheck_at == T0 + 100  # the wave's timeout
+    # Its status read again (or republished): judged like any robot.
+    back = {**running(stable, ROBOTS[1:]), **running(head, CANARY)}
+    later = step(
+        head, stable, {**held(stable), **held(head, CANARY)}, back, first, T0 + 10, lost=LOST
+    )
+    assert later.status is not None and later.status.wave == 1 and later.status.failed == []
+
+
+def test_a_seen_robot_whose_status_is_missing_from_a_lossy_read_is_not_failed_as_dark(
+    lab: Lab,
+) -> None:
+    stable, head = two(lab, "skip")
+    first = step(head, stable, held(stable), running(stable, ROBOTS))
+    launches = {**held(stable), **held(head, CANARY)}
+    unread = running(stable, ROBOTS[1:])
+    late = T0 + 1 + DARK_GRACE
+    gone = step(head, stable, launches, unread, first, late, {"tb3-01": T0 + 1})
+    assert state(gone) == "RolledBack"  # known complete: its status gone is darkness
+    kept = step(head, stable, launches, unread, first, late, {"tb3-01": T0 + 1}, lost=LOST)
+    assert state(kept) == "Progressing" and kept.status is not None
+    assert kept.status.failed == [] and kept.status.pending == CANARY
 
 
 def test_status_and_plan_show_the_skipped_robots_and_the_policy(lab: Lab) -> None:
