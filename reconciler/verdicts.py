@@ -230,6 +230,11 @@ def robot_drift(
     return drift_of(robot_id, want.needs, robot.interfaces, robot.interfaces_error)
 
 
+def row_order(row: RobotRow) -> tuple[int, bool, str]:
+    """Where a row goes: worst verdict first, drifted first among its verdict's, then by id."""
+    return (WORST_FIRST.index(row.verdict), not row.drift.drifted, row.robot_id)
+
+
 def build_rows(
     desired: Mapping[str, DesiredRobot], retained: Retained, memo: DriftMemo | None = None
 ) -> list[RobotRow]:
@@ -276,7 +281,7 @@ def build_rows(
         )
     if memo is not None:
         memo.keep_only(robots)
-    rows.sort(key=lambda r: (WORST_FIRST.index(r.verdict), not r.drift.drifted, r.robot_id))
+    rows.sort(key=row_order)
     return rows
 
 

@@ -4,11 +4,10 @@ repository, as one FleetStatus now or one per change (`--watch`)."""
 from __future__ import annotations
 
 import json
-import threading
-import time
-from collections.abc import Callable, Iterator
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 from configurator.drift import DriftMemo
 from configurator.gcpause import collector_paused
@@ -34,6 +33,22 @@ from workstation import desired_store
 CONFIRM_TIMEOUT = 5.0  # seconds for the few topics a lossy-looking read is checked with
 
 Desired = tuple[dict[str, DesiredRobot] | None, str, list[str]]
+
+
+class DesiredSource(Protocol):
+    """Where a reader gets the desired robots to compare with, given the reconciler's status."""
+
+    def get(self, reconciler: ReconcilerStatus | None) -> Desired: ...
+
+
+@dataclass(frozen=True)
+class Given:
+    """A desired state already made."""
+
+    value: Desired
+
+    def get(self, reconciler: ReconcilerStatus | None) -> Desired:
+        return self.value
 
 
 class DesiredCache:
@@ -88,7 +103,7 @@ class DesiredCache:
 def fleet_status(
     messages: dict[str, bytes],
     topics: Topics,
-    desired: DesiredCache,
+    desired: DesiredSource,
     memos: dict[bool, ReadMemo] | None = None,
     drift: DriftMemo | None = None,
     lost: str | None = None,
@@ -106,7 +121,7 @@ def fleet_status(
 def _fleet_status(
     messages: dict[str, bytes],
     topics: Topics,
-    desired: DesiredCache,
+    desired: DesiredSource,
     memos: dict[bool, ReadMemo] | None,
     drift: DriftMemo | None,
 ) -> FleetStatus:
@@ -190,30 +205,3 @@ def open_view(
 def change_key(fleet: FleetStatus) -> str:
     """What tells one report from the next: a heartbeat alone is not a change."""
     return json.dumps(fleet.as_json(heartbeat=False), sort_keys=True)
-
-
-def watch(
-    view: RetainedView,
-    topics: Topics,
-    desired: DesiredCache,
-    changed: threading.Event,
-    stop: threading.Event,
-) -> Iterator[FleetStatus | None]:
-    """Each new state of the fleet until `stop` is set; None once when the broker is lost (each
-    time). `changed` is set by the view (and by whoever sets `stop`)."""
-    shown: str | None = None
-    memos: dict[bool, ReadMemo] = {}
-    drift = DriftMemo()
-    while not stop.is_set():
-        changed.clear()
-        if view.synced:
-            fleet = fleet_status(view.snapshot(), topics, desired, memos, drift, view.lost)
-            key = change_key(fleet)
-            if key != shown:
-                shown = key
-                yield fleet
-        elif shown != "offline":
-            shown = "offline"
-            yield None
-        changed.wait(5.0)
-        time.sleep(0.2)  # coalesce a burst of status messages into one redraw

@@ -53,21 +53,20 @@ from reconciler.controller import Controller
 from reconciler.desired import DesiredBuilder
 from reconciler.ledger import ledger_path
 from reconciler.lifecycle import log_to_file, on_stop_signals
-from reconciler.observed import parse_retained
 from reconciler.retained import RetainedView
 from reconciler.signer import make_signer, make_verifier
 from reconciler.source import LocalBranch, open_repo
 from reconciler.telemetry import Telemetry
 from reconciler.verdicts import (
     FleetStatus,
-    build_rows,
     clean,
     desired_from_fleet,
     diagnostic_lines,
     rollout_line,
 )
 from workstation import desired_store
-from workstation.fleet_status import change_key, open_view
+from workstation.fleet_reader import FleetReader, open_reader
+from workstation.fleet_status import Desired, change_key
 from workstation.up_desk import UpDesk, remove_desk, write_desk
 
 if TYPE_CHECKING:
@@ -583,7 +582,8 @@ def _serve(
     telemetry.keep_desired = partial(desired_store.write, setup.root)
     controller = _controller(setup, logins, prefix, changed, signer, private_key, telemetry)
     agents = Agents(setup.workdir, logins.of, prefix, public_key)
-    view = open_view(logins.reconciler, prefix, changed.set)
+    serving = ServingDesired(controller)
+    view, reader = open_reader(logins.reconciler, prefix, serving, changed.set)
     ledger = _start_ledger(setup, logins.reconciler, prefix, say)
     if ledger is not None:
         telemetry.keep = ledger.keep
@@ -613,7 +613,7 @@ def _serve(
     ui = _start_ui(setup, connection, prefix, say, private_key)
     screen.begin(header)
     try:
-        _loop(controller, agents, view, Topics(prefix), stop, changed, screen)
+        _loop(controller, agents, view, reader, stop, changed, screen)
     finally:
         screen.end()
         if ui is not None:
@@ -777,11 +777,29 @@ def banner(setup: UpSetup, connection: Connection, desk: Path) -> list[str]:
     ]
 
 
+class ServingDesired:
+    """The desired robots of the revision up's reconciler serves, made once per revision: what
+    up's screen compares the fleet with."""
+
+    def __init__(self, controller: Controller) -> None:
+        self.controller = controller
+        self._made: tuple[str | None, Desired] = (None, ({}, "", []))
+
+    def get(self, reconciler: ReconcilerStatus | None) -> Desired:
+        serving = self.controller.serving
+        if serving is None or serving.fleet is None:
+            return self._made[1]
+        if serving.revision != self._made[0]:
+            where = f"{short_rev(serving.revision)} ({self.controller.source.branch})"
+            self._made = (serving.revision, (desired_from_fleet(serving.fleet), where, []))
+        return self._made[1]
+
+
 def _loop(
     controller: Controller,
     agents: Agents,
     view: RetainedView,
-    topics: Topics,
+    reader: FleetReader,
     stop: threading.Event,
     changed: threading.Event,
     screen: UpScreen,
@@ -794,6 +812,7 @@ def _loop(
     reported_dead: set[str] = set()
     started = time.monotonic()
     waiting_said = False
+    fleet: FleetStatus | None = None
     while not stop.is_set():
         changed.clear()
         serving = controller.serving
@@ -808,12 +827,7 @@ def _loop(
             waiting_said = True
             say(f"waiting for the broker at {view.connection.address.url} ({view.silence()})")
         if view.synced and serving is not None and serving.fleet is not None:
-            retained = parse_retained(view.snapshot(), topics)
-            fleet = FleetStatus(
-                build_rows(desired_from_fleet(serving.fleet), retained),
-                retained.reconciler,
-                f"{short_rev(serving.revision)} ({controller.source.branch})",
-            )
+            fleet, _ = reader.read(fleet, whole=fleet is None)
             key = change_key(fleet)
             if key != shown:
                 shown = key

@@ -81,6 +81,7 @@ def make_telemetry(
     notify: tuple[str, ...],
     metrics_at: str | None,
     notify_file: Path | None = None,
+    source: BranchSource | None = None,
 ) -> Telemetry:
     """Alerts (to the receivers of notify_urls) and metrics when asked for, and the timeline's
     events always (`start_ledger` hands them to the ledger); a bad URL or address, or a port
@@ -114,7 +115,9 @@ def make_telemetry(
         notifier = Notifier(receivers, metrics.notified if metrics is not None else None)
         if metrics is not None:
             metrics.receivers([receiver.name for receiver in receivers])
-    return Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
+    telemetry = Telemetry(connection, prefix, notifier=notifier, metrics=metrics)
+    telemetry.keep_desired = keep_desired(source) if source is not None else None
+    return telemetry
 
 
 def ledger_settings(
@@ -370,8 +373,7 @@ def reconcile(
     webhook = webhook_options(webhook_at, webhook_secret_file)
     ui_at_options = ui_beside(ui_at)  # checked before anything starts
     kept = ledger_settings(mqtt.prefix, **ledger_options)
-    telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at, notify_file)
-    telemetry.keep_desired = keep_desired(source)
+    telemetry = make_telemetry(connection, mqtt.prefix, notify, metrics_at, notify_file, source)
     log_to_stderr("reconciler")
     # With MQTT 5 the broker does not send back what the reconciler publishes (No Local):
     # 10,000 requests published are not 10,000 more read. Any 3.1.1 broker still serves.

@@ -24,13 +24,12 @@ from workstation.cli.fleet_view import fleet_status_view
 from workstation.cli.options import repo_option, rev_option
 from workstation.cli.terminal import is_terminal, plain_text, show, terminal_console
 from workstation.desk.broker import wait_for_broker
+from workstation.fleet_reader import FleetReader, open_reader, watch
 from workstation.fleet_status import (
     DesiredCache,
     confirm_loss,
     fleet_status,
-    open_view,
     unknown_when_lost,
-    watch,
 )
 
 
@@ -74,7 +73,8 @@ def status(
     topics = Topics(mqtt.prefix)
     desired = DesiredCache(repo, rev)
     changed = threading.Event()
-    view = open_view(connection, mqtt.prefix, changed.set)
+
+    view, reader = open_reader(connection, mqtt.prefix, desired, changed.set)
     view.start()
     try:
         wait_for_broker(view, wait)
@@ -91,7 +91,7 @@ def status(
             else:
                 show(fleet_status_view(fleet))
             return _verdict(fleet)
-        return _follow(view, topics, desired, changed, as_json, selector)
+        return _follow(view, reader, changed, as_json, selector)
     finally:
         view.stop()
 
@@ -123,8 +123,7 @@ def parse_selector(selectors: tuple[str, ...]) -> dict[str, str]:
 
 def _follow(
     view: RetainedView,
-    topics: Topics,
-    desired: DesiredCache,
+    reader: FleetReader,
     changed: threading.Event,
     as_json: bool,
     selector: dict[str, str],
@@ -135,7 +134,7 @@ def _follow(
     code = ExitCode.FINDINGS
     offline = f"(waiting for the broker at {view.connection.address.url}: {{}})"
     if as_json or not is_terminal():
-        for found in watch(view, topics, desired, changed, stop):
+        for found in watch(view, reader, changed, stop):
             fleet = found.select(selector) if found is not None else None
             if fleet is None:
                 if not as_json:
@@ -150,7 +149,7 @@ def _follow(
         return code
 
     with Live(console=terminal_console(), auto_refresh=False, transient=False) as live:
-        for found in watch(view, topics, desired, changed, stop):
+        for found in watch(view, reader, changed, stop):
             fleet = found.select(selector) if found is not None else None
             if fleet is None:
                 live.update(Text(offline.format(view.last_error)), refresh=True)

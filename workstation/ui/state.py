@@ -17,10 +17,10 @@ from contract.mqtt import Connection
 from contract.textsafe import printable
 from contract.wire import Topics
 from reconciler.verdicts import FleetStatus, reconciler_health
+from workstation.fleet_reader import FleetReader
 from workstation.fleet_status import DesiredCache, open_view
 from workstation.ui.changes import Shown, Views, change, changed_rows, first
 from workstation.ui.model import HISTORY, HistoryEntry, Snapshot
-from workstation.ui.reading import FleetReader
 
 log = logging.getLogger("robotconf.ui")
 

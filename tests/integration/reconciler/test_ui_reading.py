@@ -1,4 +1,4 @@
-"""The UI reads one robot's change alone (workstation/ui/reading.py): after any sequence of
+"""The UI reads one robot's change alone (workstation/fleet_reader.py): after any sequence of
 retained messages, its rows are those `status` works out from the whole broker, on a real
 Mosquitto (statuses that change, appear, lie or cannot be read, and topics cleared)."""
 
