@@ -36,12 +36,15 @@ from contract.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
 from reconciler.builds import Builder, Builds
 from reconciler.commits import CommitBook, named_revisions
 from reconciler.decide import (
+    HANDLING,
     Condition,
     Decision,
     Observation,
     Reason,
+    Retry,
     decide,
     internal_error,
+    retry_of,
 )
 from reconciler.delivery import Delivery, Signer
 from reconciler.desired import Desired
@@ -330,11 +333,11 @@ class Controller:
         if decision.changes:
             condition = self._apply(decision)
         self._recheck_at = decision.recheck_at
-        if condition.reason is Reason.BROKER_UNAVAILABLE:
-            return Outcome.RETRY, condition, decision.actions
-        if decision.stable is not None:
+        # Not acknowledged: not delivered, so not served.
+        if decision.stable is not None and condition.reason is not Reason.BROKER_UNAVAILABLE:
             self.serving = decision.stable
-        return (Outcome.RETRY if seen.head is None else Outcome.DONE), condition, decision.actions
+        backoff = retry_of(condition.reason) is Retry.BACKOFF  # the table decides (HANDLING)
+        return (Outcome.RETRY if backoff else Outcome.DONE), condition, decision.actions
 
     def _observe(self, fetch: bool) -> Observation | None:
         """The head commit and its build, and what the broker holds; None until the broker's
@@ -458,7 +461,7 @@ class Controller:
     ) -> None:
         """The step's outcome, logged once and written to the retained status."""
         if condition.state == "Stalled" and condition.reason is not Reason.BROKER_UNAVAILABLE:
-            self._say(condition.message, logging.WARNING)
+            self._say(f"{condition.message}; {HANDLING[condition.reason].says}", logging.WARNING)
         elif condition.reason is Reason.APPLIED:
             self._say(f"in sync with {short_rev(self._head)} ({self.source.branch})", logging.INFO)
         status = status_of(
