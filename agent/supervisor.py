@@ -253,11 +253,11 @@ class _Deferral:
         return min(now + policy.hold_poll, self.until)
 
 
-class Supervisor:
-    """One robot's brain: what should run, what runs, and what to do about the difference.
-
-    Every change of `phase` goes through `_move`, which refuses one TRANSITIONS does not list;
-    readiness and the hold file's deferral are parts of their own (`_Readiness`, `_Deferral`)."""
+class _SupervisorState:
+    """The supervisor's state and the ways it changes: every change of `phase` through `_move`,
+    which refuses one TRANSITIONS does not list; starts, stops, reloads and the hold file's
+    deferral; readiness and deferral are parts of their own (`_Readiness`, `_Deferral`).
+    `Supervisor` adds the events that drive it."""
 
     def __init__(
         self,
@@ -351,6 +351,174 @@ class Supervisor:
         self.busy = busy
         self._touch()
         return True
+
+    # ------------------------------------------------------------ internals
+
+    def _reloadable(self, request: LaunchRequest) -> bool:
+        """A reload instead of a restart: asked for in agent.yaml, only the reloadable part
+        changed (both requests carry a restart digest, and it is the same), and the brain is
+        RUNNING. Not while STARTING: it may not yet have set up its handler, and the default
+        action of SIGHUP and SIGUSR1/2 is to terminate; a restart is the safe answer there.
+        In BACKOFF, EXITED or FAILED no brain runs, and STOPPING ends in a start anyway."""
+        brain = self.brain
+        return (
+            self.policy.reload_signal is not None
+            and self.phase == AgentState.RUNNING
+            and self.pid is not None
+            and brain is not None
+            and brain is self.desired
+            and brain.request.restart_digest is not None
+            and brain.request.restart_digest == request.restart_digest
+        )
+
+    def _reload(self, assignment: _Assignment) -> list[Effect]:
+        assert self.pid is not None and self.brain is not None
+        assert self.policy.reload_signal is not None
+        request = assignment.request
+        self._before_reload = self.brain
+        self.desired = self.brain = assignment
+        self.reloads += 1
+        # The state stays `running` (and so does `since`): the same process runs on.
+        self.message = (
+            f"reloaded {request.digest} (pid {self.pid}, {self.policy.reload_signal.name})"
+        )
+        return [Reload(self.pid, self.policy.reload_signal, request)]
+
+    # ------------------------------------------------------------ deferral (the hold file)
+
+    def _holds(self) -> bool:
+        """A running brain, not yet being stopped, asks for time with its hold file."""
+        return (
+            self.policy.max_defer > 0
+            and self.pid is not None
+            and self.phase in (AgentState.STARTING, AgentState.RUNNING)
+            and self._held()
+        )
+
+    def _defer(self, now: float) -> list[Effect]:
+        """Into DEFERRED: the brain runs on; `tick` looks at the hold file until it is gone
+        or max_defer has passed, whichever comes first."""
+        self._deferral.phase_before = self.phase
+        self._deferral.until = now + self.policy.max_defer
+        self._enter(AgentState.DEFERRED, "")
+        self._deferral.since = self._since
+        return self._still_deferred(now)
+
+    def _still_deferred(self, now: float) -> list[Effect]:
+        """Something changed what waits (the newest ask wins); nothing left waiting resumes."""
+        what = self._deferral.waiting(self.desired, self.brain, self.policy)
+        if what is None:
+            self._resume()
+            return []
+        self.message = self._deferral.message(what, self.policy)
+        self.deadline = self._deferral.next_look(now, self.policy)
+        return []
+
+    def _look_at_hold(self, now: float) -> list[Effect]:
+        assert self._deferral.until is not None
+        if not self._held():
+            return self._proceed(now, "the brain removed its hold file")
+        if now >= self._deferral.until:
+            return self._proceed(
+                now,
+                f"deferral ran out after {self.policy.max_defer:g} s (max_defer) with the "
+                "hold file still there",
+            )
+        self.deadline = self._deferral.next_look(now, self.policy)
+        return []
+
+    def _proceed(self, now: float, why: str) -> list[Effect]:
+        """What waited goes ahead: a stop, the desk's restart, a reload or a restart."""
+        deferral = self._deferral
+        what = deferral.waiting(self.desired, self.brain, self.policy)
+        restart = deferral.pending_restart
+        deferral.end()
+        desired, brain = self.desired, self.brain
+        if what is None or brain is None or self.pid is None:
+            self._resume()
+            return []
+        if desired is None:
+            return self._begin_stop(now, f"stopping: no launch request for this robot ({why})")
+        if restart is None and deferral.reload_would_do(self.policy, brain, desired.request):
+            self._move(AgentState.RUNNING)  # the same process runs on, signalled
+            effects = self._reload(desired)
+            self.message += f" ({why})"
+            self._touch()
+            return effects
+        self.restarts = 0
+        self.streak = 0
+        if brain.request.digest != desired.request.digest:
+            self.reloads = 0
+        return self._begin_stop(now, f"{what} ({why}): stopping the brain")
+
+    def _resume(self) -> None:
+        """Back to what the brain was doing: nothing waits any more."""
+        self._deferral.end()
+        if self._deferral.phase_before == AgentState.STARTING and self.pid is not None:
+            self.deadline = self._readiness.deadline(self.policy)
+            self._enter(AgentState.STARTING, self._readiness.message(self.pid, self.policy))
+        else:
+            self.deadline = None
+            self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
+
+    # ------------------------------------------------------------ the rest
+
+    def _forget_desk_restart(self) -> None:
+        """A restart from the desk is shown (`restart: ROBOT by WHO at WHEN`) only while it is
+        the brain's latest start for another reason than a crash: a new request or none ends
+        it. A reload does not (the same process runs on), nor a crash restart (RESTARTS counts
+        those since)."""
+        self.restart_requested_by = None
+        self.restart_requested_at = None
+
+    def _spawn(self, now: float) -> list[Effect]:
+        assert self.desired is not None
+        self.brain = self.desired
+        self.pid = None
+        self.deadline = None
+        self._enter(AgentState.STARTING, f"starting {self.desired.request.digest}")
+        return [Spawn(self.desired.request)]
+
+    def _begin_stop(self, now: float, why: str) -> list[Effect]:
+        assert self.pid is not None
+        self._killed = False
+        self.deadline = now + self.policy.stop_timeout
+        self._enter(AgentState.STOPPING, why)
+        return [Terminate(self.pid)]
+
+    def _move(self, phase: AgentState) -> bool:
+        """The one change of `phase`: one TRANSITIONS does not list is refused (logged; the
+        phase stays), never raised: an agent must outlive a bug in its own rules."""
+        if not legal(self._phase, phase):
+            log.error(
+                "illegal phase change of %s refused: %s -> %s (agent/supervisor.py TRANSITIONS)",
+                self.robot_id,
+                self._phase.value,
+                phase.value,
+            )
+            return False
+        self._phase = phase
+        return True
+
+    def _enter(self, phase: AgentState, message: str) -> None:
+        if self._move(phase):
+            self.message = message
+        self._touch()
+
+    def _set_rejection(self, reason: str | None) -> None:
+        self.rejection = reason
+        self._touch()
+
+    def _touch(self) -> None:
+        # `since` marks the last change of the reported state, not every message edit.
+        if self.state != self._reported:
+            self._reported = self.state
+            self._since = round(self._wall(), 3)
+
+
+class Supervisor(_SupervisorState):
+    """One robot's brain: what should run, what runs, and what to do about the difference:
+    events in (a request, an exit, time passing...), effects out."""
 
     # ------------------------------------------------------------ events
 
@@ -611,166 +779,3 @@ class Supervisor:
         if self.pid is not None:
             return self._begin_stop(now, "agent shutting down: stopping the brain")
         return []
-
-    # ------------------------------------------------------------ internals
-
-    def _reloadable(self, request: LaunchRequest) -> bool:
-        """A reload instead of a restart: asked for in agent.yaml, only the reloadable part
-        changed (both requests carry a restart digest, and it is the same), and the brain is
-        RUNNING. Not while STARTING: it may not yet have set up its handler, and the default
-        action of SIGHUP and SIGUSR1/2 is to terminate; a restart is the safe answer there.
-        In BACKOFF, EXITED or FAILED no brain runs, and STOPPING ends in a start anyway."""
-        brain = self.brain
-        return (
-            self.policy.reload_signal is not None
-            and self.phase == AgentState.RUNNING
-            and self.pid is not None
-            and brain is not None
-            and brain is self.desired
-            and brain.request.restart_digest is not None
-            and brain.request.restart_digest == request.restart_digest
-        )
-
-    def _reload(self, assignment: _Assignment) -> list[Effect]:
-        assert self.pid is not None and self.brain is not None
-        assert self.policy.reload_signal is not None
-        request = assignment.request
-        self._before_reload = self.brain
-        self.desired = self.brain = assignment
-        self.reloads += 1
-        # The state stays `running` (and so does `since`): the same process runs on.
-        self.message = (
-            f"reloaded {request.digest} (pid {self.pid}, {self.policy.reload_signal.name})"
-        )
-        return [Reload(self.pid, self.policy.reload_signal, request)]
-
-    # ------------------------------------------------------------ deferral (the hold file)
-
-    def _holds(self) -> bool:
-        """A running brain, not yet being stopped, asks for time with its hold file."""
-        return (
-            self.policy.max_defer > 0
-            and self.pid is not None
-            and self.phase in (AgentState.STARTING, AgentState.RUNNING)
-            and self._held()
-        )
-
-    def _defer(self, now: float) -> list[Effect]:
-        """Into DEFERRED: the brain runs on; `tick` looks at the hold file until it is gone
-        or max_defer has passed, whichever comes first."""
-        self._deferral.phase_before = self.phase
-        self._deferral.until = now + self.policy.max_defer
-        self._enter(AgentState.DEFERRED, "")
-        self._deferral.since = self._since
-        return self._still_deferred(now)
-
-    def _still_deferred(self, now: float) -> list[Effect]:
-        """Something changed what waits (the newest ask wins); nothing left waiting resumes."""
-        what = self._deferral.waiting(self.desired, self.brain, self.policy)
-        if what is None:
-            self._resume()
-            return []
-        self.message = self._deferral.message(what, self.policy)
-        self.deadline = self._deferral.next_look(now, self.policy)
-        return []
-
-    def _look_at_hold(self, now: float) -> list[Effect]:
-        assert self._deferral.until is not None
-        if not self._held():
-            return self._proceed(now, "the brain removed its hold file")
-        if now >= self._deferral.until:
-            return self._proceed(
-                now,
-                f"deferral ran out after {self.policy.max_defer:g} s (max_defer) with the "
-                "hold file still there",
-            )
-        self.deadline = self._deferral.next_look(now, self.policy)
-        return []
-
-    def _proceed(self, now: float, why: str) -> list[Effect]:
-        """What waited goes ahead: a stop, the desk's restart, a reload or a restart."""
-        deferral = self._deferral
-        what = deferral.waiting(self.desired, self.brain, self.policy)
-        restart = deferral.pending_restart
-        deferral.end()
-        desired, brain = self.desired, self.brain
-        if what is None or brain is None or self.pid is None:
-            self._resume()
-            return []
-        if desired is None:
-            return self._begin_stop(now, f"stopping: no launch request for this robot ({why})")
-        if restart is None and deferral.reload_would_do(self.policy, brain, desired.request):
-            self._move(AgentState.RUNNING)  # the same process runs on, signalled
-            effects = self._reload(desired)
-            self.message += f" ({why})"
-            self._touch()
-            return effects
-        self.restarts = 0
-        self.streak = 0
-        if brain.request.digest != desired.request.digest:
-            self.reloads = 0
-        return self._begin_stop(now, f"{what} ({why}): stopping the brain")
-
-    def _resume(self) -> None:
-        """Back to what the brain was doing: nothing waits any more."""
-        self._deferral.end()
-        if self._deferral.phase_before == AgentState.STARTING and self.pid is not None:
-            self.deadline = self._readiness.deadline(self.policy)
-            self._enter(AgentState.STARTING, self._readiness.message(self.pid, self.policy))
-        else:
-            self.deadline = None
-            self._enter(AgentState.RUNNING, f"running (pid {self.pid})")
-
-    # ------------------------------------------------------------ the rest
-
-    def _forget_desk_restart(self) -> None:
-        """A restart from the desk is shown (`restart: ROBOT by WHO at WHEN`) only while it is
-        the brain's latest start for another reason than a crash: a new request or none ends
-        it. A reload does not (the same process runs on), nor a crash restart (RESTARTS counts
-        those since)."""
-        self.restart_requested_by = None
-        self.restart_requested_at = None
-
-    def _spawn(self, now: float) -> list[Effect]:
-        assert self.desired is not None
-        self.brain = self.desired
-        self.pid = None
-        self.deadline = None
-        self._enter(AgentState.STARTING, f"starting {self.desired.request.digest}")
-        return [Spawn(self.desired.request)]
-
-    def _begin_stop(self, now: float, why: str) -> list[Effect]:
-        assert self.pid is not None
-        self._killed = False
-        self.deadline = now + self.policy.stop_timeout
-        self._enter(AgentState.STOPPING, why)
-        return [Terminate(self.pid)]
-
-    def _move(self, phase: AgentState) -> bool:
-        """The one change of `phase`: one TRANSITIONS does not list is refused (logged; the
-        phase stays), never raised: an agent must outlive a bug in its own rules."""
-        if not legal(self._phase, phase):
-            log.error(
-                "illegal phase change of %s refused: %s -> %s (agent/supervisor.py TRANSITIONS)",
-                self.robot_id,
-                self._phase.value,
-                phase.value,
-            )
-            return False
-        self._phase = phase
-        return True
-
-    def _enter(self, phase: AgentState, message: str) -> None:
-        if self._move(phase):
-            self.message = message
-        self._touch()
-
-    def _set_rejection(self, reason: str | None) -> None:
-        self.rejection = reason
-        self._touch()
-
-    def _touch(self) -> None:
-        # `since` marks the last change of the reported state, not every message edit.
-        if self.state != self._reported:
-            self._reported = self.state
-            self._since = round(self._wall(), 3)
