@@ -7,6 +7,7 @@ without a broker.
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Mapping, Sequence, Set
 from dataclasses import dataclass, field, replace
 
@@ -44,6 +45,55 @@ _STATE_OF: dict[ReconcilerReason, ReconcilerState] = {
 
 def state_of(reason: Reason) -> ReconcilerState:
     return _STATE_OF.get(reason, "Stalled")
+
+
+class Retry(enum.Enum):
+    """What the loop does about a step's reason (as a Flux reason is retried or stalls)."""
+
+    NONE = "none"  # nothing failed: the next commit, push, report or interval moves it on
+    BACKOFF = "backoff"  # a fault outside the commit that may pass: tried again soon, backing off
+    RESYNC = "resync"  # tried again when the branch moves or at the next resync, which fetches
+    TERMINAL = "terminal"  # never retried: only a new commit or an operator's action ends it
+
+
+@dataclass(frozen=True)
+class Handling:
+    retry: Retry
+    says: str  # what the reconciler's log adds to a stalled step's message
+
+
+# Retry or terminal, per reason: the one place it is decided (the controller reads it).
+HANDLING: Mapping[Reason, Handling] = {
+    Reason.APPLIED: Handling(Retry.NONE, "in sync"),
+    Reason.PROGRESSING: Handling(Retry.NONE, "the broker's and the robots' answers move it on"),
+    Reason.ROLLOUT_PAUSED: Handling(
+        Retry.TERMINAL, "waits for fleet.yaml or an operator to resume the rollout"
+    ),
+    Reason.BUILD_FAILED: Handling(Retry.TERMINAL, "not retried: a new commit mends it"),
+    Reason.EMPTY_FLEET_REFUSED: Handling(
+        Retry.TERMINAL, "not retried: a new commit (or `allow_empty: true`) mends it"
+    ),
+    # Only a fetch or a moved branch can mend it: a sooner retry would read the same cache.
+    Reason.SOURCE_UNAVAILABLE: Handling(
+        Retry.RESYNC, "read again when the branch moves, and fetched again at the next resync"
+    ),
+    Reason.BROKER_UNAVAILABLE: Handling(Retry.BACKOFF, "retried with backoff"),
+    # A build that raised is built again at each resync (a step that raised: with backoff).
+    Reason.INTERNAL_ERROR: Handling(
+        Retry.RESYNC, "a bug: tried again (a build, at the next resync)"
+    ),
+    Reason.OFFLINE: Handling(Retry.NONE, "the reconciler is not running"),
+    Reason.ROLLOUT_HALTED: Handling(
+        Retry.TERMINAL, "not retried: a new commit or an operator's action ends it"
+    ),
+    Reason.ROLLED_BACK: Handling(
+        Retry.TERMINAL, "not retried: a new commit or an operator's action ends it"
+    ),
+}
+
+
+def retry_of(reason: Reason) -> Retry:
+    return HANDLING[reason].retry
 
 
 @dataclass(frozen=True)

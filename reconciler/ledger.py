@@ -203,7 +203,182 @@ def find_ledger(repo: Path, prefix: str, state_dir: Path | None = None) -> Path:
     return ledger_path(default_state_dir(prefix))
 
 
-class Ledger:
+class _LedgerReads:
+    """What a ledger answers: the queries of `history`, the browser and a rollout's evidence,
+    each on the one connection its `Ledger` holds."""
+
+    _db: sqlite3.Connection
+    path: Path
+
+    # ------------------------------------------------------------------ reading
+
+    def count(self) -> int:
+        """Outcomes kept (a full count: for tests and benchmarks)."""
+        return int(self._db.execute("SELECT count(*) FROM outcomes").fetchone()[0])
+
+    def revisions(self) -> list[RevisionSeen]:
+        """Every revision the ledger holds outcomes of, newest (first seen last) first."""
+        return [
+            RevisionSeen(revision, first, last)
+            for revision, first, last in self._read(
+                "SELECT revision, first_seen, last_seen FROM revisions "
+                "ORDER BY first_seen DESC, revision"
+            )
+        ]
+
+    def resolve(self, rev: str) -> RevisionSeen:
+        """The revision `rev` names: whole, or the start of one (at least 4 characters)."""
+        if len(rev) < 4 and rev != NO_REVISION:
+            raise LedgerError(f"--rev {rev!r}: give at least 4 characters of a revision")
+        found = [seen for seen in self.revisions() if seen.revision.startswith(rev)]
+        exact = [seen for seen in found if seen.revision == rev]
+        if exact:
+            return exact[0]
+        if not found:
+            raise LedgerError(f"the ledger holds no outcomes of a revision {rev!r}")
+        if len(found) > 1:
+            names = ", ".join(seen.revision[:12] for seen in found[:5])
+            raise LedgerError(f"--rev {rev!r} names several revisions: {names}")
+        return found[0]
+
+    def before(self, revision: str) -> str | None:
+        """The revision whose outcomes began arriving last before `revision`'s did."""
+        row = self._read(
+            "SELECT r.revision FROM revisions r, revisions this WHERE this.revision = ? "
+            "AND (r.first_seen < this.first_seen OR (r.first_seen = this.first_seen AND "
+            "r.revision < this.revision)) ORDER BY r.first_seen DESC, r.revision DESC LIMIT 1",
+            (revision,),
+        )
+        return row[0][0] if row else None
+
+    def evidence_rows(
+        self, *, after: int = 0, since: float | None = None, limit: int = 50_000
+    ) -> list[Row]:
+        """Outcomes in the order the ledger kept them, for a wave's evidence: those after the
+        row `after`, or (a first count) those received at or after `since`; at most `limit`."""
+        if since is not None and after == 0:
+            where, args = "received_at >= ?", (since, limit)
+        else:
+            where, args = "id > ?", (after, limit)
+        return [
+            Row(*row)
+            for row in self._read(
+                "SELECT id, robot_id, digest, scenario, outcome, code, received_at FROM outcomes "
+                f"WHERE {where} ORDER BY id LIMIT ?",
+                list(args),
+            )
+        ]
+
+    def report(
+        self, revision: str, *, robot: str | None = None, since: float | None = None
+    ) -> RevisionReport:
+        """What `revision` achieved: its outcomes (of `robot`, ended at or after `since`)
+        tallied per scenario, task and robot."""
+        where, args = "revision = ?", list[object]([revision])
+        if robot is not None:
+            where += " AND robot_id = ?"
+            args.append(robot)
+        if since is None:  # the tallies hold it all
+            table, count, total, timed = (
+                "tallies",
+                "sum(count)",
+                "sum(duration_sum)",
+                "sum(durations)",
+            )
+            codes_where = f"{where} AND code != ''"
+        else:
+            where += " AND ended_at >= ?"
+            args.append(since)
+            table, count, total, timed = (
+                "outcomes",
+                "count(*)",
+                "total(duration)",
+                "count(duration)",
+            )
+            codes_where = f"{where} AND code IS NOT NULL"
+        tasks = [
+            Group(revision, OutcomeState(outcome), n, dsum, dn, scenario=scenario, task=task)
+            for scenario, task, outcome, n, dsum, dn in self._read(
+                f"SELECT scenario, task, outcome, {count}, {total}, {timed} FROM {table} "
+                f"WHERE {where} GROUP BY scenario, task, outcome",
+                args,
+            )
+            if outcome in _STATES
+        ]
+        robots = [
+            Group(revision, OutcomeState(outcome), n, dsum, dn, robot_id=robot_id)
+            for robot_id, outcome, n, dsum, dn in self._read(
+                f"SELECT robot_id, outcome, {count}, {total}, {timed} FROM {table} "
+                f"WHERE {where} GROUP BY robot_id, outcome",
+                args,
+            )
+            if outcome in _STATES
+        ]
+        codes = dict(
+            self._read(
+                f"SELECT code, {count} FROM {table} WHERE {codes_where} GROUP BY code "
+                f"ORDER BY {count} DESC, code LIMIT {CODES_SHOWN}",
+                args,
+            )
+        )
+        seen = self._read(
+            "SELECT first_seen, last_seen FROM revisions WHERE revision = ?", (revision,)
+        )
+        first, last = seen[0] if seen else (None, None)
+        return aggregate(revision, tasks, robots, codes, first_seen=first, last_seen=last)
+
+    def history(
+        self, rev: str | None = None, *, robot: str | None = None, since: float | None = None
+    ) -> History:
+        """What a revision achieved beside the revision before it: `rev` (whole or its start),
+        by default the newest seen. LedgerError when the ledger holds none."""
+        if rev is None:
+            newest = self.revisions()
+            if not newest:
+                raise LedgerError(f"the ledger {self.path} holds no goal outcomes yet")
+            revision = newest[0].revision
+        else:
+            revision = self.resolve(rev).revision
+        previous = self.before(revision)
+        return History(
+            report=self.report(revision, robot=robot, since=since),
+            before=(None if previous is None else self.report(previous, robot=robot, since=since)),
+            robot=robot,
+            since=since,
+        )
+
+    def events(self, query: EventQuery | None = None) -> list[KeptEvent]:
+        """The kept events `query` asks for, newest first (a ledger of schema 1: none)."""
+        query = query if query is not None else EventQuery()
+        if not self._read("SELECT 1 FROM sqlite_master WHERE type='table' AND name='events'"):
+            return []
+        where, args = [], list[object]()
+        if query.robot is not None:
+            where.append("robot_id = ?")
+            args.append(query.robot)
+        if query.kind is not None:
+            where.append("kind = ?")
+            args.append(query.kind)
+        if query.since is not None:
+            where.append("at >= ?")
+            args.append(query.since)
+        sql = f"SELECT {_EVENT_COLUMNS} FROM events"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        args.append(query.limit)
+        return [
+            KeptEvent(*row) for row in self._read(f"{sql} ORDER BY at DESC, id DESC LIMIT ?", args)
+        ]
+
+    def _read(self, sql: str, args: Sequence[object] = ()) -> list[Any]:
+        """A query's rows; LedgerError when the file turns out unreadable."""
+        try:
+            return self._db.execute(sql, args).fetchall()
+        except sqlite3.DatabaseError as exc:
+            raise LedgerError(f"cannot read the ledger {self.path}: {exc}") from None
+
+
+class Ledger(_LedgerReads):
     """One connection to one ledger file. A writer (the reconciler's feed) adds and prunes
     from one thread; readers open their own, read-only."""
 
@@ -557,173 +732,6 @@ class Ledger:
     def checkpoint(self) -> None:
         """Folds the write-ahead log into the file (SQLite also does it every 1,000 pages)."""
         self._db.execute("PRAGMA wal_checkpoint(PASSIVE)")
-
-    # ------------------------------------------------------------------ reading
-
-    def count(self) -> int:
-        """Outcomes kept (a full count: for tests and benchmarks)."""
-        return int(self._db.execute("SELECT count(*) FROM outcomes").fetchone()[0])
-
-    def revisions(self) -> list[RevisionSeen]:
-        """Every revision the ledger holds outcomes of, newest (first seen last) first."""
-        return [
-            RevisionSeen(revision, first, last)
-            for revision, first, last in self._read(
-                "SELECT revision, first_seen, last_seen FROM revisions "
-                "ORDER BY first_seen DESC, revision"
-            )
-        ]
-
-    def resolve(self, rev: str) -> RevisionSeen:
-        """The revision `rev` names: whole, or the start of one (at least 4 characters)."""
-        if len(rev) < 4 and rev != NO_REVISION:
-            raise LedgerError(f"--rev {rev!r}: give at least 4 characters of a revision")
-        found = [seen for seen in self.revisions() if seen.revision.startswith(rev)]
-        exact = [seen for seen in found if seen.revision == rev]
-        if exact:
-            return exact[0]
-        if not found:
-            raise LedgerError(f"the ledger holds no outcomes of a revision {rev!r}")
-        if len(found) > 1:
-            names = ", ".join(seen.revision[:12] for seen in found[:5])
-            raise LedgerError(f"--rev {rev!r} names several revisions: {names}")
-        return found[0]
-
-    def before(self, revision: str) -> str | None:
-        """The revision whose outcomes began arriving last before `revision`'s did."""
-        row = self._read(
-            "SELECT r.revision FROM revisions r, revisions this WHERE this.revision = ? "
-            "AND (r.first_seen < this.first_seen OR (r.first_seen = this.first_seen AND "
-            "r.revision < this.revision)) ORDER BY r.first_seen DESC, r.revision DESC LIMIT 1",
-            (revision,),
-        )
-        return row[0][0] if row else None
-
-    def evidence_rows(
-        self, *, after: int = 0, since: float | None = None, limit: int = 50_000
-    ) -> list[Row]:
-        """Outcomes in the order the ledger kept them, for a wave's evidence: those after the
-        row `after`, or (a first count) those received at or after `since`; at most `limit`."""
-        if since is not None and after == 0:
-            where, args = "received_at >= ?", (since, limit)
-        else:
-            where, args = "id > ?", (after, limit)
-        return [
-            Row(*row)
-            for row in self._read(
-                "SELECT id, robot_id, digest, scenario, outcome, code, received_at FROM outcomes "
-                f"WHERE {where} ORDER BY id LIMIT ?",
-                list(args),
-            )
-        ]
-
-    def report(
-        self, revision: str, *, robot: str | None = None, since: float | None = None
-    ) -> RevisionReport:
-        """What `revision` achieved: its outcomes (of `robot`, ended at or after `since`)
-        tallied per scenario, task and robot."""
-        where, args = "revision = ?", list[object]([revision])
-        if robot is not None:
-            where += " AND robot_id = ?"
-            args.append(robot)
-        if since is None:  # the tallies hold it all
-            table, count, total, timed = (
-                "tallies",
-                "sum(count)",
-                "sum(duration_sum)",
-                "sum(durations)",
-            )
-            codes_where = f"{where} AND code != ''"
-        else:
-            where += " AND ended_at >= ?"
-            args.append(since)
-            table, count, total, timed = (
-                "outcomes",
-                "count(*)",
-                "total(duration)",
-                "count(duration)",
-            )
-            codes_where = f"{where} AND code IS NOT NULL"
-        tasks = [
-            Group(revision, OutcomeState(outcome), n, dsum, dn, scenario=scenario, task=task)
-            for scenario, task, outcome, n, dsum, dn in self._read(
-                f"SELECT scenario, task, outcome, {count}, {total}, {timed} FROM {table} "
-                f"WHERE {where} GROUP BY scenario, task, outcome",
-                args,
-            )
-            if outcome in _STATES
-        ]
-        robots = [
-            Group(revision, OutcomeState(outcome), n, dsum, dn, robot_id=robot_id)
-            for robot_id, outcome, n, dsum, dn in self._read(
-                f"SELECT robot_id, outcome, {count}, {total}, {timed} FROM {table} "
-                f"WHERE {where} GROUP BY robot_id, outcome",
-                args,
-            )
-            if outcome in _STATES
-        ]
-        codes = dict(
-            self._read(
-                f"SELECT code, {count} FROM {table} WHERE {codes_where} GROUP BY code "
-                f"ORDER BY {count} DESC, code LIMIT {CODES_SHOWN}",
-                args,
-            )
-        )
-        seen = self._read(
-            "SELECT first_seen, last_seen FROM revisions WHERE revision = ?", (revision,)
-        )
-        first, last = seen[0] if seen else (None, None)
-        return aggregate(revision, tasks, robots, codes, first_seen=first, last_seen=last)
-
-    def history(
-        self, rev: str | None = None, *, robot: str | None = None, since: float | None = None
-    ) -> History:
-        """What a revision achieved beside the revision before it: `rev` (whole or its start),
-        by default the newest seen. LedgerError when the ledger holds none."""
-        if rev is None:
-            newest = self.revisions()
-            if not newest:
-                raise LedgerError(f"the ledger {self.path} holds no goal outcomes yet")
-            revision = newest[0].revision
-        else:
-            revision = self.resolve(rev).revision
-        previous = self.before(revision)
-        return History(
-            report=self.report(revision, robot=robot, since=since),
-            before=(None if previous is None else self.report(previous, robot=robot, since=since)),
-            robot=robot,
-            since=since,
-        )
-
-    def events(self, query: EventQuery | None = None) -> list[KeptEvent]:
-        """The kept events `query` asks for, newest first (a ledger of schema 1: none)."""
-        query = query if query is not None else EventQuery()
-        if not self._read("SELECT 1 FROM sqlite_master WHERE type='table' AND name='events'"):
-            return []
-        where, args = [], list[object]()
-        if query.robot is not None:
-            where.append("robot_id = ?")
-            args.append(query.robot)
-        if query.kind is not None:
-            where.append("kind = ?")
-            args.append(query.kind)
-        if query.since is not None:
-            where.append("at >= ?")
-            args.append(query.since)
-        sql = f"SELECT {_EVENT_COLUMNS} FROM events"
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        args.append(query.limit)
-        return [
-            KeptEvent(*row) for row in self._read(f"{sql} ORDER BY at DESC, id DESC LIMIT ?", args)
-        ]
-
-    def _read(self, sql: str, args: Sequence[object] = ()) -> list[Any]:
-        """A query's rows; LedgerError when the file turns out unreadable."""
-        try:
-            return self._db.execute(sql, args).fetchall()
-        except sqlite3.DatabaseError as exc:
-            raise LedgerError(f"cannot read the ledger {self.path}: {exc}") from None
 
 
 _STATES = {state.value for state in OutcomeState}

@@ -151,6 +151,26 @@ class _Window:
         self.flight.append((info, size))
         self.size += size
 
+    def send(
+        self,
+        client: paho.Client,
+        items: Sequence[tuple[str, Payload]],
+        copies: Sequence[bytes],
+    ) -> list[tuple[str, bytes, paho.MQTTMessageInfo]]:
+        """Publishes each item retained, QoS 1, each payload made as it is sent; each with
+        the copy to keep of it, and what tells its acknowledgement."""
+        infos: list[tuple[str, bytes, paho.MQTTMessageInfo]] = []
+        # 10,000 publishes allocate enough to set off collections that walk every object
+        # the reconciler holds (its whole rendered fleet); none of them is a cycle.
+        with collector_paused():
+            for (topic, payload), copy in zip(items, copies, strict=True):
+                data = made(payload)
+                self.make_room(len(data))
+                info = client.publish(topic, data, qos=1, retain=True)
+                self.add(info, len(data))
+                infos.append((topic, copy, info))
+        return infos
+
 
 def client_id(role: str) -> str:
     """Unique per process and instance: two clients with one id would kick each other off."""
@@ -373,17 +393,7 @@ class RetainedView:
         with self._lock:
             before = {topic: self._arrivals.get(topic, 0) for topic, _ in items}
         deadline = time.monotonic() + timeout
-        infos: list[tuple[str, bytes, paho.MQTTMessageInfo]] = []
-        # 10,000 publishes allocate enough to set off collections that walk every object
-        # the reconciler holds (its whole rendered fleet); none of them is a cycle.
-        window = _Window(deadline)
-        with collector_paused():
-            for (topic, payload), copy in zip(items, copies, strict=True):
-                data = made(payload)
-                window.make_room(len(data))
-                info = self._client.publish(topic, data, qos=1, retain=True)
-                window.add(info, len(data))
-                infos.append((topic, copy, info))
+        infos = _Window(deadline).send(self._client, items, copies)
         ok = True
         for topic, copy, info in infos:
             try:

@@ -10,7 +10,7 @@ from contract.signing import Signed
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
-    from reconciler.controller import Signer
+    from reconciler.delivery import Signer
 
 
 def make_signer(key_path: Path | None) -> Signer | None:

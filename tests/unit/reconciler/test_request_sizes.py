@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from configurator.render import FleetRender, render_fleet
 from configurator.workspace import check
-from reconciler.controller import RequestSizes
+from reconciler.builds import RequestSizes
 from tests.support.agents import make_request
 from tests.support.lab import ROOT
 
