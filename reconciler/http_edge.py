@@ -178,6 +178,67 @@ class _Cut(Exception):
     """The connection ends unanswered; the message says why (for the log)."""
 
 
+class _Admission:
+    """Which connections a listener holds, per address: the caps, counted on open connections
+    only (see BoundedHTTPServer). Used on the listener's loop thread alone."""
+
+    def __init__(self, limits: Limits) -> None:
+        self.limits = limits
+        self.open: dict[str, list[_Connection]] = {}
+        self.total = 0
+
+    def admit(self, connection: _Connection) -> str | None:
+        """None when `connection` may stay; else why it is closed at once. Decided on what is
+        open now: finished connections are not counted (see the class)."""
+        mine = self.open.get(connection.key, [])
+        busy = {key: [c for c in held if not c.finished] for key, held in self.open.items()}
+        holding = len(busy.get(connection.key, []))
+        if holding >= self.limits.per_client:
+            return f"{holding} already open from {connection.key}, the most one address may hold"
+        if len(mine) >= self.limits.per_client:
+            self._close_finished(mine)
+        if sum(len(held) for held in busy.values()) >= self.limits.connections:
+            victim = self._victim(busy, holding)
+            if victim is None:
+                return f"{self.total} already open, the most it holds"
+            victim.evicted = True
+            victim.transport.abort()
+            self.forget(victim)
+        if self.total >= self.limits.connections:
+            self._close_finished([c for held in self.open.values() for c in held])
+        self.open.setdefault(connection.key, []).append(connection)
+        self.total += 1
+        return None
+
+    def _close_finished(self, connections: list[_Connection]) -> None:
+        """Closes the oldest finished one of `connections` (there is one: the caller counted
+        them): closed, not reset, so that its answer still reaches its client."""
+        oldest = min((c for c in connections if c.finished), key=lambda c: c.serial)
+        self.forget(oldest)
+        oldest.transport.close()
+
+    @staticmethod
+    def _victim(busy: dict[str, list[_Connection]], holding: int) -> _Connection | None:
+        """The oldest open connection of the address holding the most, when making room for a
+        client holding `holding` leaves things fairer: that address holds at least two more
+        (one more for an address new to the listener)."""
+        least = holding + 2 if holding else 1
+        candidates = [
+            c for connections in busy.values() if len(connections) >= least for c in connections
+        ]
+        if not candidates:
+            return None
+        return max(candidates, key=lambda c: (len(busy[c.key]), -c.serial))
+
+    def forget(self, connection: _Connection) -> None:
+        mine = self.open.get(connection.key, [])
+        if connection in mine:
+            mine.remove(connection)
+            self.total -= 1
+        if not mine:
+            self.open.pop(connection.key, None)
+
+
 class BoundedHTTPServer:
     """HTTP/1.1, one request per connection, every connection bounded by `limits`.
 
@@ -194,8 +255,7 @@ class BoundedHTTPServer:
         self.name = name
         self.service = service
         self.limits = limits
-        self._open: dict[str, list[_Connection]] = {}
-        self._total = 0
+        self._held = _Admission(limits)
         self._serial = 0
         self._busy_said = Throttle(60.0)
         self._cut_said = Throttle(60.0, limit=3)
@@ -228,7 +288,7 @@ class BoundedHTTPServer:
 
     @property
     def open_connections(self) -> int:
-        return self._total
+        return self._held.total
 
     def close(self) -> None:
         loop, stopping, thread = self._loop, self._stopping, self._thread
@@ -264,65 +324,12 @@ class BoundedHTTPServer:
         self._ready.set()
         await self._stopping.wait()
         server.close()
-        for connections in list(self._open.values()):
+        for connections in list(self._held.open.values()):
             for connection in connections:
                 connection.transport.abort()
         tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
         if tasks:
             await asyncio.wait(tasks, timeout=5)
-
-    # ------------------------------------------------------------------ admission (loop thread)
-
-    def _admit(self, connection: _Connection) -> str | None:
-        """None when `connection` may stay; else why it is closed at once. Decided on what is
-        open now: finished connections are not counted (see the class)."""
-        mine = self._open.get(connection.key, [])
-        busy = {key: [c for c in held if not c.finished] for key, held in self._open.items()}
-        holding = len(busy.get(connection.key, []))
-        if holding >= self.limits.per_client:
-            return f"{holding} already open from {connection.key}, the most one address may hold"
-        if len(mine) >= self.limits.per_client:
-            self._close_finished(mine)
-        if sum(len(held) for held in busy.values()) >= self.limits.connections:
-            victim = self._victim(busy, holding)
-            if victim is None:
-                return f"{self._total} already open, the most it holds"
-            victim.evicted = True
-            victim.transport.abort()
-            self._forget(victim)
-        if self._total >= self.limits.connections:
-            self._close_finished([c for held in self._open.values() for c in held])
-        self._open.setdefault(connection.key, []).append(connection)
-        self._total += 1
-        return None
-
-    def _close_finished(self, connections: list[_Connection]) -> None:
-        """Closes the oldest finished one of `connections` (there is one: the caller counted
-        them): closed, not reset, so that its answer still reaches its client."""
-        oldest = min((c for c in connections if c.finished), key=lambda c: c.serial)
-        self._forget(oldest)
-        oldest.transport.close()
-
-    @staticmethod
-    def _victim(busy: dict[str, list[_Connection]], holding: int) -> _Connection | None:
-        """The oldest open connection of the address holding the most, when making room for a
-        client holding `holding` leaves things fairer: that address holds at least two more
-        (one more for an address new to the listener)."""
-        least = holding + 2 if holding else 1
-        candidates = [
-            c for connections in busy.values() if len(connections) >= least for c in connections
-        ]
-        if not candidates:
-            return None
-        return max(candidates, key=lambda c: (len(busy[c.key]), -c.serial))
-
-    def _forget(self, connection: _Connection) -> None:
-        mine = self._open.get(connection.key, [])
-        if connection in mine:
-            mine.remove(connection)
-            self._total -= 1
-        if not mine:
-            self._open.pop(connection.key, None)
 
     def _say(self, throttle: Throttle, line: str) -> None:
         loop = self._loop
@@ -339,7 +346,7 @@ class BoundedHTTPServer:
         transport = writer.transport
         assert isinstance(transport, asyncio.Transport)
         connection = _Connection(client_key(client), client, transport, self._serial)
-        refusal = self._admit(connection)
+        refusal = self._held.admit(connection)
         if refusal is not None:
             writer.transport.abort()
             self._say(
@@ -366,7 +373,7 @@ class BoundedHTTPServer:
                 printable(f"{type(exc).__name__}: {exc}")[:300],
             )
         finally:
-            self._forget(connection)
+            self._held.forget(connection)
             if writer.transport.get_write_buffer_size():  # a client that does not read
                 writer.transport.abort()
             else:
