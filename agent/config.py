@@ -26,9 +26,10 @@ from pydantic import (
 from pydantic_core import ErrorDetails
 
 from contract.diagnostics import did_you_mean
-from contract.files import read_regular
 from contract.models import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
+from contract.mqtt import MAX_TLS_FILE as MAX_CREDENTIAL_BYTES
 from contract.mqtt import Connection
+from contract.trust import Trust, UntrustedFile, check_trusted, read_trusted
 from contract.typing_errors import error_path, error_text, type_error_text
 from contract.wire import (
     BROKER_ENV,
@@ -572,19 +573,33 @@ def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc
             load_public_key(config.public_key)
         except SigningKeyError as exc:
             yield ("public_key",), f"public_key: {exc}"
-    files: list[tuple[Loc, Path | None]] = [(("password_file",), config.password_file)]
+    yield from _file_problems(config)
+
+
+def _file_problems(config: AgentConfig) -> Iterator[tuple[Loc, str]]:
+    """Each file agent.yaml names, judged as it will be read (contract/trust.py): readable,
+    the agent's (or root's), changed by nobody else, a secret read by nobody else."""
+    files: list[tuple[Loc, Path | None, Trust]] = [
+        (("password_file",), config.password_file, Trust.SECRET)
+    ]
     if config.tls is not None:
+        key_in_cert = config.tls.key_file is None  # then the certificate file holds the key
         files += [
-            (("tls", "ca_file"), config.tls.ca_file),
-            (("tls", "cert_file"), config.tls.cert_file),
-            (("tls", "key_file"), config.tls.key_file),
+            (("tls", "ca_file"), config.tls.ca_file, Trust.CONFIG),
+            (
+                ("tls", "cert_file"),
+                config.tls.cert_file,
+                Trust.SECRET if key_in_cert else Trust.CONFIG,
+            ),
+            (("tls", "key_file"), config.tls.key_file, Trust.SECRET),
         ]
-    for loc, path in files:
+    for loc, path, kind in files:
         if path is None:
             continue
         try:
-            with path.open("rb"):
-                pass
+            check_trusted(path, kind, MAX_CREDENTIAL_BYTES)
+        except UntrustedFile as exc:
+            yield loc, f"{error_path(loc)}: {path} {exc}"
         except OSError as exc:
             reason = exc.strerror or str(exc)
             yield loc, f"{error_path(loc)}: cannot read {path} ({reason}); give a readable file"
@@ -657,7 +672,10 @@ def _errors(
 def load_config(path: Path, *, prepare: bool = True) -> AgentConfig:
     """`prepare=False` (`--check`) changes nothing on disk: the work directory is not made."""
     try:
-        text = read_regular(path, MAX_FILE_BYTES, follow=True).decode("utf-8")
+        # Whoever may change agent.yaml decides what the robot runs: checked as ssh would.
+        text = read_trusted(path, Trust.CONFIG, MAX_FILE_BYTES).decode("utf-8")
+    except UntrustedFile as exc:
+        raise ConfigInvalid([ConfigError(str(path), None, str(exc))]) from None
     except (OSError, UnicodeDecodeError) as exc:
         reason = (exc.strerror or str(exc)) if isinstance(exc, OSError) else "not UTF-8 text"
         raise ConfigInvalid([ConfigError(str(path), None, f"cannot read: {reason}")]) from None

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from contract.files import write_atomic
 from contract.pidlock import PidLock
+from contract.trust import euid, owner_trusted
 
 __all__ = ["write_atomic"]  # kept here too: the agent's modules import it from its workdir
 
@@ -35,14 +36,16 @@ HOLD_FILE = "brain.hold"  # the brain's "not now" (ROBOTCONF_HOLD_FILE): defers 
 def hold_exists(path: Path) -> bool:
     """Whether the brain holds: `path` exists as anything at all (a file, a directory, a
     symlink, even a dangling one), looked at with lstat and never followed or read. A look
-    that fails for another reason than absence counts as held: max_defer bounds it."""
+    that fails for another reason than absence counts as held: max_defer bounds it. One that
+    another user owns is no hold: only the brain (the agent's user) or root may defer a stop
+    (contract/trust.py)."""
     try:
-        os.lstat(path)
+        info = os.lstat(path)
     except (FileNotFoundError, NotADirectoryError):
         return False
     except OSError:
         return True
-    return True
+    return owner_trusted(info.st_uid, euid())
 
 
 def remove_hold(path: Path) -> str | None:

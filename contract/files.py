@@ -1,7 +1,7 @@
 """Safe file access: atomic private writes (readers see the old file or the new one, never a
 half of it) and bounded reads of regular files only (never through a link, never a FIFO).
 
-Used by the agent (requests, pidfile, counters, agent.yaml), the repository reader and the
+Used by the agent (requests, pidfile, counters), the repository reader and the
 commands that write secrets.
 """
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
+from contract.trust import Trust, check_trusted, read_secret_text
 from contract.wire import BrokerAddress, parse_broker_url
 
 # Seconds between connection attempts: the first retry after 1 s, doubling up to 30 s. paho's
@@ -43,7 +44,25 @@ class Connection:
     def password(self) -> str | None:
         if self.password_file is None:
             return self.address.password
-        return self.password_file.read_text(encoding="utf-8").strip()
+        # A secret: refused when others may read or change it (contract/trust.py).
+        return read_secret_text(self.password_file)
+
+
+MAX_TLS_FILE = 1024 * 1024  # a certificate chain; anything larger is not one
+
+
+def check_tls_files(connection: Connection) -> None:
+    """UntrustedFile (an OSError) when a TLS file is one others could have changed, or the key
+    one others may read; ssl reads them by path afterwards. A certificate file without a key
+    file holds the key too: a secret then."""
+    key_in_cert = connection.key_file is None
+    for path, kind in (
+        (connection.ca_file, Trust.CONFIG),
+        (connection.cert_file, Trust.SECRET if key_in_cert else Trust.CONFIG),
+        (connection.key_file, Trust.SECRET),
+    ):
+        if path is not None:
+            check_trusted(path, kind, MAX_TLS_FILE)
 
 
 def make_client(connection: Connection, client_id: str, *, session: bool = False) -> paho.Client:
@@ -62,6 +81,7 @@ def make_client(connection: Connection, client_id: str, *, session: bool = False
     if username:
         client.username_pw_set(username, connection.password())
     if address.tls:
+        check_tls_files(connection)
         context = ssl.create_default_context(
             cafile=str(connection.ca_file) if connection.ca_file else None
         )

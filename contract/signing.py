@@ -21,6 +21,7 @@ from contract.launch import (
     StopRequest,
     canonical_json,
 )
+from contract.trust import Trust, UntrustedFile, read_trusted
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
@@ -80,13 +81,20 @@ def generate_keys(folder: Path, *, force: bool = False) -> KeyPair:
     return pair
 
 
+MAX_KEY_FILE = 64 * 1024  # a PEM Ed25519 key is a few hundred bytes
+
+
 def load_private_key(path: Path) -> Ed25519PrivateKey:
     _require_cryptography()
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
     try:
-        key = serialization.load_pem_private_key(path.read_bytes(), password=None)
+        key = serialization.load_pem_private_key(
+            read_trusted(path, Trust.SECRET, MAX_KEY_FILE), password=None
+        )
+    except UntrustedFile as exc:
+        raise SigningKeyError(f"signing key {path} {exc}") from None
     except OSError as exc:
         raise SigningKeyError(f"{path}: cannot read the signing key ({exc.strerror})") from None
     except (ValueError, TypeError):
@@ -104,7 +112,10 @@ def load_public_key(path: Path) -> Ed25519PublicKey:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
     try:
-        key = serialization.load_pem_public_key(path.read_bytes())
+        # Not a secret, but whoever may change it decides which requests the agent obeys.
+        key = serialization.load_pem_public_key(read_trusted(path, Trust.CONFIG, MAX_KEY_FILE))
+    except UntrustedFile as exc:
+        raise SigningKeyError(f"public key {path} {exc}") from None
     except OSError as exc:
         raise SigningKeyError(f"{path}: cannot read the public key ({exc.strerror})") from None
     except ValueError:

@@ -10,8 +10,9 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from contract.files import NotRegularFile, read_regular
+from contract.files import NotRegularFile
 from contract.textsafe import printable
+from contract.trust import Trust, read_trusted
 from reconciler.http_edge import EdgeListener, Limits, Request, Response
 from reconciler.webhook import MAX_BODY, Answer, Outcome, judge, refused, server_of
 
@@ -35,7 +36,7 @@ def read_secret(path: Path) -> bytes:
     """The secret in `path` without surrounding white space; ValueError with a one-line reason
     (which never quotes the file's content)."""
     try:
-        data = read_regular(path, MAX_SECRET, follow=True)
+        data = read_trusted(path, Trust.SECRET, MAX_SECRET)
     except NotRegularFile as exc:
         raise ValueError(f"--webhook-secret-file {path} {exc}") from None
     except OSError as exc:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from contract.models import file_name_problem, is_robot_id
+from contract.trust import read_secret_text
 
 USERNAME = "operator"  # the operator's commands (the desk); up's reconciler and robots have theirs
 RECONCILER = "reconciler"
@@ -25,7 +26,7 @@ class BrokerLogin:
     password_file: Path
 
     def password(self) -> str:
-        return self.password_file.read_text(encoding="utf-8").strip()
+        return read_secret_text(self.password_file)
 
     def accepts(self, username: str | None, password: str | bytes | None) -> bool:
         """Compared in constant time, so that not even the password's length shows."""

@@ -67,7 +67,7 @@ from reconciler.verdicts import (
 from workstation import desired_store
 from workstation.fleet_reader import FleetReader, open_reader
 from workstation.fleet_status import Desired, change_key
-from workstation.up_desk import UpDesk, remove_desk, write_desk
+from workstation.up_desk import UpDesk, write_desk
 
 if TYPE_CHECKING:
     from reconciler.ledger_feed import LedgerFeed
@@ -601,8 +601,8 @@ def _serve(
         f"{len(setup.fleet.requests)} robot(s); agent files and logs in {setup.workdir}"
     )
     say(robots_line(setup))
-    desk = write_desk(setup.root, up_desk(setup, connection, prefix, private_key))
-    header = banner(setup, connection, desk)
+    lease = write_desk(setup.root, up_desk(setup, connection, prefix, private_key))
+    header = banner(setup, connection, lease.path)
     for line in header[1:3]:
         say(line.strip())
     thread = threading.Thread(target=controller.run, name="robotconf-reconciler", daemon=True)
@@ -619,7 +619,7 @@ def _serve(
         if ui is not None:
             ui.close()
         say("stopping: agents and their brains ...")
-        remove_desk(setup.root, os.getpid())
+        lease.remove()
         agents.stop()
         view.stop()
         controller.stop()
@@ -739,7 +739,6 @@ def up_desk(
         broker=connection.address.url,
         prefix=prefix,
         pid=os.getpid(),
-        lock=(setup.workdir / "up.lock").absolute(),
         username=connection.username or connection.address.username,
         password_file=absolute(connection.password_file),
         signing_key=absolute(private_key),

@@ -13,7 +13,7 @@ import click
 
 from contract.errors import CliError
 from contract.logsafe import escape_stray_records
-from contract.mqtt import Connection
+from contract.mqtt import Connection, check_tls_files
 from contract.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX, validate_prefix
 from workstation.cli.options import F
 
@@ -65,6 +65,11 @@ class BrokerOptions:
                 raise CliError(
                     f"cannot read --password-file {connection.password_file}: {exc.strerror}"
                 ) from None
+        try:
+            if connection.address.tls:
+                check_tls_files(connection)
+        except OSError as exc:
+            raise CliError(f"cannot use {exc.filename or 'a TLS file'}: {exc.strerror}") from None
         return connection
 
 

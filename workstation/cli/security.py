@@ -18,6 +18,7 @@ from contract.errors import CliError, ExitCode
 from contract.files import write_atomic
 from contract.models import file_name
 from contract.signing import SigningKeyError, generate_keys
+from contract.trust import UntrustedFile, read_secret_text
 from contract.wire import DEFAULT_PREFIX, validate_prefix
 from workstation.cli.options import repo_option, rev_option
 
@@ -43,7 +44,10 @@ def _password_for(secrets_dir: Path, user: str) -> str:
     """The user's password from its file, made (random, 0600) when there is none yet."""
     path = secrets_dir / f"{user}.password"
     if path.is_file():
-        return path.read_text(encoding="utf-8").strip()
+        try:
+            return read_secret_text(path)
+        except UntrustedFile as exc:
+            raise CliError(f"password file {path} {exc}") from None
     password = secrets.token_urlsafe(24)
     write_atomic(path, (password + "\n").encode("utf-8"), 0o600)
     return password

@@ -4,13 +4,11 @@ header or a login session's cookie) or a viewer; sessions, CSRF tokens and login
 from __future__ import annotations
 
 import contextlib
-import errno
 import hashlib
 import hmac
 import os
 import re
 import secrets
-import stat
 import threading
 import time
 from collections import OrderedDict, deque
@@ -20,10 +18,12 @@ from pathlib import Path
 from typing import Literal, Protocol
 
 from contract.errors import CliError
+from contract.trust import Trust, UntrustedFile, read_trusted
 
 COOKIE = "robotconf_ui"
 MIN_TOKEN = 16
 MAX_TOKEN = 1024
+MAX_TOKEN_FILE = 64 * 1024  # bounds the read; the token itself is checked after
 # Visible ASCII: the token fits a header and a form field as it is.
 _TOKEN = re.compile(r"[\x21-\x7e]+")
 _SESSION_ID = re.compile(r"[A-Za-z0-9_-]{20,100}")
@@ -85,26 +85,12 @@ def read_token(path: Path, what: str = "--operator-token-file", follow: bool = T
     the errors; `follow`: False refuses a symbolic link (a file the tool made itself)."""
     where = f"{what} {path}"
     try:
-        nofollow = 0 if follow else getattr(os, "O_NOFOLLOW", 0)
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | nofollow | getattr(os, "O_CLOEXEC", 0))
+        # The shared rule (contract/trust.py): a secret only its owner (or root) reads.
+        data = read_trusted(path, Trust.SECRET, MAX_TOKEN_FILE, follow=follow)
+    except UntrustedFile as exc:
+        raise CliError(f"{where} {exc}") from None
     except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise CliError(f"{where} is a symbolic link: delete it for a new token") from None
         raise CliError(f"cannot read {where}: {exc.strerror}") from None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise CliError(f"{where} is not a regular file")
-        if info.st_mode & 0o077:
-            raise CliError(
-                f"{where} may be read or changed by others "
-                f"(mode {stat.S_IMODE(info.st_mode):04o}): chmod 600 it, as ssh asks of a key"
-            )
-        if hasattr(os, "geteuid") and info.st_uid != os.geteuid():
-            raise CliError(f"{where} belongs to another user")
-        data = os.read(fd, MAX_TOKEN + 3)
-    finally:
-        os.close(fd)
     return _token_in(data, where)
 
 

@@ -23,6 +23,7 @@ from contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto
+from tests.support.private import write_private
 from tests.support.tlsutil import make_pki
 from tests.support.watch import FleetWatch, wait_for
 
@@ -175,7 +176,7 @@ def test_tls_client_certificate_password_and_signed_requests(
 
 def test_wrong_password_is_reported_and_retried(tmp_path: Path, secured: Secured) -> None:
     wrong = tmp_path / "wrong.password"
-    wrong.write_text("guess\n", encoding="utf-8")
+    write_private(wrong, "guess\n")
     settings = secured.agent_settings() | {"password_file": str(wrong)}
     agent = AgentProc(tmp_path / "agent", "unused", **settings)
     try:

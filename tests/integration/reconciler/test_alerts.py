@@ -30,6 +30,7 @@ from tests.integration.reconciler.conftest import Fleet
 from tests.support.agents import publish
 from tests.support.fleet import GitLab, Running, refused_reconcile, start_reconciler
 from tests.support.mosquitto import Mosquitto
+from tests.support.private import write_private
 from tests.support.watch import FleetWatch, wait_for
 
 FLEET = "configs/fleet.yaml"
@@ -362,7 +363,7 @@ def test_a_fresh_reconciler_scrapes_every_known_series_at_zero(
     kind of interfaces report, both publish actions. An alert on `increase()` sees the first."""
     ok, port, hook = Receiver(), free_port(), free_port()
     secret = tmp_path / "webhook.secret"
-    secret.write_text("s3cret\n", encoding="utf-8")
+    write_private(secret, "s3cret\n")
     reconciler = start_reconciler(
         lab, mosquitto.url, tmp_path / "reconciler.log", "--interval", "1",
         "--notify", ok.url, "--metrics", f"127.0.0.1:{port}",

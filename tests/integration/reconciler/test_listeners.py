@@ -27,6 +27,7 @@ from tests.integration.reconciler.test_alerts import scrape, value
 from tests.integration.reconciler.test_webhook import SECRET, github, post, push_body
 from tests.support.fleet import GitLab, Proc, start_reconciler
 from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.private import write_private
 from tests.support.watch import wait_for
 
 ATTACKER = "127.0.0.2"
@@ -147,7 +148,7 @@ def reconciler(
 ) -> Iterator[tuple[Proc, int, int]]:
     """A real `robotconf reconcile` with a webhook and metrics, both with the default limits."""
     secret = tmp_path / "webhook.secret"
-    secret.write_text(SECRET + "\n", encoding="utf-8")
+    write_private(secret, SECRET + "\n")
     port, metrics = free_port(), free_port()
     proc = start_reconciler(
         lab, mosquitto.url, tmp_path / "reconciler.log", "--interval", "3600",

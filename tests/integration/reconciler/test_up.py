@@ -31,6 +31,7 @@ from contract.mqtt import Connection
 from reconciler.desired import load_desired
 from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto
+from tests.support.private import write_private
 from tests.support.watch import FleetWatch, wait_for
 from workstation.broker import EmbeddedBroker, free_port
 from workstation.broker_login import broker_login
@@ -192,7 +193,7 @@ def test_the_generated_agent_yaml_is_valid_with_credentials_and_tls(
     secrets = {}
     for name in ("password", "ca.crt", "client.crt", "client.key"):
         secrets[name] = tmp_path / name
-        secrets[name].write_text("x\n", encoding="utf-8")
+        write_private(secrets[name], "x\n")
     connection = Connection(
         url="mqtts://broker.lab:8883",
         username="lab",

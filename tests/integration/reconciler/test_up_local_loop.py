@@ -142,7 +142,7 @@ def test_up_ui_refuses_a_token_file_others_may_read(lab: GitLab) -> None:
     )
     assert done.returncode == 2, done.stdout + done.stderr
     assert "up's operator token file" in done.stderr
-    assert "may be read or changed by others (mode 0644): chmod 600 it" in done.stderr
+    assert "may be read by others (mode 0644): chmod 600" in done.stderr
     assert "Traceback" not in done.stderr
     assert not (Path(up_folder(lab)) / "tb3-01").exists()  # nothing started
 

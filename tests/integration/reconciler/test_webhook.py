@@ -18,6 +18,7 @@ from reconciler.webhook import MAX_BODY
 from tests.integration.reconciler.test_alerts import scrape, value
 from tests.support.fleet import GitLab, Proc, refused_reconcile, start_reconciler
 from tests.support.mosquitto import Mosquitto, free_port
+from tests.support.private import write_private
 from tests.support.watch import FleetWatch, wait_for
 
 SECRET = "d1c6f0a7e9b34c2b8f5e0a1d3c7b9e24"
@@ -68,7 +69,7 @@ def bare(lab: GitLab, tmp_path: Path) -> Path:
 def start(lab: GitLab, bare: Path, mosquitto: Mosquitto, tmp_path: Path) -> tuple[Proc, int, int]:
     """`reconcile --remote` polling once an hour, with a webhook and metrics."""
     secret = tmp_path / "webhook.secret"
-    secret.write_text(SECRET + "\n", encoding="utf-8")
+    write_private(secret, SECRET + "\n")
     port, metrics = free_port(), free_port()
     proc = start_reconciler(
         lab, mosquitto.url, tmp_path / "reconciler.log",
@@ -219,7 +220,7 @@ def test_bad_webhook_options_are_one_line_errors(
     if secret is not None:
         path = tmp_path / "secret"
         if secret != "missing":
-            path.write_text(secret + "\n", encoding="utf-8")
+            write_private(path, secret + "\n")
         options = [*options, "--webhook-secret-file", str(path)]
     said_back = refused_reconcile(lab, mosquitto.url, options)
     assert said in said_back and "s3cret" not in said_back
@@ -229,7 +230,7 @@ def test_a_webhook_port_in_use_is_a_one_line_error(
     lab: GitLab, mosquitto: Mosquitto, tmp_path: Path
 ) -> None:
     secret = tmp_path / "secret"
-    secret.write_text(SECRET, encoding="utf-8")
+    write_private(secret, SECRET)
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
@@ -247,7 +248,7 @@ def test_a_local_branch_with_a_webhook_stops_cleanly(
 ) -> None:
     """Without --remote a push re-reads the local branch; SIGTERM ends the receiver too."""
     secret = tmp_path / "secret"
-    secret.write_text(SECRET, encoding="utf-8")
+    write_private(secret, SECRET)
     port = free_port()
     proc = start_reconciler(
         lab, mosquitto.url, tmp_path / "reconciler.log", "--webhook", f"127.0.0.1:{port}",

@@ -15,6 +15,7 @@ import pytest
 
 from contract.mqtt import Connection, make_client
 from tests.support.lab import ROBOTCONF, ROOT
+from tests.support.private import write_private
 from tests.support.secure import Secured, start_secured
 
 WAIT = 10.0
@@ -84,7 +85,7 @@ def test_anonymous_client_is_refused(broker: Secured) -> None:
 
 def test_wrong_password_is_refused(broker: Secured, tmp_path: Path) -> None:
     wrong = tmp_path / "wrong.password"
-    wrong.write_text("not-the-password\n")
+    write_private(wrong, "not-the-password\n")
     session = connect(broker.connection("tb3-01", password_file=wrong), "tb3-01")
     try:
         assert session.reason != "Success"

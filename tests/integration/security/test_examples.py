@@ -12,6 +12,7 @@ import yaml
 
 from agent.config import load_config
 from tests.support.lab import ROBOTCONF, ROOT
+from tests.support.private import write_private
 
 EXAMPLE = ROOT / "examples" / "production"
 
@@ -40,7 +41,7 @@ def test_example_agent_yaml_is_valid(tmp_path: Path) -> None:
     folder = tmp_path / "etc"
     folder.mkdir()
     # The referenced files and workdir exist on a robot; stand them in here.
-    (folder / "tb3-01.password").write_text("secret\n")
+    write_private(folder / "tb3-01.password", "secret\n")
     (folder / "ca.crt").write_text("")
     subprocess.run([ROBOTCONF, "keys", "generate", "--out", str(folder)], check=True)
     text = text.replace("/var/lib/robotconf/tb3-01", str(tmp_path / "work"))

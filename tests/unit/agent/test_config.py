@@ -9,6 +9,7 @@ import pytest
 
 from agent.cli import main
 from agent.config import ConfigInvalid, load_config
+from tests.support.private import write_private
 
 GOOD = """\
 broker: mqtt://127.0.0.1:1883
@@ -165,7 +166,7 @@ def test_numbers_out_of_range(tmp_path: Path) -> None:
 
 
 def test_credentials_and_tls(tmp_path: Path) -> None:
-    (tmp_path / "secret").write_text("pw\n", encoding="utf-8")
+    write_private(tmp_path / "secret", "pw\n")
     (tmp_path / "ca.pem").write_text("", encoding="utf-8")
     text = GOOD.replace("mqtt://", "mqtts://") + (
         "username: tb3-01\npassword_file: secret\ntls: {ca_file: ca.pem}\n"
