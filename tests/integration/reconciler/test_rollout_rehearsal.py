@@ -20,7 +20,7 @@ GUIDE = Path(__file__).resolve().parents[3] / "docs" / "how-to" / "rollouts.md"
 # The guide's two steps, verbatim (the test checks that the guide still says them).
 POLICY = "sed -i -e 's/^# rollout:/rollout:/' -e 's/^#   /  /' configs/fleet.yaml"
 CRASH = (
-    "sed -i 's/knowledge: {TARGET: {GOAL_ID: \"2\"}}/knowledge: {TARGET: {GOAL_ID: \"2\"}, "
+    'sed -i \'s/knowledge: {TARGET: {GOAL_ID: "2"}}/knowledge: {TARGET: {GOAL_ID: "2"}, '
     "STANDIN_CRASH: 3}/' configs/scenarios/delivery-gazebo.yaml"
 )
 
