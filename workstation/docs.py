@@ -34,11 +34,22 @@ GENERATED = "Generated from the code by `python -m workstation.docs`: edit the c
 # ---- commands.md -------------------------------------------------------------------------
 
 
+# Everything in the environment that changes what `--help` prints, across the Pythons the
+# project supports (3.10-3.13: argparse reads COLUMNS through shutil.get_terminal_size; 3.14's
+# argparse colours help unless PYTHON_COLORS=0 or NO_COLOR) and click's versions (COLUMNS;
+# colour only when forced). Help generated under 3.10.13, 3.12.1 and 3.13.0 with click 8.1.8
+# and 8.5.1 is the same page.
+FIXED = {"COLUMNS": COLUMNS, "NO_COLOR": "1", "PYTHON_COLORS": "0"}
+UNSET = ("FORCE_COLOR", "CLICOLOR_FORCE", "LINES")
+
+
 @contextlib.contextmanager
 def _fixed_terminal() -> Iterator[None]:
-    """click and argparse both read COLUMNS (shutil.get_terminal_size); colour stays off."""
-    saved = {name: os.environ.get(name) for name in ("COLUMNS", "NO_COLOR")}
-    os.environ.update(COLUMNS=COLUMNS, NO_COLOR="1")
+    """The help laid out the same whatever the terminal and environment generating it."""
+    saved = {name: os.environ.get(name) for name in (*FIXED, *UNSET)}
+    os.environ.update(FIXED)
+    for name in UNSET:
+        os.environ.pop(name, None)
     try:
         yield
     finally:

@@ -75,6 +75,10 @@ def test_help_on_the_page_does_not_depend_on_the_terminal(monkeypatch: pytest.Mo
     monkeypatch.setenv("COLUMNS", "200")
     wide = docs.command_help(["reconcile"]), docs.command_help(["agent"])
     monkeypatch.setenv("COLUMNS", "50")
+    # Colour forced (click, Python 3.14's argparse) never reaches the page.
+    for name in ("FORCE_COLOR", "CLICOLOR_FORCE", "PYTHON_COLORS"):
+        monkeypatch.setenv(name, "1")
+    monkeypatch.delenv("NO_COLOR", raising=False)
     narrow = docs.command_help(["reconcile"]), docs.command_help(["agent"])
     assert wide == narrow
     assert max(len(line) for text in wide for line in text.splitlines()) <= 80

@@ -76,3 +76,35 @@ def test_the_wheel_carries_the_ui_script_and_stylesheet(tmp_path: Path) -> None:
     with zipfile.ZipFile(build_wheel(tmp_path)) as built:
         names = set(built.namelist())
     assert {"workstation/ui/static/ui.js", "workstation/ui/static/ui.css"} <= names
+
+
+def test_the_wheel_build_warns_of_nothing_and_carries_every_module(tmp_path: Path) -> None:
+    """A fresh install builds the wheel: setuptools says nothing to warn of (a data folder
+    outside `packages` did), and every module of the source is in it (a package list once
+    left out workstation/desk, and `robotconf logs` with it)."""
+    project = copy_project(tmp_path / "project")
+    (tmp_path / "dist").mkdir()
+    done = subprocess.run(
+        [sys.executable, "-c", _HOOK, "build_wheel", str(tmp_path / "dist")],
+        cwd=project,
+        env={k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    output = done.stdout + done.stderr
+    assert done.returncode == 0, output
+    # setuptools' warnings are classes (`_Warning`, `SetuptoolsDeprecationWarning`) framed in
+    # `!!`; distutils' lower-case "warning: byte-compiling is disabled" is no packaging fault.
+    for noise in ("Warning", "!!", "would be ignored", "eprecat"):
+        assert noise not in output, output
+    (wheel,) = (tmp_path / "dist").glob("robotconf-*.whl")
+    with zipfile.ZipFile(wheel) as built:
+        names = {n for n in built.namelist() if n.endswith(".py")}
+    sources = {
+        path.relative_to(project).as_posix()
+        for package in ("robotconf", "contract", "configurator", "reconciler", "workstation")
+        for path in (project / package).rglob("*.py")
+    } | {path.relative_to(project).as_posix() for path in (project / "agent").rglob("*.py")}
+    assert sources - names == set()
