@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import NamedTuple
 from urllib.parse import parse_qsl
 
 from configurator.waves import matches
@@ -147,9 +148,9 @@ def visible(fleet: FleetStatus, query: FleetQuery, limit: int = ROWS_SHOWN) -> V
     return Visible(rows, selected, {k: n for k, n in counts.items() if n}, len(fleet.rows))
 
 
-@dataclass(frozen=True)
-class HistoryEntry:
-    """One change of a robot's status, as the UI saw it arrive."""
+class HistoryEntry(NamedTuple):
+    """One change of a robot's status, as the UI saw it arrive (a tuple: 10,000 of them are
+    made at the first read, several times faster than frozen dataclasses)."""
 
     at: float
     verdict: str

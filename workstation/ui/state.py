@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
+from configurator.gcpause import collector_paused
 from contract.mqtt import Connection
 from contract.textsafe import printable
 from contract.wire import Topics
@@ -132,6 +133,12 @@ class LiveFleet:
 
     def step(self) -> None:
         """One new state (when anything changed) and the events it makes."""
+        # A first read makes 10,000 rows and history entries that all live on: collections of
+        # the young objects meanwhile would walk them again and again.
+        with collector_paused():
+            self._step()
+
+    def _step(self) -> None:
         started = time.monotonic()
         before = self._snap
         now = time.time()
