@@ -28,8 +28,8 @@ sys.path.insert(0, str(ROOT))
 
 from contract.goals import CurrentGoal  # noqa: E402
 from contract.wire import AgentState, AgentStatus, Topics  # noqa: E402
-from reconciler.observed import ReadMemo, parse_retained  # noqa: E402
-from reconciler.verdicts import DesiredRobot, FleetStatus, build_rows  # noqa: E402
+from readmodel.observed import ReadMemo, parse_retained  # noqa: E402
+from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows  # noqa: E402
 from tests.support.goals_summaries import AT, ended, summary  # noqa: E402
 from workstation.ui.goals_html import rates_box  # noqa: E402
 from workstation.ui.model import FleetQuery, Snapshot  # noqa: E402

@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from contract.goals import OutcomeRecord, OutcomeState
 from contract.mqtt import Connection, make_client
 from contract.wire import Topics
-from reconciler.ledger import Ledger, ledger_path
+from readmodel.ledger import Ledger, ledger_path
 from reconciler.ledger_feed import LedgerFeed, LedgerSettings
 from tests.support.mosquitto import Mosquitto
 

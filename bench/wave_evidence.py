@@ -25,9 +25,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from contract.goals import OutcomeRecord, OutcomeState
+from readmodel.ledger import Ledger, ledger_path
 from reconciler.evidence import EvidenceKey, Roles, WaveEvidence, judge, new_evidence
 from reconciler.evidence_feed import EvidenceCounter
-from reconciler.ledger import Ledger, ledger_path
 
 ROBOTS = 10_000
 NEW = "sha256:" + "ab" * 32

@@ -8,7 +8,7 @@ writer). Level-triggered and stateless: what is published is learned from the br
 The controller's state is a few named parts, each with one owner: the builds
 (`reconciler.builds`), the look at the robots (`reconciler.robot_watch`), the rollout memory
 (`reconciler.rollout_memory`), the delivery (`reconciler.delivery`), the launch view and the
-status writer (`reconciler.retained`, `reconciler.report`); the controller itself keeps only
+status writer (`readmodel.retained`, `reconciler.report`); the controller itself keeps only
 what its steps learned.
 """
 
@@ -33,8 +33,14 @@ from contract.notes import VerdictNote
 from contract.safejson import PayloadError
 from contract.topics import Role, subscriptions
 from contract.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
+from readmodel.commits import CommitBook, named_revisions
+from readmodel.observed import (
+    RECONCILER_STATUS,
+    LaunchDigests,
+    summarise_launches,
+)
+from readmodel.retained import Ignored, Presence, RetainedView, read_object
 from reconciler.builds import Builder, Builds
-from reconciler.commits import CommitBook, named_revisions
 from reconciler.decide import (
     HANDLING,
     Condition,
@@ -49,13 +55,7 @@ from reconciler.decide import (
 from reconciler.delivery import Delivery, Signer
 from reconciler.desired import Desired
 from reconciler.diff import Actions
-from reconciler.observed import (
-    RECONCILER_STATUS,
-    LaunchDigests,
-    summarise_launches,
-)
 from reconciler.report import Followed, StatusWriter, one_line, status_of
-from reconciler.retained import Ignored, Presence, RetainedView, read_object
 from reconciler.robot_watch import RobotWatch
 from reconciler.rollout_memory import RolloutMemory
 from reconciler.source import BranchSource

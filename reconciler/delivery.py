@@ -17,10 +17,10 @@ from configurator.rendered import RenderedRequest
 from contract.launch import StopRequest
 from contract.signing import Signed
 from contract.wire import Topics, short_rev
+from readmodel.observed import launch_summary
+from readmodel.retained import Payload, RetainedView
 from reconciler import heap
 from reconciler.decide import Condition, Decision
-from reconciler.observed import launch_summary
-from reconciler.retained import Payload, RetainedView
 
 log = logging.getLogger("robotconf.reconciler")
 

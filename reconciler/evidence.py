@@ -16,29 +16,17 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 from configurator.types import Verify
 from contract.goals import OutcomeState, success_rate
 from contract.wire import Verdict, WaveVerification
+from readmodel.outcomes import Row
 
 _SUCCEEDED, _FAILED, _CANCELED = (
     OutcomeState.SUCCEEDED.value,
     OutcomeState.FAILED.value,
     OutcomeState.CANCELED.value,
 )
-
-
-class Row(NamedTuple):
-    """One outcome as the ledger keeps it, the columns evidence needs."""
-
-    id: int
-    robot_id: str
-    digest: str | None
-    scenario: str
-    outcome: str
-    code: str | None
-    received_at: float
 
 
 @dataclass(frozen=True)

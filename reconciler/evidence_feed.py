@@ -18,8 +18,8 @@ from pathlib import Path
 from configurator.render import FleetRender
 from configurator.stages import plan_waves
 from contract.wire import RolloutStatus
+from readmodel.ledger import Ledger, LedgerError
 from reconciler.evidence import Counts, EvidenceKey, WaveEvidence, new_evidence
-from reconciler.ledger import Ledger, LedgerError
 from reconciler.rollout import criteria, kept_requests, stage_bases, wave_roles
 
 log = logging.getLogger("robotconf.reconciler")

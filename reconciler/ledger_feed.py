@@ -38,7 +38,7 @@ from contract.goals import OutcomeRecord
 from contract.mqtt import Connection, make_client
 from contract.throttle import Throttle
 from contract.wire import Topics
-from reconciler.ledger import (
+from readmodel.ledger import (
     DEFAULT_MAX_AGE,
     DEFAULT_MAX_EVENTS,
     DEFAULT_MAX_RECORDS,
@@ -49,11 +49,11 @@ from reconciler.ledger import (
     ledger_path,
     set_aside,
 )
-from reconciler.outcomes import DEFAULT_STREAK, RecordRefused, check_record, streak_event
-from reconciler.retained import Ignored, _guarded
+from readmodel.outcomes import DEFAULT_STREAK, RecordRefused, check_record, streak_event
+from readmodel.retained import Ignored, _guarded
 
 if TYPE_CHECKING:
-    from reconciler.events import Event
+    from readmodel.events import Event
     from reconciler.metrics import Metrics
 
 log = logging.getLogger("robotconf.reconciler")

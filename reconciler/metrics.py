@@ -1,5 +1,5 @@
 """`reconcile --metrics HOST:PORT`: Prometheus metrics, written by the official client library
-and served by the bounded edge (`reconciler/http_edge.py`).
+and served by the bounded edge (`readmodel/http_edge.py`).
 
 A registry of our own (not the process-wide default), so that only robotconf_ metrics and the
 ones that explain them are scraped.
@@ -29,11 +29,11 @@ from contract.goals import OutcomeRecord
 from contract.notes import VerdictNote
 from contract.wire import ReconcilerReason, RolloutStatus
 from contract.wire import Verdict as WaveVerdict
+from readmodel.http_edge import EdgeListener, Limits, Request, Response
+from readmodel.outcomes import MAX_LABEL_VALUES, NO_SCENARIO, OTHER, BoundedLabels
+from readmodel.verdicts import Verdict
 from reconciler.decide import state_of
-from reconciler.http_edge import EdgeListener, Limits, Request, Response
 from reconciler.notify import OUTCOMES
-from reconciler.outcomes import MAX_LABEL_VALUES, NO_SCENARIO, OTHER, BoundedLabels
-from reconciler.verdicts import Verdict
 from reconciler.webhook import SERVERS, UNKNOWN, Outcome
 
 INTERFACES_VERDICTS = ("reported", "unknown", "error")

@@ -23,7 +23,7 @@ from typing import Any
 from urllib.parse import unquote, urlsplit, urlunsplit
 
 from contract.backoff import Backoff
-from reconciler.events import Event
+from readmodel.events import Event
 
 log = logging.getLogger("robotconf.reconciler")
 

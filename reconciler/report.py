@@ -16,11 +16,11 @@ from pydantic import ValidationError
 from configurator.rendered import RenderedRequest
 from contract.safejson import PayloadError
 from contract.wire import ReconcilerStatus, Topics, now
+from readmodel.observed import RECONCILER_STATUS
+from readmodel.retained import Ignored, Presence, RetainedView, read_object
 from reconciler.decide import Condition, Reason
 from reconciler.desired import Desired
 from reconciler.diff import Actions
-from reconciler.observed import RECONCILER_STATUS
-from reconciler.retained import Ignored, Presence, RetainedView, read_object
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -16,8 +16,8 @@ from contract.interfaces import Reported
 from contract.mqtt import Connection
 from contract.topics import Role, subscriptions
 from contract.wire import AgentState, AgentStatus, ReconcilerStatus, Topics, is_online
-from reconciler.observed import ReadMemo, parse_retained
-from reconciler.retained import Ignored, RetainedView, take_snapshot_said
+from readmodel.observed import ReadMemo, parse_retained
+from readmodel.retained import Ignored, RetainedView, take_snapshot_said
 
 log = logging.getLogger("robotconf.reconciler")
 SAMPLE_TIMEOUT = 10.0  # seconds to wait for a sample of the robots' statuses

@@ -23,15 +23,15 @@ from configurator.render import FleetRender
 from contract.notes import VerdictNote
 from contract.safejson import PayloadError
 from contract.wire import OperatorAnswer, ReconcilerStatus, Topics, short_rev
+from readmodel.observed import WAVE_RECORD
+from readmodel.retained import Ignored, RetainedView, read_object
 from reconciler.decide import Condition
 from reconciler.desired import Desired
 from reconciler.evidence import Counts, WaveEvidence
 from reconciler.evidence_feed import EvidenceCounter
 from reconciler.notes_store import NotesError, NotesStore
-from reconciler.observed import WAVE_RECORD
 from reconciler.operator_actions import Refused, judge_action
 from reconciler.report import one_line
-from reconciler.retained import Ignored, RetainedView, read_object
 from reconciler.wave_memory import WaveRecord
 
 if TYPE_CHECKING:

@@ -2,7 +2,7 @@
 
 Fed by the controller's `on_step` hook and by a view of the robots' statuses: it judges
 transitions (`events`), tells the receivers (`notify`), hands every event to the timeline
-(`keep`: the ledger's, `reconciler/timeline.py` notes the timeline's own kinds) and sets the
+(`keep`: the ledger's, `readmodel/timeline.py` notes the timeline's own kinds) and sets the
 gauges (`metrics`).
 """
 
@@ -19,13 +19,13 @@ from configurator.drift import Drift, DriftMemo
 from contract.mqtt import Connection
 from contract.topics import Role, subscriptions
 from contract.wire import AgentState, AgentStatus, Topics
+from readmodel.events import Event, Seen, Told, WaveRun, resumed, resumers, transitions
+from readmodel.observed import ReadMemo, Retained, RobotSeen, parse_retained
+from readmodel.retained import RetainedView
+from readmodel.timeline import Noted, noted_at_start, timeline_transitions
+from readmodel.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
 from reconciler.controller import Step
 from reconciler.decide import state_of
-from reconciler.events import Event, Seen, Told, WaveRun, resumed, resumers, transitions
-from reconciler.observed import ReadMemo, Retained, RobotSeen, parse_retained
-from reconciler.retained import RetainedView
-from reconciler.timeline import Noted, noted_at_start, timeline_transitions
-from reconciler.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
 
 if TYPE_CHECKING:
     from reconciler.metrics import Metrics

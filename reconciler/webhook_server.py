@@ -1,6 +1,6 @@
 """`reconcile --webhook HOST:PORT`: the HTTP edge that turns a git server's push into a fetch now.
 
-Served by the bounded edge (`reconciler/http_edge.py`); every request is judged by
+Served by the bounded edge (`readmodel/http_edge.py`); every request is judged by
 `reconciler.webhook.judge`, answered, and logged.
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 from contract.files import NotRegularFile
 from contract.textsafe import printable
 from contract.trust import Trust, read_trusted
-from reconciler.http_edge import EdgeListener, Limits, Request, Response
+from readmodel.http_edge import EdgeListener, Limits, Request, Response
 from reconciler.webhook import MAX_BODY, Answer, Outcome, judge, refused, server_of
 
 log = logging.getLogger("robotconf.reconciler")

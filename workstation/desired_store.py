@@ -25,7 +25,7 @@ import configurator
 import contract
 from configurator.drift import Need
 from contract.wire import is_commit
-from reconciler.verdicts import DesiredRobot
+from readmodel.verdicts import DesiredRobot
 
 FORMAT = 1
 MAX_BYTES = 256 * 1024 * 1024  # far above 10,000 robots (about 4 MB): a bound, not a size

@@ -13,9 +13,9 @@ from dataclasses import replace
 from configurator.drift import DriftMemo
 from contract.mqtt import Connection
 from contract.wire import ReconcilerStatus, Topics
-from reconciler.observed import ReadMemo, parse_retained
-from reconciler.retained import RetainedView
-from reconciler.verdicts import (
+from readmodel.observed import ReadMemo, parse_retained
+from readmodel.retained import RetainedView
+from readmodel.verdicts import (
     DesiredRobot,
     FleetStatus,
     RobotRow,

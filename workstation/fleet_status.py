@@ -17,9 +17,9 @@ from configurator.workspace import check
 from contract.mqtt import Connection
 from contract.topics import Role, subscriptions
 from contract.wire import ReconcilerStatus, Topics
-from reconciler.observed import ReadMemo, parse_retained
-from reconciler.retained import RetainedView
-from reconciler.verdicts import (
+from readmodel.observed import ReadMemo, parse_retained
+from readmodel.retained import RetainedView
+from readmodel.verdicts import (
     DesiredRobot,
     FleetStatus,
     Verdict,

@@ -37,6 +37,7 @@ from configurator.render import FleetRender
 from configurator.source import SourceError
 from contract.errors import CliError, ExitCode
 from contract.files import read_regular, write_atomic
+from contract.lifecycle import log_to_file, on_stop_signals
 from contract.models import file_name
 from contract.mqtt import Connection
 from contract.pidlock import PidLock
@@ -49,21 +50,20 @@ from contract.wire import (
     redact_url,
     short_rev,
 )
-from reconciler.controller import Controller
-from reconciler.desired import DesiredBuilder
-from reconciler.ledger import ledger_path
-from reconciler.lifecycle import log_to_file, on_stop_signals
-from reconciler.retained import RetainedView
-from reconciler.signer import make_signer, make_verifier
-from reconciler.source import LocalBranch, open_repo
-from reconciler.telemetry import Telemetry
-from reconciler.verdicts import (
+from readmodel.ledger import ledger_path
+from readmodel.retained import RetainedView
+from readmodel.verdicts import (
     FleetStatus,
     clean,
     desired_from_fleet,
     diagnostic_lines,
     rollout_line,
 )
+from reconciler.controller import Controller
+from reconciler.desired import DesiredBuilder
+from reconciler.signer import make_signer, make_verifier
+from reconciler.source import LocalBranch, open_repo
+from reconciler.telemetry import Telemetry
 from workstation import desired_store
 from workstation.fleet_reader import FleetReader, open_reader
 from workstation.fleet_status import Desired, change_key
@@ -671,7 +671,7 @@ def _start_ledger(
 ) -> LedgerFeed | None:
     """The outcome ledger under up's folder (`robotconf history` finds it there); a state
     folder that cannot be written is said, and `up` runs without a ledger."""
-    from reconciler.ledger import LedgerError
+    from readmodel.ledger import LedgerError
     from reconciler.ledger_feed import LedgerFeed, LedgerSettings
 
     feed = LedgerFeed(connection, prefix, LedgerSettings(setup.state_dir))
@@ -695,7 +695,7 @@ def _start_ui(
     if setup.ui is None:
         return None
     from contract.signing import load_private_key
-    from reconciler.ledger import ledger_path
+    from readmodel.ledger import ledger_path
     from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi
 

@@ -11,7 +11,15 @@ from pathlib import Path
 
 from tests.support.lab import ROOT
 
-PACKAGES = ("contract", "configurator", "reconciler", "workstation", "agent", "robotconf")
+PACKAGES = (
+    "contract",
+    "configurator",
+    "readmodel",
+    "reconciler",
+    "workstation",
+    "agent",
+    "robotconf",
+)
 INSTALL_TIMEOUT = 600
 
 

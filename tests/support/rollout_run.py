@@ -8,7 +8,8 @@ from configurator.render import FleetRender
 from configurator.stages import plan_waves
 from contract.notes import VerdictNote
 from contract.wire import AgentState, AgentStatus, RolloutStatus
-from reconciler.evidence import EvidenceKey, Row, WaveEvidence, new_evidence
+from readmodel.outcomes import Row
+from reconciler.evidence import EvidenceKey, WaveEvidence, new_evidence
 from reconciler.rollout import (
     RolloutInput,
     RolloutStep,

@@ -18,8 +18,8 @@ from configurator.rendered import RenderedRequest
 from contract.mqtt import Connection
 from contract.safejson import PayloadError
 from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
-from reconciler.observed import parse_retained
-from reconciler.retained import RetainedView, read_object
+from readmodel.observed import parse_retained
+from readmodel.retained import RetainedView, read_object
 
 TIMEOUT = 60.0  # generous: CI machines are slow and shared
 T = TypeVar("T")

@@ -34,7 +34,7 @@ from contract.textsafe import printable
 from contract.topics import Role, subscriptions
 from contract.wire import Topics
 from contract.yamlio import MAX_FILE_BYTES
-from reconciler.retained import RetainedView, read_object
+from readmodel.retained import RetainedView, read_object
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.options import repo_option
 from workstation.desk.broker import wait_for_broker

@@ -11,8 +11,8 @@ from pathlib import Path
 import click
 
 from contract.errors import CliError, ExitCode
-from reconciler.ledger import Ledger, LedgerError, find_ledger
-from reconciler.timeline import DEFAULT_LIMIT, MAX_LIMIT, QueryRefused, event_query
+from readmodel.ledger import Ledger, LedgerError, find_ledger
+from readmodel.timeline import DEFAULT_LIMIT, MAX_LIMIT, QueryRefused, event_query
 from workstation.cli.broker_options import prefix_option
 from workstation.cli.options import ledger_dir_option, repo_option
 

@@ -6,7 +6,7 @@ from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
-from reconciler.verdicts import FleetStatus, RobotRow, Verdict, reconciler_lines, short_digest
+from readmodel.verdicts import FleetStatus, RobotRow, Verdict, reconciler_lines, short_digest
 from workstation.cli.terminal import plain_text, safe
 
 COLUMNS = (

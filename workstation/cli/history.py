@@ -13,8 +13,8 @@ from contract.durations import parse_duration
 from contract.errors import CliError, ExitCode
 from contract.textsafe import printable
 from contract.wire import short_rev
-from reconciler.ledger import Ledger, LedgerError, find_ledger
-from reconciler.outcomes import History, RevisionReport, Tally
+from readmodel.ledger import Ledger, LedgerError, find_ledger
+from readmodel.outcomes import History, RevisionReport, Tally
 from workstation.cli.broker_options import prefix_option
 from workstation.cli.options import ledger_dir_option, repo_option
 

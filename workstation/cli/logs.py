@@ -11,8 +11,8 @@ import click
 
 from configurator.types import is_robot_id
 from contract.errors import CliError, ExitCode
+from contract.lifecycle import on_stop_signals
 from contract.wire import MAX_TAIL_LINES, LogsChunk
-from reconciler.lifecycle import on_stop_signals
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.options import repo_option
 from workstation.desk.logs import log_chunks, shown

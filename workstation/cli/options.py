@@ -27,7 +27,7 @@ def rev_option(command: F) -> F:
 
 
 # Where the desk reads the reconciler's outcome ledger (`history`, `ui`): one option, one rule
-# (reconciler.ledger.find_ledger).
+# (readmodel.ledger.find_ledger).
 ledger_dir_option = click.option(
     "--state-dir",
     type=click.Path(path_type=Path, file_okay=False),

@@ -14,9 +14,9 @@ import click
 
 from contract.errors import CliError, ExitCode
 from contract.files import read_regular
+from contract.lifecycle import log_to_stderr, on_stop_signals, parse_address
 from contract.signing import SigningKeyError
 from contract.textsafe import printable
-from reconciler.lifecycle import log_to_stderr, on_stop_signals, parse_address
 from reconciler.notify import (
     MAX_NOTIFY_FILE_BYTES,
     NOTIFY_ENV,
@@ -32,11 +32,11 @@ from workstation.cli.ui import ui_beside, ui_option
 
 if TYPE_CHECKING:
     from contract.mqtt import Connection
+    from readmodel.verdicts import DesiredRobot
     from reconciler.controller import Controller
     from reconciler.ledger_feed import LedgerFeed, LedgerSettings
     from reconciler.metrics import Metrics
     from reconciler.telemetry import Telemetry
-    from reconciler.verdicts import DesiredRobot
     from reconciler.webhook_server import WebhookServer
     from workstation.ui.run import RunningUi, UiOptions
 
@@ -131,7 +131,7 @@ def ledger_settings(
     """Where and how the outcome ledger is kept (`state_options`), checked before anything
     starts."""
     from contract.durations import parse_duration
-    from reconciler.ledger import default_state_dir
+    from readmodel.ledger import default_state_dir
     from reconciler.ledger_feed import LedgerSettings
 
     try:
@@ -152,7 +152,7 @@ def start_ledger(
     """The outcome ledger's feed, started: its file opened (an unreadable one set aside and
     a new one started, said in the log), its session connecting; the telemetry's events are
     kept in it (the timeline). CliError when no ledger can be kept in the state folder at all."""
-    from reconciler.ledger import LedgerError
+    from readmodel.ledger import LedgerError
     from reconciler.ledger_feed import LedgerFeed
 
     notifier = telemetry.notifier if telemetry is not None else None
@@ -362,8 +362,8 @@ def reconcile(
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds, and at once when --webhook receives a push; runs until signalled."""
+    from readmodel.retained import speaks_mqtt5
     from reconciler.controller import Controller
-    from reconciler.retained import speaks_mqtt5
 
     connection = mqtt.connection()
     if interval <= 0:

@@ -15,10 +15,10 @@ from rich.text import Text
 from configurator.gcpause import collector_paused
 from configurator.types import is_robot_id
 from contract.errors import CliError, ExitCode
+from contract.lifecycle import on_stop_signals
 from contract.wire import Topics
-from reconciler.lifecycle import on_stop_signals
-from reconciler.retained import RetainedView
-from reconciler.verdicts import FleetStatus
+from readmodel.retained import RetainedView
+from readmodel.verdicts import FleetStatus
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.fleet_view import fleet_status_view
 from workstation.cli.options import repo_option, rev_option

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import click
 
 from contract.errors import CliError, ExitCode
-from reconciler.lifecycle import log_to_stderr, on_stop_signals
+from contract.lifecycle import log_to_stderr, on_stop_signals
 from workstation.cli.broker_options import BrokerOptions, desk_broker_options
 from workstation.cli.options import F, ledger_dir_option, repo_option
 from workstation.cli.restart import signing_key_option
@@ -41,7 +41,7 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     """`--ui` of `reconcile` and `up`, checked before anything starts: read-only, loopback."""
     if ui_at is None:
         return None
-    from reconciler.lifecycle import parse_address
+    from contract.lifecycle import parse_address
     from workstation.ui.run import ui_options
     from workstation.ui.server import is_loopback
 
@@ -110,7 +110,7 @@ def ui(
     A revision's page (/revisions/REV) shows what it achieved beside the revision before,
     from the reconciler's outcome ledger (read-only; --state-dir says where it is); the
     timeline (/timeline) lists the fleet's events kept in the same ledger, newest first."""
-    from reconciler.ledger import find_ledger
+    from readmodel.ledger import find_ledger
     from workstation.ui.revisions import LedgerHistory
     from workstation.ui.run import RunningUi, ui_options
 

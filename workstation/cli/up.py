@@ -15,7 +15,7 @@ from rich.panel import Panel
 
 from contract.errors import ExitCode
 from contract.wire import BROKER_ENV
-from reconciler.verdicts import FleetStatus
+from readmodel.verdicts import FleetStatus
 from workstation.cli.broker_options import BrokerOptions, broker_options
 from workstation.cli.fleet_view import fleet_status_view
 from workstation.cli.options import repo_option

@@ -187,8 +187,8 @@ def _does_not_validate(checked: Checked, rev: str | None, label: str) -> str:
 def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
     """Each robot's retained interfaces report (or why it cannot be read); None, said on
     stderr, when the broker does not answer: the plan stands without drift."""
-    from reconciler.observed import parse_retained
-    from reconciler.retained import take_snapshot_said
+    from readmodel.observed import parse_retained
+    from readmodel.retained import take_snapshot_said
 
     connection = mqtt.connection()
     topics = Topics(mqtt.prefix)
@@ -218,7 +218,7 @@ def _fleet_runs(mqtt: BrokerOptions, wait: float) -> FleetRead:
 
     from contract.safejson import PayloadError
     from contract.wire import ReconcilerStatus
-    from reconciler.retained import RetainedView, read_object
+    from readmodel.retained import RetainedView, read_object
 
     connection = mqtt.connection()
     url = connection.address.url
@@ -263,7 +263,7 @@ def _fleets(
 
 def _subjects(repo: Path, result: Plan) -> dict[str, str]:
     """The commit subjects of the plan's revisions (the work tree's side has none)."""
-    from reconciler.commits import CommitBook
+    from readmodel.commits import CommitBook
 
     revisions = (result.base, result.head)  # the work tree's is no commit: left out
     return {line.revision: line.subject for line in CommitBook(repo).lines(revisions)}

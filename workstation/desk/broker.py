@@ -10,7 +10,7 @@ from contract.errors import CliError
 from contract.mqtt import NOTHING_LISTENS
 
 if TYPE_CHECKING:
-    from reconciler.retained import RetainedView
+    from readmodel.retained import RetainedView
 
 # What to do when nothing listens at the broker's address, and when something there turned
 # the connection away: said by every desk command alike.

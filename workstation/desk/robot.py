@@ -19,8 +19,8 @@ from contract.safejson import PayloadError
 from contract.textsafe import printable
 from contract.topics import Role, subscriptions
 from contract.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
-from reconciler.observed import RobotSeen, parse_retained
-from reconciler.retained import RetainedView, read_object, take_snapshot
+from readmodel.observed import RobotSeen, parse_retained
+from readmodel.retained import RetainedView, read_object, take_snapshot
 from workstation.desk.broker import wait_for_broker
 
 # Answers are bounded by the agent; anything much larger is not one of its answers.

@@ -17,7 +17,7 @@ from contract.safejson import PayloadError
 from contract.textsafe import printable
 from contract.topics import Role, subscriptions
 from contract.wire import OperatorAnswer, ReconcilerStatus, RolloutStatus, Topics, short_rev
-from reconciler.retained import RetainedView, read_object
+from readmodel.retained import RetainedView, read_object
 from workstation.desk.broker import wait_for_broker
 
 if TYPE_CHECKING:

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from urllib.parse import parse_qsl, urlencode
 
 from configurator.types import is_robot_id
-from reconciler.http_edge import FedStream, Request, Response, client_key
+from readmodel.http_edge import FedStream, Request, Response, client_key
 from workstation.ui import forms
 from workstation.ui.auth import MAX_TOKEN, Identity, OperatorAuth, refusal_text
 from workstation.ui.logtail import LogTails

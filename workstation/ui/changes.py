@@ -7,7 +7,7 @@ import json
 from collections.abc import Set
 from dataclasses import dataclass, field
 
-from reconciler.verdicts import RobotRow
+from readmodel.verdicts import RobotRow
 from workstation.ui.goals_html import goals_box, rates_box
 from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
 from workstation.ui.pages import banner_box, reconciler_box, rollout_box, row_html, summary_box

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 from configurator.plan import Plan, format_plan_text
 from contract.diagnostics import Diagnostic
-from reconciler.verdicts import short_rev
+from readmodel.verdicts import short_rev
 from workstation.ui.goals_html import revision_link
 from workstation.ui.pages import diagnostics
 from workstation.ui.text import esc, when

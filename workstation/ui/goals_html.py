@@ -10,8 +10,8 @@ from urllib.parse import quote
 from contract.goals import BrainEvent, CurrentGoal, GoalsSummary, LastOutcome, VitalValue
 from contract.textsafe import shorten
 from contract.wire import ReconcilerStatus
-from reconciler.robot_goals import COUNTS, GoalRate, goal_rates
-from reconciler.verdicts import SUBJECT_SHOWN, RobotRow, short_rev
+from readmodel.robot_goals import COUNTS, GoalRate, goal_rates
+from readmodel.verdicts import SUBJECT_SHOWN, RobotRow, short_rev
 from workstation.ui.model import FleetQuery, Snapshot
 from workstation.ui.text import age, definitions, digest, esc, fold
 

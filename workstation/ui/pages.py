@@ -13,7 +13,7 @@ from contract.wire import (
     RolloutStatus,
     WaveVerification,
 )
-from reconciler.verdicts import (
+from readmodel.verdicts import (
     Health,
     RobotRow,
     Verdict,

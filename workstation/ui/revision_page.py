@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from urllib.parse import quote
 
-from reconciler.outcomes import History, RevisionReport, Tally
-from reconciler.verdicts import short_rev
+from readmodel.outcomes import History, RevisionReport, Tally
+from readmodel.verdicts import short_rev
 from workstation.ui.auth import Identity
 from workstation.ui.goals_html import duration, rate_row, revision_link
 from workstation.ui.model import Snapshot

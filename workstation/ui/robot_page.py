@@ -8,7 +8,7 @@ from urllib.parse import quote
 from contract.interfaces import Interface, RobotInterfaces
 from contract.launch import LaunchRequest
 from contract.wire import ReconcilerStatus
-from reconciler.verdicts import RobotRow
+from readmodel.verdicts import RobotRow
 from workstation.ui.auth import Identity
 from workstation.ui.goals_html import goals_box, revision_link
 from workstation.ui.model import HistoryEntry, Snapshot

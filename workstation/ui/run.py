@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contract.errors import CliError
+from contract.lifecycle import parse_address
 from contract.mqtt import Connection
-from reconciler.http_edge import BoundedHTTPServer
-from reconciler.lifecycle import parse_address
+from readmodel.http_edge import BoundedHTTPServer
 from workstation.desk.signing import private_key
 from workstation.ui import DEFAULT_LISTEN
 from workstation.ui.actions import Actions

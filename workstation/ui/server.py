@@ -1,4 +1,4 @@
-"""The UI's HTTP service: a route table answered on the bounded edge (reconciler/http_edge.py),
+"""The UI's HTTP service: a route table answered on the bounded edge (readmodel/http_edge.py),
 every page with the Content-Security-Policy, every bad request a 4xx page, never a traceback."""
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
 from contract.launch import LaunchRequest
 from contract.models import is_robot_id
 from contract.textsafe import printable
-from reconciler.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
-from reconciler.retained import read_object
-from reconciler.timeline import QueryRefused
+from readmodel.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
+from readmodel.retained import read_object
+from readmodel.timeline import QueryRefused
 from workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
 from workstation.ui.changes import Shown
 from workstation.ui.commit_facts import commit_section

@@ -17,7 +17,7 @@ from configurator.gcpause import collector_paused
 from contract.mqtt import Connection
 from contract.textsafe import printable
 from contract.wire import Topics
-from reconciler.verdicts import FleetStatus, reconciler_health
+from readmodel.verdicts import FleetStatus, reconciler_health
 from workstation.fleet_reader import FleetReader
 from workstation.fleet_status import DesiredCache, open_view
 from workstation.ui.changes import Shown, Views, change, changed_rows, first
@@ -31,7 +31,7 @@ MAX_STREAMS = 1000  # event streams at once (the edge's connection cap is lower)
 
 
 class Sink(Protocol):
-    """Where one stream's events go (reconciler.http_edge.FedStream)."""
+    """Where one stream's events go (readmodel.http_edge.FedStream)."""
 
     closed: bool
 

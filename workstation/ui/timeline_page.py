@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from urllib.parse import parse_qsl, quote
 
-from reconciler.timeline import KINDS, EventQuery, KeptEvent, QueryRefused, event_query
+from readmodel.timeline import KINDS, EventQuery, KeptEvent, QueryRefused, event_query
 from workstation.ui.auth import Identity
 from workstation.ui.goals_html import revision_link
 from workstation.ui.pages import page

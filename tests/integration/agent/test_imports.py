@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-SERVER_ONLY = ["git", "watchfiles", "amqtt", "reconciler"]
+SERVER_ONLY = ["git", "watchfiles", "amqtt", "readmodel", "reconciler"]
 # Loaded only when agent.yaml names a public key: an agent without one stays small.
 ON_DEMAND = ["cryptography"]
 

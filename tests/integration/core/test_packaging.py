@@ -104,7 +104,14 @@ def test_the_wheel_build_warns_of_nothing_and_carries_every_module(tmp_path: Pat
         names = {n for n in built.namelist() if n.endswith(".py")}
     sources = {
         path.relative_to(project).as_posix()
-        for package in ("robotconf", "contract", "configurator", "reconciler", "workstation")
+        for package in (
+            "robotconf",
+            "contract",
+            "configurator",
+            "readmodel",
+            "reconciler",
+            "workstation",
+        )
         for path in (project / package).rglob("*.py")
     } | {path.relative_to(project).as_posix() for path in (project / "agent").rglob("*.py")}
     assert sources - names == set()

@@ -12,7 +12,15 @@ import pytest
 
 from tests.support.lab import ROOT
 
-PACKAGES = ("contract", "configurator", "reconciler", "workstation", "agent", "robotconf")
+PACKAGES = (
+    "contract",
+    "configurator",
+    "readmodel",
+    "reconciler",
+    "workstation",
+    "agent",
+    "robotconf",
+)
 
 
 def module_name(path: Path) -> str:
@@ -100,14 +108,18 @@ def test_the_cycle_finder_finds_a_function_level_cycle(tmp_path: Path) -> None:
 
 # The layers, bottom first: each may import its own and those below. The robot side (agent)
 # stands beside them on the contract alone; the workstation shell is the top and may start it.
+# The read model (how the fleet is read: the retained mirror, verdicts, the ledger, the HTTP
+# edge) is a layer of its own that the reconciler and the workstation both stand on; the
+# workstation imports the reconciler only to start it (STARTS_THE_RECONCILER).
 # Inside the workstation its two front ends are layers of their own: the browser view (ui)
 # stands on the workstation's services (the desk's operations, the fleet reader), and the
 # commands (cli) on both, so that neither reaches the other's operations backwards.
-_WORKSTATION = {"contract", "configurator", "reconciler", "workstation", "agent"}
+_WORKSTATION = {"contract", "configurator", "readmodel", "workstation", "agent"}
 MAY_IMPORT = {
     "contract": {"contract"},
     "configurator": {"contract", "configurator"},
-    "reconciler": {"contract", "configurator", "reconciler"},
+    "readmodel": {"contract", "configurator", "readmodel"},
+    "reconciler": {"contract", "configurator", "readmodel", "reconciler"},
     "workstation": _WORKSTATION,
     # The browser view calls the desk's operations, never a command.
     "workstation.ui": _WORKSTATION | {"workstation.ui"},
@@ -121,6 +133,9 @@ MAY_IMPORT = {
 # Modules of the workstation that stand at the commands' level though they live beside the
 # services: `up`'s engine starts the browser view; the docs generator reads every command.
 AT_THE_COMMANDS = {"workstation.up", "workstation.docs"}
+# The only modules of the workstation that import the reconciler: they start it (`reconcile`,
+# `up`). Everything else reads the fleet through the read model.
+STARTS_THE_RECONCILER = {"workstation.cli.reconcile", "workstation.up"}
 
 
 def layer(module: str) -> str:
@@ -132,19 +147,27 @@ def layer(module: str) -> str:
     return sub if sub in MAY_IMPORT else top
 
 
+def may_import(module: str, target: str) -> bool:
+    """Whether `module` may import `target`: its layer's rule, and the reconciler for the
+    workstation's modules that start it."""
+    if layer(target) in MAY_IMPORT[layer(module)]:
+        return True
+    return layer(target) == "reconciler" and module in STARTS_THE_RECONCILER
+
+
 def layer_breaches(graph: dict[str, set[str]]) -> list[str]:
     return sorted(
         f"{module} -> {target}"
         for module, targets in graph.items()
         for target in targets
-        if layer(target) not in MAY_IMPORT[layer(module)]
+        if not may_import(module, target)
     )
 
 
 def test_every_import_goes_down_the_layers() -> None:
-    """contract < configurator < reconciler < workstation < ui < cli, and agent on contract
-    alone: an import anywhere in a module (a function's too) that goes up or sideways is a
-    breach."""
+    """contract < configurator < readmodel < reconciler, readmodel < workstation < ui < cli
+    (the workstation reaching the reconciler only to start it), and agent on contract alone:
+    an import anywhere in a module (a function's too) that goes up or sideways is a breach."""
     assert {name.partition(".")[0] for name in MAY_IMPORT} == set(PACKAGES)
     breaches = layer_breaches(import_graph())
     assert breaches == [], "imports against the layers: " + "; ".join(breaches)
@@ -153,7 +176,7 @@ def test_every_import_goes_down_the_layers() -> None:
 def test_the_layer_check_finds_an_upward_import() -> None:
     graph = {
         "contract.wire": {"configurator.types"},
-        "agent.runtime": {"reconciler.retained", "contract.wire"},
+        "agent.runtime": {"readmodel.retained", "contract.wire"},
         "workstation.up": {"agent.workdir", "workstation.ui.run"},
         "workstation.ui.restarts": {"workstation.cli.restart", "workstation.desk.restart"},
         "workstation.desk.restart": {"workstation.cli.options", "workstation.desk.robot"},
@@ -161,11 +184,33 @@ def test_the_layer_check_finds_an_upward_import() -> None:
         "reconciler.metrics": {"workstation.ui.server"},
     }
     assert layer_breaches(graph) == [
-        "agent.runtime -> reconciler.retained",
+        "agent.runtime -> readmodel.retained",
         "contract.wire -> configurator.types",
         "reconciler.metrics -> workstation.ui.server",
         "workstation.desk.restart -> workstation.cli.options",
         "workstation.ui.restarts -> workstation.cli.restart",
+    ]
+
+
+def test_the_layer_check_holds_the_reconciler_to_those_that_start_it() -> None:
+    """The workstation reads the fleet through the read model; only `reconcile` and `up`
+    import the reconciler (to start it). The read model imports neither of its users."""
+    graph = {
+        "workstation.cli.reconcile": {"reconciler.controller", "readmodel.retained"},
+        "workstation.up": {"reconciler.controller", "readmodel.verdicts"},
+        "workstation.cli.status": {"reconciler.telemetry", "readmodel.verdicts"},
+        "workstation.ui.server": {"reconciler.controller", "readmodel.http_edge"},
+        "workstation.fleet_reader": {"reconciler.observed", "readmodel.observed"},
+        "reconciler.controller": {"readmodel.retained", "configurator.render"},
+        "readmodel.verdicts": {"reconciler.decide", "workstation.fleet_status", "contract.wire"},
+        "readmodel.ledger": {"configurator.types", "readmodel.outcomes"},
+    }
+    assert layer_breaches(graph) == [
+        "readmodel.verdicts -> reconciler.decide",
+        "readmodel.verdicts -> workstation.fleet_status",
+        "workstation.cli.status -> reconciler.telemetry",
+        "workstation.fleet_reader -> reconciler.observed",
+        "workstation.ui.server -> reconciler.controller",
     ]
 
 
@@ -197,13 +242,21 @@ def test_help_imports_no_command_module() -> None:
     loaded = loaded_modules("--help")
     commands = {m for m in loaded if m.startswith("workstation.cli.")}
     assert commands <= {"workstation.cli.main", "contract.errors"}, commands
-    assert not _top(loaded) & {"rich", "pydantic", "paho", "git", "reconciler", "agent"}
+    assert not _top(loaded) & {
+        "rich",
+        "pydantic",
+        "paho",
+        "git",
+        "readmodel",
+        "reconciler",
+        "agent",
+    }
 
 
 def test_validate_imports_neither_rich_nor_the_broker_side() -> None:
     loaded = loaded_modules("validate", "--repo", str(ROOT))
     assert "configurator.workspace" in loaded  # it did run
-    assert not _top(loaded) & {"rich", "paho", "git", "reconciler", "agent"}
+    assert not _top(loaded) & {"rich", "paho", "git", "readmodel", "reconciler", "agent"}
     # Nor rendering: its models are built at import, and every commit pays validate's start-up.
     rendering = {"configurator.render", "configurator.drift", "contract.launch", "contract.wire"}
     assert not loaded & rendering, loaded & rendering
@@ -242,7 +295,13 @@ def test_the_robot_side_imports_no_workstation_library(module: str) -> None:
     code = f"import sys, {module}; print('\\n'.join(sorted(sys.modules)))"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
-    assert not _top(set(done.stdout.splitlines())) & {"click", "rich", "git", "reconciler"}
+    assert not _top(set(done.stdout.splitlines())) & {
+        "click",
+        "rich",
+        "git",
+        "readmodel",
+        "reconciler",
+    }
 
 
 def test_the_architecture_page_names_every_module_once() -> None:

@@ -20,12 +20,12 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from contract.mqtt import Connection
 from contract.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, Topics
+from readmodel.events import Event, Kind
+from readmodel.verdicts import Verdict
 from reconciler.decide import state_of
-from reconciler.events import Event, Kind
 from reconciler.notify import QUEUE, Notifier, Sender, parse_receiver
 from reconciler.source import LocalBranch
 from reconciler.telemetry import Telemetry
-from reconciler.verdicts import Verdict
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.agents import publish
 from tests.support.fleet import GitLab, Running, refused_reconcile, start_reconciler

@@ -16,8 +16,8 @@ from pathlib import Path
 
 from contract.mqtt import Connection
 from contract.wire import AgentState, AgentStatus, Topics
+from readmodel.retained import RetainedView
 from reconciler.controller import Controller
-from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch
 from tests.support.fleet import ROBOTS, GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port

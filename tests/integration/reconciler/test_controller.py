@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from contract.mqtt import Connection
-from reconciler.retained import RetainedView
+from readmodel.retained import RetainedView
 from reconciler.source import LocalBranch, RemoteBranch
 from tests.support.fleet import ROBOTS, GitLab, Running
 from tests.support.mosquitto import Mosquitto

@@ -17,10 +17,10 @@ from contract.launch import LaunchRequest, StopRequest
 from contract.mqtt import Connection
 from contract.signing import Signed, generate_keys, load_public_key, verify
 from contract.wire import ReconcilerStatus, Topics
+from readmodel.retained import Ignored, RetainedView
 from reconciler.builds import MAX_REQUEST_BYTES
 from reconciler.delivery import Signer
 from reconciler.desired import Desired, load_desired
-from reconciler.retained import Ignored, RetainedView
 from reconciler.signer import make_signer
 from reconciler.source import LocalBranch
 from tests.support.fleet import ROBOTS, GitLab, Running, robotconf_argv, start_reconciler

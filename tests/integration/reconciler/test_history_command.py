@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from contract.goals import OutcomeRecord, OutcomeState
-from reconciler.ledger import Ledger, ledger_path
+from readmodel.ledger import Ledger, ledger_path
 from tests.support.fleet import robotconf_argv
 
 OLD, NEW = "0a" * 20, "0b" * 20

@@ -27,8 +27,8 @@ from prometheus_client import CollectorRegistry
 from contract.goals import OutcomeRecord, OutcomeState
 from contract.mqtt import Connection, make_client
 from contract.wire import Topics
-from reconciler.events import Event, Kind
-from reconciler.ledger import Ledger, ledger_path
+from readmodel.events import Event, Kind
+from readmodel.ledger import Ledger, ledger_path
 from reconciler.ledger_feed import LedgerFeed, LedgerSettings
 from reconciler.metrics import Metrics
 from tests.support.fleet import GitLab, Proc, robotconf_argv, start_reconciler
@@ -361,7 +361,7 @@ WRITER = textwrap.dedent(
     import sys, time
     from pathlib import Path
     from contract.goals import OutcomeRecord
-    from reconciler.ledger import Ledger
+    from readmodel.ledger import Ledger
     ledger = Ledger.open_or_start(Path(sys.argv[1]))
     seq = 0
     while True:

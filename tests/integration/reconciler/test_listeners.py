@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from reconciler.http_edge import Limits, client_key
+from readmodel.http_edge import Limits, client_key
 from reconciler.metrics import Metrics
 from reconciler.webhook_server import LIMITS, WebhookServer
 from tests.integration.reconciler.test_alerts import scrape, value

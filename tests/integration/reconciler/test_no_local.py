@@ -7,8 +7,8 @@ from collections.abc import Callable
 import pytest
 
 from contract.mqtt import Connection
-from reconciler import retained
-from reconciler.retained import RetainedView, speaks_mqtt5
+from readmodel import retained
+from readmodel.retained import RetainedView, speaks_mqtt5
 from tests.support.agents import publish
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.watch import wait_for

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from reconciler.events import Event, Kind
+from readmodel.events import Event, Kind
 from reconciler.notify import Sender, parse_receiver
 from tests.support.receivers import ANSWER, Dripper, Recorder
 from tests.support.tlsutil import make_pki

@@ -12,8 +12,8 @@ import pytest
 
 from contract.mqtt import Connection
 from contract.wire import AgentState, AgentStatus, Topics
+from readmodel.retained import RetainedView
 from reconciler.controller import Controller
-from reconciler.retained import RetainedView
 from reconciler.source import LocalBranch
 from tests.support.fleet import GitLab
 from tests.support.mosquitto import Mosquitto

@@ -15,8 +15,8 @@ from urllib.parse import quote
 
 import pytest
 
-from reconciler.events import Event, Kind
-from reconciler.ledger import Ledger, ledger_path
+from readmodel.events import Event, Kind
+from readmodel.ledger import Ledger, ledger_path
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.mosquitto import Mosquitto

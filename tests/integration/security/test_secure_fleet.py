@@ -17,7 +17,7 @@ from configurator.rendered import RenderedRequest
 from contract.launch import LaunchRequest, canonical_json, content_digest
 from contract.signing import generate_keys, load_private_key, sign
 from contract.wire import AgentState, AgentStatus, Topics
-from reconciler.retained import RetainedView
+from readmodel.retained import RetainedView
 from tests.support.fleet import GitLab, Proc, pid_alive
 from tests.support.lab import ROBOTCONF
 from tests.support.secure import Secured, start_secured

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import pytest
 
 from contract.goals import BrainEvent, CurrentGoal, OutcomeRecord, OutcomeState, Severity
-from reconciler.ledger import Ledger, ledger_path
+from readmodel.ledger import Ledger, ledger_path
 from tests.integration.ui.test_browser import (  # noqa: F401 (pages_without_errors: autouse)
     expect_ms,
     open_page,

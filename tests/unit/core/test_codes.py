@@ -23,7 +23,14 @@ UPDATE = "python -m workstation.docs"
 def _sources() -> list[Path]:
     found = [
         path
-        for package in ("contract", "configurator", "reconciler", "workstation", "agent")
+        for package in (
+            "contract",
+            "configurator",
+            "readmodel",
+            "reconciler",
+            "workstation",
+            "agent",
+        )
         for path in sorted((ROOT / package).rglob("*.py"))
         if path != REGISTRY
     ]

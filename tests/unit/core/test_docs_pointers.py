@@ -16,6 +16,7 @@ DESIGN = "DESIGN " + "\N{SECTION SIGN}"
 SCANNED_FOLDERS = (
     "contract",
     "configurator",
+    "readmodel",
     "reconciler",
     "workstation",
     "agent",

@@ -22,8 +22,8 @@ from contract.launch import (
     with_digest,
 )
 from contract.wire import AgentState, AgentStatus, RobotDescription
-from reconciler.observed import RobotSeen
-from reconciler.verdicts import DesiredRobot, template_warning
+from readmodel.observed import RobotSeen
+from readmodel.verdicts import DesiredRobot, template_warning
 from tests.support.agents import make_request
 
 

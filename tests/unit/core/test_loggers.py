@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[3]
-PACKAGES = ["contract", "configurator", "reconciler", "workstation", "agent"]
+PACKAGES = ["contract", "configurator", "readmodel", "reconciler", "workstation", "agent"]
 # Other libraries' loggers, configured by their own names (quietened, mostly).
 THIRD_PARTY = {"watchfiles", "amqtt", "transitions"}
 # `logging.getLogger()` without a name is the root logger: only for attaching a handler.
-ROOT_LOGGER_USERS = {"reconciler/lifecycle.py"}
+ROOT_LOGGER_USERS = {"contract/lifecycle.py"}
 
 
 def _is_get_logger(node: ast.AST) -> bool:

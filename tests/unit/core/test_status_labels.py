@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from configurator.render import render_fleet
 from contract.wire import AgentState, AgentStatus
-from reconciler.observed import Retained, RobotSeen
-from reconciler.verdicts import DesiredRobot, FleetStatus, build_rows, desired_from_fleet
+from readmodel.observed import Retained, RobotSeen
+from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows, desired_from_fleet
 from tests.support.lab import Lab
 from workstation.cli.fleet_view import COLUMNS, fleet_status_text
 

@@ -143,7 +143,7 @@ def test_an_interfaces_report_is_read_or_an_error_never_a_crash(payload: bytes) 
     nothing from an unreadable one."""
     from configurator.drift import Need, drift_of
     from contract.wire import Topics
-    from reconciler.observed import parse_retained
+    from readmodel.observed import parse_retained
 
     topics = Topics()
     robot = parse_retained({topics.interfaces("r1"): payload}, topics).robots.get("r1")

@@ -10,8 +10,8 @@ from contract.wire import (
     RolloutStatus,
     StageState,
 )
-from reconciler.commits import named_revisions
-from reconciler.verdicts import reconciler_lines, rev_text, rollout_line
+from readmodel.commits import named_revisions
+from readmodel.verdicts import reconciler_lines, rev_text, rollout_line
 from workstation.ui.goals_html import revision_link
 
 A, B, C = "a" * 40, "b" * 40, "c" * 40

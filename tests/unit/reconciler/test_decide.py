@@ -7,9 +7,9 @@ import pytest
 from configurator.render import render_fleet
 from contract.launch import StopRequest
 from contract.wire import AgentState, AgentStatus, StatusDiagnostic, Topics
+from readmodel.observed import parse_retained
 from reconciler.decide import Observation, Reason, decide
 from reconciler.desired import Desired, build_failure
-from reconciler.observed import parse_retained
 from reconciler.report import Followed, offline_status, status_of
 from tests.support.lab import Lab
 

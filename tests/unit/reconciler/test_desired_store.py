@@ -11,7 +11,7 @@ import pytest
 
 from configurator.render import render_fleet
 from configurator.workspace import check
-from reconciler.verdicts import DesiredRobot, desired_from_fleet
+from readmodel.verdicts import DesiredRobot, desired_from_fleet
 from tests.support.lab import ROOT
 from workstation import desired_store
 

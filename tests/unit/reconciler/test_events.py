@@ -6,12 +6,12 @@ import json
 
 import pytest
 
+from contract.lifecycle import parse_address
 from contract.wire import AgentState, AgentStatus, CommitLine, ReconcilerStatus, RolloutStatus
-from reconciler.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
-from reconciler.lifecycle import parse_address
+from readmodel.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
+from readmodel.verdicts import DesiredRobot, Verdict
 from reconciler.notify import parse_receiver
 from reconciler.telemetry import verdict_counts
-from reconciler.verdicts import DesiredRobot, Verdict
 
 D1 = "sha256:" + "1" * 64
 D2 = "sha256:" + "2" * 64

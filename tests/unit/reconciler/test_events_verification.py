@@ -14,7 +14,7 @@ from contract.wire import (
     Verdict,
     WaveVerification,
 )
-from reconciler.events import (
+from readmodel.events import (
     REMEMBERED,
     RESUMERS,
     Event,

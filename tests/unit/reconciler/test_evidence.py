@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 
 from configurator.types import Verify
-from reconciler.evidence import Counts, EvidenceKey, Roles, Row, WaveEvidence, judge, new_evidence
+from readmodel.outcomes import Row
+from reconciler.evidence import Counts, EvidenceKey, Roles, WaveEvidence, judge, new_evidence
 
 T0 = 1_000_000.0
 KEY = EvidenceKey("a" * 40, 1, T0)

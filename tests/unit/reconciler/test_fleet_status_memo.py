@@ -11,7 +11,7 @@ import pytest
 from configurator.render import render_fleet
 from configurator.workspace import check
 from contract.wire import AgentState, AgentStatus, Topics
-from reconciler.observed import ReadMemo
+from readmodel.observed import ReadMemo
 from tests.support.lab import ROOT
 from workstation.fleet_status import DesiredCache, fleet_status
 

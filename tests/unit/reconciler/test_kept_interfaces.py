@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from configurator.drift import Need, drift_of
 from contract.interfaces import KeptInterfaces, RobotInterfaces, index
 from contract.wire import Topics
-from reconciler.observed import parse_retained
+from readmodel.observed import parse_retained
 
 TOPICS = Topics()
 NAMES = st.sampled_from(["/scan", "/odom", "/cmd_vel", "/tb3_01/scan", "/navigate_to_pose"])

@@ -8,7 +8,7 @@ import json
 from configurator.render import render_fleet
 from configurator.workspace import check
 from contract.wire import Topics
-from reconciler.observed import canonical_digest, parse_retained, summarise_launches
+from readmodel.observed import canonical_digest, parse_retained, summarise_launches
 from tests.support.lab import ROOT
 
 T = Topics()

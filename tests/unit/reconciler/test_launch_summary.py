@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from contract.launch import StopRequest
 from contract.wire import AgentState, AgentStatus, Topics
-from reconciler.observed import launch_summary, parse_retained, summarise_launches
-from reconciler.retained import oversized
+from readmodel.observed import launch_summary, parse_retained, summarise_launches
+from readmodel.retained import oversized
 from tests.support.agents import make_request
 
 T = Topics()

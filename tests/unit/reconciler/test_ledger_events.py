@@ -7,9 +7,9 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-from reconciler.events import Event, Kind
-from reconciler.ledger import SCHEMA_VERSION, Ledger, ledger_path
-from reconciler.timeline import EventQuery
+from readmodel.events import Event, Kind
+from readmodel.ledger import SCHEMA_VERSION, Ledger, ledger_path
+from readmodel.timeline import EventQuery
 
 A, B = "a1" * 20, "b2" * 20
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from contract.goals import OutcomeRecord, OutcomeState
-from reconciler.ledger import (
+from readmodel.ledger import (
     KEEP_ASIDE,
     SCHEMA_VERSION,
     Ledger,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from contract.launch import StopRequest
 from contract.wire import AgentState, AgentStatus, Topics
-from reconciler.observed import LaunchDigests, ReadMemo, parse_retained
-from reconciler.retained import Ignored
+from readmodel.observed import LaunchDigests, ReadMemo, parse_retained
+from readmodel.retained import Ignored
 from tests.support.agents import make_request
 
 T = Topics()

@@ -10,8 +10,8 @@ import pytest
 
 from contract.durations import parse_duration
 from contract.goals import OutcomeRecord, OutcomeState
-from reconciler.events import Kind
-from reconciler.outcomes import (
+from readmodel.events import Kind
+from readmodel.outcomes import (
     MAX_RECORD_BYTES,
     OTHER,
     BoundedLabels,

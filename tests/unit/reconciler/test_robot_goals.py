@@ -16,9 +16,9 @@ from contract.goals import (
     TaskCounts,
 )
 from contract.wire import Topics
-from reconciler.observed import parse_retained
-from reconciler.robot_goals import NO_GOALS, RobotGoals, bounded, goal_rates
-from reconciler.verdicts import DesiredRobot, FleetStatus, build_rows
+from readmodel.observed import parse_retained
+from readmodel.robot_goals import NO_GOALS, RobotGoals, bounded, goal_rates
+from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows
 from tests.support.goals_summaries import AT, REV1, REV2, ended, summary
 from workstation.cli.fleet_view import GOALS, GOALS_LEGEND, columns, fleet_status_text
 

@@ -9,8 +9,8 @@ import pytest
 
 from configurator.render import FleetRender, render_fleet
 from contract.wire import AgentState, AgentStatus, RolloutStatus
+from readmodel.verdicts import rollout_line
 from reconciler.rollout import RolloutInput, RolloutStep, roll_out
-from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab
 
 ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]

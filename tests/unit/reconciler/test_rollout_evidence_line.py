@@ -5,7 +5,7 @@ carries the verification as the reconciler published it."""
 from __future__ import annotations
 
 from contract.wire import ReconcilerStatus, RolloutStatus, WaveVerification
-from reconciler.verdicts import FleetStatus, evidence_words, paused_for_evidence, rollout_line
+from readmodel.verdicts import FleetStatus, evidence_words, paused_for_evidence, rollout_line
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout_verify import T0, Run
 from workstation.cli.fleet_view import fleet_status_text

@@ -9,8 +9,8 @@ from configurator.plan import format_plan_text, make_plan, plan_as_json
 from configurator.render import FleetRender
 from configurator.types import RolloutPolicy
 from contract.wire import AgentState, AgentStatus
+from readmodel.verdicts import rollout_line
 from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
-from reconciler.verdicts import rollout_line
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout import CANARY, ROBOTS, T0, fleet, held, published, running
 from tests.unit.reconciler.test_rollout_memory import offline, state

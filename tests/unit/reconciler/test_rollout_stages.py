@@ -134,7 +134,7 @@ def test_an_operator_promotes_the_revision_to_a_stage_by_hand(lab: Lab) -> None:
 
 
 def test_status_and_the_browser_view_show_each_stage_and_its_verified_revision(lab: Lab) -> None:
-    from reconciler.verdicts import rollout_line
+    from readmodel.verdicts import rollout_line
     from workstation.ui.pages import stages_html
 
     run = Run(lab)

@@ -4,8 +4,8 @@ the fleet, restart lines, RELOADS beside RESTARTS (issue 22, item 4)."""
 from __future__ import annotations
 
 from contract.wire import AgentStatus, ReconcilerStatus, RolloutStatus
-from reconciler.observed import Retained, RobotSeen
-from reconciler.verdicts import DesiredRobot, FleetStatus, build_rows
+from readmodel.observed import Retained, RobotSeen
+from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows
 from workstation.cli.fleet_view import fleet_status_text
 
 STABLE = "sha256:" + "1" * 64  # the stable revision's request for each robot

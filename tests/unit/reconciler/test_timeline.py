@@ -7,8 +7,8 @@ from __future__ import annotations
 import pytest
 
 from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
-from reconciler.events import Event, Kind
-from reconciler.timeline import (
+from readmodel.events import Event, Kind
+from readmodel.timeline import (
     KINDS,
     MAX_FIELD,
     MAX_LIMIT,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from contract.wire import ReconcilerStatus, RolloutStatus
-from reconciler.verdicts import FleetStatus
+from readmodel.verdicts import FleetStatus
 from workstation.up import summary
 
 

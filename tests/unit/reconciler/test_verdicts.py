@@ -6,9 +6,9 @@ import pytest
 
 from contract.launch import StopRequest
 from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
-from reconciler.observed import Retained, RobotSeen, parse_retained
-from reconciler.retained import oversized
-from reconciler.verdicts import (
+from readmodel.observed import Retained, RobotSeen, parse_retained
+from readmodel.retained import oversized
+from readmodel.verdicts import (
     DesiredRobot,
     FleetStatus,
     Health,

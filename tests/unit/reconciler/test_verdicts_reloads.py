@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from contract.wire import AgentState, AgentStatus
-from reconciler.observed import Retained, RobotSeen
-from reconciler.verdicts import DesiredRobot, FleetStatus, Verdict, build_rows
+from readmodel.observed import Retained, RobotSeen
+from readmodel.verdicts import DesiredRobot, FleetStatus, Verdict, build_rows
 
 D1 = "sha256:" + "1" * 64
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from contract.wire import ReconcilerStatus, StatusDiagnostic
-from reconciler.verdicts import WORST_FIRST, FleetStatus, RobotRow, Verdict
+from readmodel.verdicts import WORST_FIRST, FleetStatus, RobotRow, Verdict
 from workstation.ui.model import Snapshot
 
 D1 = "sha256:" + "1" * 64

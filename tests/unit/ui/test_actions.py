@@ -9,7 +9,7 @@ from urllib.parse import urlencode
 
 import pytest
 
-from reconciler.http_edge import Request, Response
+from readmodel.http_edge import Request, Response
 from workstation.ui import forms
 from workstation.ui.actions import Actions
 from workstation.ui.auth import COOKIE, Identity, OperatorAuth, Policy

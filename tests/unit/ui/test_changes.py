@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
-from reconciler.verdicts import Verdict
+from readmodel.verdicts import Verdict
 from tests.unit.ui.fleets import fleet, refused, row, snapshot
 from workstation.ui.changes import Shown, Views, change, changed_rows, first
 from workstation.ui.model import FleetQuery

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from reconciler.verdicts import Verdict
+from readmodel.verdicts import Verdict
 from tests.unit.ui.fleets import fleet, row
 from workstation.ui.model import MAX_QUERY, FleetQuery, QueryError, parse_query, visible
 

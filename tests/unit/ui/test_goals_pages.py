@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 
 from contract.goals import BrainEvent, CurrentGoal, OutcomeState, Severity
-from reconciler.robot_goals import RobotGoals, bounded
+from readmodel.robot_goals import RobotGoals, bounded
 from tests.support.goals_summaries import AT, REV1, REV2, ended, summary
 from tests.unit.ui.fleets import fleet, row, snapshot
 from tests.unit.ui.test_pages import assert_no_inline_code, tags

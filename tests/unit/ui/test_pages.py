@@ -6,7 +6,7 @@ import re
 from html.parser import HTMLParser
 
 from contract.wire import AgentState, RolloutStatus
-from reconciler.verdicts import Verdict
+from readmodel.verdicts import Verdict
 from tests.unit.ui.fleets import fleet, reconciler, refused, row, snapshot
 from workstation.ui.auth import ANONYMOUS, Identity
 from workstation.ui.model import FleetQuery, HistoryEntry

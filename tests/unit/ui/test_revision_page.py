@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from contract.goals import OutcomeRecord, OutcomeState
-from reconciler.ledger import Ledger, ledger_path
-from reconciler.outcomes import History
-from reconciler.robot_goals import RobotGoals, bounded
+from readmodel.ledger import Ledger, ledger_path
+from readmodel.outcomes import History
+from readmodel.robot_goals import RobotGoals, bounded
 from tests.support.goals_summaries import AT, REV1, REV2, summary
 from tests.unit.ui.fleets import fleet, row, snapshot
 from tests.unit.ui.test_pages import assert_no_inline_code, tags
@@ -72,7 +72,7 @@ def keep(path: Path) -> LedgerHistory:
         for i in range(5)
     ]
     now += [outcome(110 + i, REV2, "guide-gazebo", "Guide", S, "tb3-02") for i in range(5)]
-    # The feed refuses such an id (reconciler/outcomes.py); the page escapes it all the same.
+    # The feed refuses such an id (readmodel/outcomes.py); the page escapes it all the same.
     now += [outcome(120, REV2, "delivery-gazebo", "Delivery", X, HOSTILE)]
     with Ledger.open_or_start(ledger_path(path)) as ledger:
         ledger.add(before, received_at=AT - 50)

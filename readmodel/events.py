@@ -52,10 +52,10 @@ class Kind(str, enum.Enum):
     ROBOT_DRIFT_CLEARED = "robot_drift_cleared"
     ROBOT_DEFERRED = "robot_deferred"
     ROBOT_GOALS_FAILING = (
-        "robot_goals_failing"  # told by the outcome ledger (reconciler/outcomes.py)
+        "robot_goals_failing"  # told by the outcome ledger (readmodel/outcomes.py)
     )
     ROBOT_GOALS_RECOVERED = "robot_goals_recovered"
-    # Kept in the timeline only (reconciler/timeline.py), not told to --notify's receivers:
+    # Kept in the timeline only (readmodel/timeline.py), not told to --notify's receivers:
     # every commit and wave would be noise in a chat; the history wants them.
     COMMIT_APPLIED = "commit_applied"
     WAVE_STARTED = "wave_started"

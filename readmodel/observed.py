@@ -30,8 +30,8 @@ from contract.wire import (
     Topics,
     is_online,
 )
-from reconciler.retained import Ignored, read_object
-from reconciler.robot_goals import bounded
+from readmodel.retained import Ignored, read_object
+from readmodel.robot_goals import bounded
 
 RECONCILER_STATUS = "reconciler-status"
 WAVE_RECORD = "rollout-record"  # reconciler.wave_memory, read by the reconciler alone

@@ -4,7 +4,7 @@ reconciler's state folder (`ledger.sqlite3`), and what each revision achieved re
 The SQLite edge only: the standard library's `sqlite3`, WAL (readers never wait for the
 writer), the schema versioned by `PRAGMA user_version`, each batch one transaction,
 (robot_id, run, seq) unique so that a record delivered twice is kept once. What is read is
-tallied by the pure functions of `reconciler/outcomes.py`.
+tallied by the pure functions of `readmodel/outcomes.py`.
 
 The query API (what `robotconf history` and the browser's revision page call):
 
@@ -21,7 +21,7 @@ ledger (corrupt, truncated, another program's) is set aside beside it, said in o
 new ledger is started: never a crash loop.
 
 Schema 2 added the fleet's timeline (`events`: what the reconciler told or noted, see
-`reconciler/timeline.py`), bounded as the outcomes are, by age and by a count of rows. A writer
+`readmodel/timeline.py`), bounded as the outcomes are, by age and by a count of rows. A writer
 opening a schema 1 ledger adds it (one transaction); a reader of one finds no events.
 """
 
@@ -39,20 +39,20 @@ from pathlib import Path
 from typing import Any
 
 from contract.goals import OutcomeRecord, OutcomeState
-from reconciler.events import Event
-from reconciler.evidence import Row
-from reconciler.outcomes import (
+from readmodel.events import Event
+from readmodel.outcomes import (
     NO_REVISION,
     NO_SCENARIO,
     Group,
     History,
     RevisionReport,
+    Row,
     Streak,
     StreakEvent,
     advance,
     aggregate,
 )
-from reconciler.timeline import EventQuery, KeptEvent, stored
+from readmodel.timeline import EventQuery, KeptEvent, stored
 
 log = logging.getLogger("robotconf.reconciler")
 

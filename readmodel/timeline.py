@@ -1,7 +1,7 @@
 """The fleet's timeline, pure: the events kept in the ledger beside the alerts, and how they are
 asked for.
 
-The alerts (`reconciler/events.py`) are the transitions worth telling a person; the timeline
+The alerts (`readmodel/events.py`) are the transitions worth telling a person; the timeline
 keeps them all, and three more that would be noise in a chat but are the fleet's history: a
 commit applied, a rollout's wave started, a robot restarted from the desk (and by whom). Those
 three are judged here (`timeline_transitions`), with their own memory (`Noted`).
@@ -30,7 +30,7 @@ from contract.wire import (
     RolloutStatus,
     short_rev,
 )
-from reconciler.events import REMEMBERED, Event, Kind
+from readmodel.events import REMEMBERED, Event, Kind
 
 KINDS = tuple(kind.value for kind in Kind)  # what --kind and the page's filter accept
 DEFAULT_LIMIT = 200  # events listed unless asked for more

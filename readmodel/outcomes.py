@@ -2,7 +2,7 @@
 what a revision achieved (revision → scenario → task → counts, rates, durations), the
 comparison with the revision before, and the streaks that make a robot's goals failing.
 
-No SQLite and no MQTT here: `reconciler/ledger.py` is the edge that feeds these functions.
+No SQLite and no MQTT here: `readmodel/ledger.py` is the edge that feeds these functions.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from pydantic import ValidationError
 
@@ -26,7 +26,7 @@ from contract.goals import (
 )
 from contract.safejson import PayloadError, parse_object
 from contract.textsafe import printable, shorten
-from reconciler.events import Event, Kind
+from readmodel.events import Event, Kind
 
 MAX_RECORD_BYTES = 8 * 1024  # one OutcomeRecord: its texts are cut at MAX_TEXT by the agent
 MAX_ID = 80  # characters of a run, a revision or a digest
@@ -42,6 +42,18 @@ _SCENARIO = re.compile(r"^[A-Za-z0-9_.-]{1,128}$")
 # What counts toward a robot's failing streak, and what ends one.
 FAILING = frozenset({OutcomeState.FAILED})  # stale may still end: never failing
 DEFAULT_STREAK = 3  # failed goals in a row before a robot's goals are failing
+
+
+class Row(NamedTuple):
+    """One outcome as the ledger keeps it, the columns evidence needs."""
+
+    id: int
+    robot_id: str
+    digest: str | None
+    scenario: str
+    outcome: str
+    code: str | None
+    received_at: float
 
 
 class RecordRefused(ValueError):

@@ -159,7 +159,7 @@ class RobotGoals:
 
     @classmethod
     def of(cls, summary: GoalsSummary | None, error: str | None = None) -> RobotGoals:
-        """`summary` as `bounded` keeps it (reconciler.observed reads it so, once per payload)."""
+        """`summary` as `bounded` keeps it (readmodel.observed reads it so, once per payload)."""
         if error is not None:
             return cls(note=f"its goals summary cannot be read: {cut(error, 300)}", unreadable=True)
         if summary is None:

@@ -38,8 +38,8 @@ from contract.wire import (
 )
 from contract.wire import short_digest as _short_digest
 from contract.wire import short_rev as _short_rev
-from reconciler.observed import Retained, RobotSeen
-from reconciler.robot_goals import NO_GOALS, RobotGoals
+from readmodel.observed import Retained, RobotSeen
+from readmodel.robot_goals import NO_GOALS, RobotGoals
 
 
 class Verdict(str, enum.Enum):
