@@ -88,6 +88,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "workstation.cli.security:broker_config",
         "write Mosquitto ACL, password file and TLS listener from configs/fleet.yaml",
     ),
+    "hash-token": (
+        "workstation.cli.hash_token:hash_token_command",
+        "hash an operator's token for robotconf ui --operators-file",
+    ),
 }
 
 

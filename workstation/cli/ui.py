@@ -74,7 +74,24 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     default=None,
     metavar="F",
     help="a file (readable by you alone) whose one line is the operators' token: with it, "
-    "operators log in and restart robots; without, the UI is read-only",
+    "operators log in and restart robots; without (and without --operators-file), the UI "
+    "is read-only",
+)
+@click.option(
+    "--operators-file",
+    type=_path,
+    default=None,
+    metavar="F",
+    help="named operators, each with their own token: lines `NAME HASH` (the hash "
+    "robotconf hash-token prints); the status and the timeline name who restarted",
+)
+@click.option(
+    "--trusted-proxy",
+    "trusted_proxies",
+    multiple=True,
+    metavar="ADDR",
+    help="a reverse proxy's address or network (repeatable): requests from it are "
+    "throttled and audited by the X-Forwarded-For address it adds",
 )
 @click.option("--tls-cert", type=_path, default=None, metavar="F", help="serve HTTPS: certificate")
 @click.option("--tls-key", type=_path, default=None, metavar="F", help="... and its private key")
@@ -90,6 +107,8 @@ def ui(
     mqtt: BrokerOptions,
     listen: str,
     operator_token_file: Path | None,
+    operators_file: Path | None,
+    trusted_proxies: tuple[str, ...],
     tls_cert: Path | None,
     tls_key: Path | None,
     behind_tls_proxy: bool,
@@ -105,7 +124,13 @@ def ui(
     confirmed, or POST /robots/ROBOT/restart) through the same signed request as robotconf
     restart (signed with --signing-key when given; the status says `ui.cookie` or
     `ui.bearer` asked) and follow its brain's log on its page. Without a token or with a
-    wrong one a restart is refused (401/403); wrong tokens from one address are throttled.
+    wrong one a restart is refused (401/403); wrong tokens from one address are throttled
+    (all of loopback counts as one address).
+
+    With --operators-file instead, each operator logs in with their name and their own token
+    (a script sends `Authorization: Bearer NAME:TOKEN`), and the status, the timeline and
+    the UI's log say `ui.NAME` asked. Behind a reverse proxy, --trusted-proxy ADDR makes the
+    throttle and the log use the client address the proxy adds to X-Forwarded-For.
 
     A revision's page (/revisions/REV) shows what it achieved beside the revision before,
     from the reconciler's outcome ledger (read-only; --state-dir says where it is); the
@@ -121,6 +146,8 @@ def ui(
         tls_key,
         behind_tls_proxy,
         signing_key=signing_key or mqtt.signing_key,  # up's own, found with its broker
+        operators_file=operators_file,
+        trusted_proxies=trusted_proxies,
     )
     connection = mqtt.connection()
     log_to_stderr("ui")

@@ -3,15 +3,18 @@
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Callable
 from urllib.parse import parse_qsl, urlencode
 
 from configurator.types import is_robot_id
-from readmodel.http_edge import FedStream, Request, Response, client_key
+from contract.textsafe import printable
+from readmodel.http_edge import FedStream, Request, Response
 from workstation.ui import forms
 from workstation.ui.auth import MAX_TOKEN, Identity, OperatorAuth, refusal_text
 from workstation.ui.logtail import LogTails
+from workstation.ui.operators import MAX_NAME, name_problem
 from workstation.ui.pages import page
 from workstation.ui.restarts import Restarts
 from workstation.ui.rollout_decisions import Decisions
@@ -19,6 +22,7 @@ from workstation.ui.server import CSP, Handler, Route
 
 MAX_FORM = 4096  # bytes of a form body: a token, a CSRF token and a path fit
 MAX_FIELDS = 8
+log = logging.getLogger("robotconf.ui")
 FORM_TYPE = "application/x-www-form-urlencoded"
 LOG_BACKLOG = 64  # log events waiting for a slow page; beyond, its stream ends (it reconnects)
 PAGE_HEADERS = (
@@ -117,8 +121,8 @@ class Actions:
         if token and self.link_login:
             return self.login_link(request, token, next_path, who)
         if who.operator and who.via == "cookie":
-            return self.page(200, "Log in", forms.logged_in(), who)
-        body = forms.login_form(next_path, enabled=self.auth.enabled)
+            return self.page(200, "Log in", forms.logged_in(who.name), who)
+        body = forms.login_form(next_path, enabled=self.auth.enabled, named=self.auth.named)
         return self.page(200, "Log in", body, who)
 
     def login(self, request: Request, match: re.Match[str], who: Identity) -> Response:
@@ -131,16 +135,26 @@ class Actions:
         token = fields.get("token")
         if token is None:
             raise Refused(400, "the login form has no token field")
-        return self._logged_in(request, token, next_path, who)
+        name = fields.get("username", "")[: MAX_NAME + 1] if self.auth.named else ""
+        return self._logged_in(request, token, next_path, who, name)
 
-    def _logged_in(self, request: Request, token: str, next_path: str, who: Identity) -> Response:
-        """A login with `token`: on to `next_path` with the session cookie, or the form again
-        saying why not."""
-        result = self.auth.login(client_key(request.client), token[: MAX_TOKEN + 1])
+    def _logged_in(
+        self, request: Request, token: str, next_path: str, who: Identity, name: str = ""
+    ) -> Response:
+        """A login with `token` (and a named operator's `name`): on to `next_path` with the
+        session cookie, or the form again saying why not. Each is a line of the UI's log."""
+        client = self.auth.client(request.client, request.headers)
+        result = self.auth.login(client, token[: MAX_TOKEN + 1], name)
+        named = self.auth.named
+        said = _operator_name(name) if named else "the operator"
         if result.cookie is not None:
+            log.info("ui: %s logged in from %s", said, client)
             self.auth.logout(request.headers)  # a session it had ends: one per login
             return _see_other(next_path, ("Set-Cookie", result.cookie))
-        body = forms.login_form(next_path, refusal_text(result), enabled=self.auth.enabled)
+        log.info("ui: login as %s from %s refused: %s", said, client, result.refusal)
+        body = forms.login_form(
+            next_path, refusal_text(result, named), enabled=self.auth.enabled, named=named
+        )
         if result.refusal == "throttled":
             return self.page(429, "Log in", body, who, ("Retry-After", str(result.retry_after)))
         return self.page(403 if result.refusal == "disabled" else 401, "Log in", body, who)
@@ -177,7 +191,8 @@ class Actions:
         _posted(request, who)
         if self.restarts is None:
             raise Refused(503, "this UI has no broker to send a restart through")
-        started = self.restarts.start(robot_id, f"ui.{who.via}")
+        client = self.auth.client(request.client, request.headers)
+        started = self.restarts.start(robot_id, who.by, client)
         if started == "busy":
             raise Refused(503, "too many restarts are waiting for their robots: try again soon")
         return _see_other(forms.robot_path(robot_id))
@@ -210,7 +225,8 @@ class Actions:
         if self.decisions is None:
             raise Refused(503, "this UI has no broker to send a decision through")
         action = match.group("action")
-        if self.decisions.start("resume" if action == "resume" else "abort", f"ui.{who.via}") == (
+        client = self.auth.client(request.client, request.headers)
+        if self.decisions.start("resume" if action == "resume" else "abort", who.by, client) == (
             "already"
         ):
             raise Refused(409, "a decision is waiting for the reconciler's answer: reload soon")
@@ -251,7 +267,7 @@ class Actions:
     def _require_operator(self, request: Request, who: Identity) -> None:
         """Refused unless an operator asks: 401 without credentials, 403 with a wrong token,
         429 for an address that guessed too often."""
-        client = client_key(request.client)
+        client = self.auth.client(request.client, request.headers)
         if who.via == "bearer" and not who.operator:
             self.auth.failed(client)
         wait = self.auth.blocked(client) if who.via == "bearer" else 0
@@ -268,7 +284,14 @@ class Actions:
                 link=("/login?" + urlencode({"next": back}), "log in"),
             )
         if not who.operator:
-            raise Refused(403, "that is not the operator token")
+            said = "an operator's name and token" if self.auth.named else "the operator token"
+            raise Refused(403, f"that is not {said}")
+
+
+def _operator_name(name: str) -> str:
+    """A name given at login as the log may show it: one that could be an operator's, else
+    what it is not (an attacker's text never reaches the log as it is)."""
+    return name if name_problem(name) is None else f"a bad name ({printable(name[:40])!r})"
 
 
 def _posted(request: Request, who: Identity) -> None:

@@ -1,5 +1,6 @@
-"""Who a UI request comes from: an operator (the token of --operator-token-file, as a Bearer
-header or a login session's cookie) or a viewer; sessions, CSRF tokens and login throttling."""
+"""Who a UI request comes from: an operator (the one token of --operator-token-file, or a named
+operator's own token of --operators-file, as a Bearer header or a login session's cookie) or a
+viewer; sessions, CSRF tokens and login throttling."""
 
 from __future__ import annotations
 
@@ -12,13 +13,22 @@ import secrets
 import threading
 import time
 from collections import OrderedDict, deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Protocol
 
 from contract.errors import CliError
 from contract.trust import Trust, UntrustedFile, read_trusted
+from workstation.ui.clients import Network, client_of
+from workstation.ui.operators import (
+    COST,
+    Operators,
+    TokenHash,
+    hash_token,
+    name_problem,
+    read_operators,
+)
 
 COOKIE = "robotconf_ui"
 MIN_TOKEN = 16
@@ -28,6 +38,7 @@ MAX_TOKEN_FILE = 64 * 1024  # bounds the read; the token itself is checked after
 _TOKEN = re.compile(r"[\x21-\x7e]+")
 _SESSION_ID = re.compile(r"[A-Za-z0-9_-]{20,100}")
 MAX_COOKIE_HEADER = 8192
+MAX_VERIFIED = 64  # named operators' Bearer credentials remembered once verified
 
 
 class Headers(Protocol):
@@ -48,6 +59,13 @@ class Identity:
     operator: bool
     csrf: str = field(default="", repr=False)  # the session's; empty for a Bearer or a viewer
     via: Via = "anonymous"
+    name: str = ""  # a named operator's (--operators-file); empty for the single token's
+
+    @property
+    def by(self) -> str:
+        """Who asks, as a restart's or a decision's requested_by says it (and the status and
+        the timeline show it): `ui.NAME` for a named operator, else `ui.cookie` / `ui.bearer`."""
+        return f"ui.{self.name}" if self.name else f"ui.{self.via}"
 
     def csrf_matches(self, given: str) -> bool:
         """True when `given` is this session's CSRF token (compared in constant time)."""
@@ -76,6 +94,7 @@ class _Session:
     csrf: str
     created: float
     used: float
+    name: str = ""
 
 
 def read_token(path: Path, what: str = "--operator-token-file", follow: bool = True) -> str:
@@ -91,10 +110,11 @@ def read_token(path: Path, what: str = "--operator-token-file", follow: bool = T
         raise CliError(f"{where} {exc}") from None
     except OSError as exc:
         raise CliError(f"cannot read {where}: {exc.strerror}") from None
-    return _token_in(data, where)
+    return token_in(data, where)
 
 
-def _token_in(data: bytes, where: str) -> str:
+def token_in(data: bytes, where: str) -> str:
+    """The token that `data` holds as its one line; CliError naming `where` otherwise."""
     text = data.decode("ascii", "replace")
     line = text[:-2] if text.endswith("\r\n") else text[:-1] if text.endswith("\n") else text
     if len(line) > MAX_TOKEN:
@@ -147,34 +167,60 @@ class Login:
     cookie: str | None
     refusal: Literal["", "disabled", "wrong", "throttled"] = ""
     retry_after: int = 0  # seconds, when throttled
+    name: str = ""  # the named operator who logged in
 
 
 class OperatorAuth:
-    """The operator token (None: a read-only UI), the sessions of those who logged in with it,
-    and the failed logins of each client address. Thread-safe."""
+    """The operators (None of either: a read-only UI): the one token of --operator-token-file
+    or the named operators of --operators-file; the sessions of those who logged in, and the
+    failed logins of each client (clients.py says who a client is, behind `proxies` too).
+    Thread-safe."""
 
     def __init__(
         self,
         token: str | None,
         *,
+        operators: Operators | None = None,
+        proxies: Sequence[Network] = (),
         secure: bool = False,
         policy: Policy | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        if token is not None and operators is not None:
+            raise ValueError("one token or named operators, not both")
         # Only a hash is kept: compared in constant time, and no repr or dump shows the token.
         self._token = hashlib.sha256(token.encode("ascii")).digest() if token is not None else None
+        self._operators = operators
+        self.proxies = tuple(proxies)
         self.secure = secure  # cookies only over TLS
         self.policy = policy or Policy()
         self._clock = clock
         self._sessions: OrderedDict[str, _Session] = OrderedDict()
         self._failures: OrderedDict[str, deque[float]] = OrderedDict()
+        # A script's Bearer credentials once verified, by their hash: scrypt once, not per call.
+        self._verified: OrderedDict[bytes, str] = OrderedDict()
+        self._unknown: TokenHash | None = None  # hashed against for a name nobody has
         self._lock = threading.Lock()
 
     @classmethod
-    def from_file(cls, path: Path | None, *, secure: bool = False) -> OperatorAuth:
-        """The auth of `--operator-token-file` (None: nobody is an operator); CliError when
-        the file is refused (read_token)."""
-        return cls(read_token(path) if path is not None else None, secure=secure)
+    def from_file(
+        cls,
+        path: Path | None,
+        *,
+        operators_file: Path | None = None,
+        proxies: Sequence[Network] = (),
+        secure: bool = False,
+    ) -> OperatorAuth:
+        """The auth of `--operator-token-file` or `--operators-file` (neither: nobody is an
+        operator); CliError when a file is refused (read_token, read_operators)."""
+        if path is not None and operators_file is not None:
+            raise CliError(
+                "--operator-token-file (one operator) and --operators-file (named operators) "
+                "do not go together: give one"
+            )
+        token = read_token(path) if path is not None else None
+        operators = read_operators(operators_file) if operators_file is not None else None
+        return cls(token, operators=operators, proxies=proxies, secure=secure)
 
     def __repr__(self) -> str:  # never the token
         return f"OperatorAuth(enabled={self.enabled}, sessions={len(self._sessions)})"
@@ -182,7 +228,16 @@ class OperatorAuth:
     @property
     def enabled(self) -> bool:
         """False for a read-only UI: no token, nobody logs in."""
-        return self._token is not None
+        return self._token is not None or self._operators is not None
+
+    @property
+    def named(self) -> bool:
+        """True when operators log in with their names (--operators-file)."""
+        return self._operators is not None
+
+    def client(self, peer: str, headers: Headers) -> str:
+        """Whom the throttle and the audit name for a request from `peer` with `headers`."""
+        return client_of(peer, headers.get_all("X-Forwarded-For") or [], self.proxies)
 
     def token_matches(self, given: str) -> bool:
         if self._token is None:
@@ -194,23 +249,57 @@ class OperatorAuth:
         # Compared in full whatever it is, so its time says nothing of the token.
         return hmac.compare_digest(hashlib.sha256(candidate).digest(), self._token)
 
+    def check(self, name: str, token: str) -> str | None:
+        """Whose `token` is: the named operator `name` (--operators-file), "" for the single
+        token, None for nobody. An unknown name costs a hash as a known one does, so the
+        time of a refusal does not tell which names exist."""
+        if self._operators is None:
+            return "" if self.token_matches(token) else None
+        known = self._operators.hashes.get(name) if name_problem(name) is None else None
+        if known is None:
+            if self._unknown is None:
+                self._unknown = hash_token(secrets.token_urlsafe(32), COST)
+            self._unknown.matches(token)
+            return None
+        return name if known.matches(token) else None
+
     # ------------------------------------------------------------------ identify
 
-    def identify(self, headers: Headers) -> Identity:
+    def identify(self, headers: Headers, peer: str = "") -> Identity:
         """Who sends these headers: a Bearer header is judged alone (a script has no
-        cookie); else the session cookie; else anonymous."""
+        cookie); else the session cookie; else anonymous. A throttled `peer`'s named Bearer
+        is refused unhashed (a guess costs the UI nothing while it waits)."""
         authorization = headers.get_all("Authorization") or []
         if authorization:
-            return self._bearer(authorization)
+            return self._bearer(authorization, headers, peer)
         session_id = session_cookie(headers.get_all("Cookie") or [])
         if session_id is None:
             return ANONYMOUS
         return self._session(session_id)
 
-    def _bearer(self, values: list[str]) -> Identity:
-        scheme, _, token = values[0].strip().partition(" ")
-        good = len(values) == 1 and scheme.lower() == "bearer" and self.token_matches(token.strip())
-        return Identity(operator=good, via="bearer")
+    def _bearer(self, values: list[str], headers: Headers, peer: str) -> Identity:
+        scheme, _, credentials = values[0].strip().partition(" ")
+        if len(values) != 1 or scheme.lower() != "bearer" or len(credentials) > 2 * MAX_TOKEN:
+            return Identity(operator=False, via="bearer")
+        credentials = credentials.strip()
+        if self._operators is None:
+            return Identity(operator=self.token_matches(credentials), via="bearer")
+        # A named operator's script sends `Bearer NAME:TOKEN` (a name has no colon).
+        name, colon, token = credentials.partition(":")
+        if not colon or (peer and self.blocked(self.client(peer, headers))):
+            return Identity(operator=False, via="bearer")
+        key = hashlib.sha256(f"{name}\0{token}".encode("utf-8", "replace")).digest()
+        with self._lock:
+            known = self._verified.get(key)
+        if known is None:
+            known = self.check(name, token)
+            if known is None:
+                return Identity(operator=False, via="bearer")
+            with self._lock:
+                self._verified[key] = known
+                while len(self._verified) > MAX_VERIFIED:
+                    self._verified.popitem(last=False)
+        return Identity(operator=True, via="bearer", name=known)
 
     def _session(self, session_id: str) -> Identity:
         key = _digest(session_id)
@@ -224,7 +313,7 @@ class OperatorAuth:
                 return ANONYMOUS
             session.used = now
             self._sessions.move_to_end(key)
-            return Identity(operator=True, csrf=session.csrf, via="cookie")
+            return Identity(operator=True, csrf=session.csrf, via="cookie", name=session.name)
 
     def _expired(self, session: _Session, now: float) -> bool:
         policy = self.policy
@@ -232,25 +321,29 @@ class OperatorAuth:
 
     # ------------------------------------------------------------------ login / logout
 
-    def login(self, client: str, token: str) -> Login:
-        """A login from `client` (its address, as http_edge.client_key groups it) with
-        `token`: a new session, or why not. While an address is throttled its guesses are not
-        even compared."""
-        if self._token is None:
+    def login(self, client: str, token: str, name: str = "") -> Login:
+        """A login from `client` (as `client` groups addresses) with `token` (and, for named
+        operators, `name`): a new session, or why not. While a client is throttled its
+        guesses are not even compared."""
+        if not self.enabled:
             return Login(None, "disabled")
+        with self._lock:
+            wait = self._throttled(client, self._clock())
+        if wait:
+            return Login(None, "throttled", wait)
+        # Hashed outside the lock: a named operator's scrypt holds up no other request's look.
+        who = self.check(name, token)
         now = self._clock()
         with self._lock:
-            wait = self._throttled(client, now)
-            if wait:
-                return Login(None, "throttled", wait)
-            if not self.token_matches(token):
+            if who is None:
                 self._failed(client, now)
                 return Login(None, "wrong")
             self._failures.pop(client, None)
             session_id = secrets.token_urlsafe(32)
-            self._sessions[_digest(session_id)] = _Session(secrets.token_urlsafe(32), now, now)
+            session = _Session(secrets.token_urlsafe(32), now, now, who)
+            self._sessions[_digest(session_id)] = session
             self._prune(now)
-        return Login(self.cookie(session_id))
+        return Login(self.cookie(session_id), name=who)
 
     def blocked(self, client: str) -> int:
         """Seconds `client` must wait before it may try a token again (0: it may now)."""
@@ -330,10 +423,13 @@ def session_cookie(values: list[str]) -> str | None:
     return found
 
 
-def refusal_text(login: Login) -> str:
-    """What the login page says of a refused login (never the token, never how close)."""
+def refusal_text(login: Login, named: bool = False) -> str:
+    """What the login page says of a refused login (never the token, never how close, nor
+    whether a name exists)."""
     if login.refusal == "disabled":
         return "This UI has no operator token (--operator-token-file): it is read-only."
     if login.refusal == "throttled":
         return f"Too many wrong tokens from your address: try again in {login.retry_after} s."
+    if named:
+        return "That name and token are not an operator's."
     return "That is not the operator token."

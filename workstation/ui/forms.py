@@ -8,6 +8,7 @@ import time
 from urllib.parse import quote
 
 from workstation.ui.auth import Identity
+from workstation.ui.operators import MAX_NAME
 from workstation.ui.restarts import Outcome
 from workstation.ui.rollout_decisions import Decision
 from workstation.ui.text import esc
@@ -26,22 +27,33 @@ def local_path(candidate: str | None) -> str:
     return "/"
 
 
-def login_form(next_path: str, message: str = "", *, enabled: bool = True) -> str:
-    """The login form (`form[data-login]`, its field `token`)."""
+def login_form(
+    next_path: str, message: str = "", *, enabled: bool = True, named: bool = False
+) -> str:
+    """The login form (`form[data-login]`, its fields `username` and `token`): the name is
+    asked for when operators are named (--operators-file), else a fixed one for password
+    managers and screen readers (a password field has its user name)."""
     if not enabled:
         return (
             "<h1>Log in</h1><p data-login-disabled>This UI was started without "
-            "<code>--operator-token-file</code>: it is read-only, nobody logs in.</p>"
+            "<code>--operator-token-file</code> or <code>--operators-file</code>: it is "
+            "read-only, nobody logs in.</p>"
         )
     said = f'<p class="refusal" role="alert">{esc(message)}</p>' if message else ""
+    name = (
+        '<label for="username">Operator name</label> '
+        '<input type="text" id="username" name="username" autocomplete="username" '
+        f'required maxlength="{MAX_NAME}" autofocus> '
+        if named
+        else '<input type="text" name="username" value="operator" autocomplete="username" hidden>'
+    )
     return (
         f"<h1>Log in as an operator</h1>{said}"
         '<form method="post" action="/login" data-login>'
-        # For password managers and screen readers: a password field has its user name.
-        '<input type="text" name="username" value="operator" autocomplete="username" hidden>'
+        f"{name}"
         '<label for="token">Operator token</label> '
         '<input type="password" id="token" name="token" autocomplete="current-password" '
-        'required maxlength="1024" autofocus> '
+        f'required maxlength="1024"{"" if named else " autofocus"}> '
         f'<input type="hidden" name="next" value="{esc(local_path(next_path))}">'
         '<button type="submit">Log in</button></form>'
         "<p>Operators may restart robots and read their brains' logs; "
@@ -49,8 +61,9 @@ def login_form(next_path: str, message: str = "", *, enabled: bool = True) -> st
     )
 
 
-def logged_in() -> str:
-    return "<h1>Log in</h1><p>You are logged in as an operator (log out at the top).</p>"
+def logged_in(name: str = "") -> str:
+    who = f"the operator {esc(name)}" if name else "an operator"
+    return f"<h1>Log in</h1><p>You are logged in as {who} (log out at the top).</p>"
 
 
 def robot_path(robot_id: str) -> str:

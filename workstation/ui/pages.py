@@ -66,10 +66,16 @@ def page(title: str, body: str, who: Identity, attrs: str = "") -> str:
         '<a class="skip" href="#main">Skip to content</a>'
         '<header><nav aria-label="site"><a href="/">Fleet</a> '
         '<a href="/timeline">Timeline</a> '
-        f'<span class="who">{"operator" if who.operator else "viewer (read-only)"}</span> '
+        f'<span class="who">{_who(who)}</span> '
         f"{account}</nav></header>"
         f'<main id="main" tabindex="-1">{body}</main></body></html>\n'
     )
+
+
+def _who(who: Identity) -> str:
+    if not who.operator:
+        return "viewer (read-only)"
+    return f"operator {esc(who.name)}" if who.name else "operator"
 
 
 def error_page(code: int, message: str, who: Identity) -> str:

@@ -64,9 +64,12 @@ class Restarts:
         with self._lock:
             return self._outcomes.get(robot_id)
 
-    def start(self, robot_id: str, by: str) -> Literal["started", "already", "busy"]:
+    def start(
+        self, robot_id: str, by: str, client: str = "?"
+    ) -> Literal["started", "already", "busy"]:
         """Asks for a restart of `robot_id` on a thread; "already" when one is waiting for
-        that robot, "busy" when `limit` restarts wait."""
+        that robot, "busy" when `limit` restarts wait. `client`: where the ask came from (the
+        audit line's)."""
         with self._lock:
             current = self._outcomes.get(robot_id)
             if current is not None and current.state == "pending":
@@ -77,7 +80,7 @@ class Restarts:
             self._record(Outcome(robot_id, "pending", by, time.time()))
         # The audit line comes before anything is sent: a UI killed mid-restart loses no
         # record of who asked (what the robot did is its status's and its brain.log's).
-        log.info("ui: restart of %s asked by %s", robot_id, by)
+        log.info("ui: restart of %s asked by %s from %s", robot_id, by, client)
         threading.Thread(
             target=self._restart, args=(robot_id, by), name=f"ui-restart-{robot_id}", daemon=True
         ).start()

@@ -53,11 +53,15 @@ class Decisions:
         with self._lock:
             return self._latest
 
-    def start(self, action: Action, by: str) -> Literal["started", "already"]:
+    def start(self, action: Action, by: str, client: str = "?") -> Literal["started", "already"]:
+        """Sends `action` on a thread; "already" while one waits for its answer. `client`:
+        where the ask came from (the audit line's)."""
         with self._lock:
             if self._latest is not None and self._latest.state == "pending":
                 return "already"
             self._latest = Decision(action, "pending", by, time.time())
+        # The audit line before anything is sent, as a restart's (restarts.py).
+        log.info("ui: rollout %s asked by %s from %s", action, by, client)
         threading.Thread(
             target=self._send, args=(action, by), name=f"ui-rollout-{action}", daemon=True
         ).start()
@@ -74,5 +78,6 @@ class Decisions:
         except Exception as exc:  # one decision fails, never the UI
             log.error("ui: the rollout %s failed: %s", action, printable(repr(exc))[:300])
             done = Decision(action, "failed", by, at, "internal error (see the UI's log)")
+        log.info("ui: rollout %s asked by %s: %s: %s", action, by, done.state, done.text)
         with self._lock:
             self._latest = done

@@ -4,6 +4,7 @@ whether that is allowed), its TLS, the live fleet and the HTTP service, stopped 
 from __future__ import annotations
 
 import ssl
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -16,6 +17,7 @@ from workstation.desk.signing import private_key
 from workstation.ui import DEFAULT_LISTEN
 from workstation.ui.actions import Actions
 from workstation.ui.auth import OperatorAuth
+from workstation.ui.clients import parse_proxies
 from workstation.ui.commit_reader import CommitReader
 from workstation.ui.logtail import LogTails
 from workstation.ui.restarts import Restarts
@@ -51,11 +53,14 @@ def ui_options(
     behind_tls_proxy: bool = False,
     option: str = "--listen",
     signing_key: Path | None = None,
+    operators_file: Path | None = None,
+    trusted_proxies: Sequence[str] = (),
 ) -> UiOptions:
     """The checked options, before anything starts; CliError (exit 2) with what to do. A
     non-loopback address needs operator authentication and TLS (or a proxy that does it)."""
     try:
         host, port = parse_address(listen, option, DEFAULT_LISTEN)
+        proxies = parse_proxies(trusted_proxies)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     if (tls_cert is None) != (tls_key is None):
@@ -63,10 +68,11 @@ def ui_options(
     if tls_cert is not None and behind_tls_proxy:
         raise CliError("--behind-tls-proxy says a proxy does TLS: give it or --tls-cert, not both")
     if not is_loopback(host):
-        if token_file is None:
+        if token_file is None and operators_file is None:
             raise CliError(
                 f"{option} {listen} is reachable from other machines: it needs "
-                "--operator-token-file F (operators log in with its token) and TLS "
+                "--operators-file F (each operator logs in with their own token) or "
+                "--operator-token-file F (one token) and TLS "
                 "(--tls-cert F --tls-key F, or --behind-tls-proxy); or listen on 127.0.0.1"
             )
         if tls_cert is None and not behind_tls_proxy:
@@ -76,7 +82,12 @@ def ui_options(
                 "(--behind-tls-proxy)"
             )
     # Over TLS, here or at a proxy, the browser sends the session cookie over TLS only.
-    auth = OperatorAuth.from_file(token_file, secure=tls_cert is not None or behind_tls_proxy)
+    auth = OperatorAuth.from_file(
+        token_file,
+        operators_file=operators_file,
+        proxies=proxies,
+        secure=tls_cert is not None or behind_tls_proxy,
+    )
     tls = _tls(tls_cert, tls_key) if tls_cert and tls_key else None
     return UiOptions(host, port, auth, tls, private_key(signing_key))
 

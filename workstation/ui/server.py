@@ -139,7 +139,7 @@ class UiService:
         except UnicodeDecodeError:
             return self.error(400, "the path is not UTF-8 once decoded")
         try:
-            who = self.auth.identify(request.headers)
+            who = self.auth.identify(request.headers, request.client)
         except Exception as exc:  # a bug in telling who it is: a viewer, never a traceback
             log.error("ui: identifying a request failed: %s", printable(str(exc))[:200])
             who = ANONYMOUS

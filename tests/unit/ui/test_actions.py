@@ -288,3 +288,36 @@ def test_robot_text_in_an_outcome_is_escaped() -> None:
     assert "<script>" not in html and "&lt;script&gt;" in html
     assert 'data-restart-outcome="failed"' in html
     assert forms.outcome_html(None) == ""
+
+
+def test_named_operators_log_in_with_their_name_and_the_log_says_who(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    from workstation.ui.operators import MIN_COST, hash_token, parse_operators
+
+    hashed = hash_token(TOKEN, MIN_COST).text()
+    ui = UI(None)
+    ui.auth = OperatorAuth(None, operators=parse_operators(f"alice {hashed}\n", "ops"))
+    ui.routes = Actions(ui.auth, None, None).routes()
+    form = ui.ask("GET", "/login").body.decode()
+    assert 'id="username" name="username"' in form and "hidden>" not in form
+    caplog.set_level("INFO", logger="robotconf.ui")
+    wrong = urlencode({"username": "bob", "token": TOKEN})
+    refused = ui.ask("POST", "/login", wrong, Content_Type=FORM)
+    assert refused.code == 401 and "name and token are not" in refused.body.decode()
+    evil = urlencode({"username": "x\r\nforged", "token": TOKEN})
+    assert ui.ask("POST", "/login", evil, Content_Type=FORM).code == 401
+    right = urlencode({"username": "alice", "token": TOKEN})
+    answer = ui.ask("POST", "/login", right, Content_Type=FORM)
+    assert answer.code == 303
+    cookie = dict(answer.headers)["Set-Cookie"].split(";")[0]
+    page = ui.ask("GET", "/login", Cookie=cookie).body.decode()
+    assert "logged in as the operator alice" in page and "operator alice</span>" in page
+    said = caplog.text
+    assert "ui: alice logged in from 192.0.2.1" in said
+    assert "ui: login as bob from 192.0.2.1 refused: wrong" in said
+    assert "\r" not in said and "\nforged" not in said and TOKEN not in said
+    wrong_bearer = ui.ask("GET", "/robots/tb3-01/restart", Authorization=f"Bearer {TOKEN}")
+    assert (
+        wrong_bearer.code == 403 and "operator&#x27;s name and token" in wrong_bearer.body.decode()
+    )

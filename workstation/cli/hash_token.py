@@ -1,0 +1,60 @@
+"""`robotconf hash-token`: the line an operators file keeps for an operator (`robotconf ui
+--operators-file`): a token read from stdin (never an argument, which ps shows) hashed, or with
+--new NAME a new random token, shown once, and its line."""
+
+from __future__ import annotations
+
+import getpass
+import secrets
+import sys
+
+import click
+
+from contract.errors import CliError, ExitCode
+from workstation.ui.auth import MAX_TOKEN_FILE, token_in
+from workstation.ui.operators import hash_token, name_problem
+
+STDIN = "the token on stdin"
+
+
+def _read_token() -> str:
+    """The token typed at the terminal (not echoed), or the one line piped in."""
+    if sys.stdin.isatty():
+        try:
+            typed = getpass.getpass("token (not shown): ")
+        except (EOFError, KeyboardInterrupt):
+            raise CliError("no token typed: nothing to hash") from None
+        return token_in(typed.encode("ascii", "replace"), STDIN)
+    data = sys.stdin.buffer.read(MAX_TOKEN_FILE + 1)
+    if len(data) > MAX_TOKEN_FILE:
+        raise CliError(f"{STDIN} is over {MAX_TOKEN_FILE:,} bytes: give the token alone")
+    return token_in(data, STDIN)
+
+
+@click.command("hash-token")
+@click.option(
+    "--new",
+    "new_name",
+    metavar="NAME",
+    default=None,
+    help="make a new random token for operator NAME: its line `NAME HASH` on stdout, the "
+    "token itself on stderr, once",
+)
+def hash_token_command(new_name: str | None) -> ExitCode:
+    """Print the hash of an operator's token, for `robotconf ui --operators-file`.
+
+    Reads the token from stdin (typed unechoed at a terminal, or piped: never an argument,
+    which ps shows) and prints its hash; the operators file keeps it on a line `NAME HASH`.
+    With --new NAME it makes a new token instead and prints the whole line (append it to the
+    file: `robotconf hash-token --new alice >> operators`) and, on stderr, the token to give
+    alice; it is not kept anywhere else."""
+    if new_name is None:
+        print(hash_token(_read_token()).text())
+        return ExitCode.OK
+    problem = name_problem(new_name)
+    if problem is not None:
+        raise CliError(f"--new {problem}")
+    token = secrets.token_urlsafe(32)
+    print(f"{new_name} {hash_token(token).text()}")
+    click.echo(f"the token of {new_name} (shown once, give it to them): {token}", err=True)
+    return ExitCode.OK
