@@ -135,9 +135,7 @@ def ui(
     A revision's page (/revisions/REV) shows what it achieved beside the revision before,
     from the reconciler's outcome ledger (read-only; --state-dir says where it is); the
     timeline (/timeline) lists the fleet's events kept in the same ledger, newest first."""
-    from readmodel.ledger import find_ledger
-    from workstation.ui.revisions import LedgerHistory
-    from workstation.ui.run import RunningUi, ui_options
+    from workstation.ui.run import ui_options
 
     options = ui_options(
         listen,
@@ -149,6 +147,16 @@ def ui(
         operators_file=operators_file,
         trusted_proxies=trusted_proxies,
     )
+    _serve(repo, mqtt, options, state_dir)
+    return ExitCode.OK
+
+
+def _serve(repo: Path, mqtt: BrokerOptions, options: UiOptions, state_dir: Path | None) -> None:
+    """The UI of checked `options` serving the fleet until the process is signalled."""
+    from readmodel.ledger import find_ledger
+    from workstation.ui.revisions import LedgerHistory
+    from workstation.ui.run import RunningUi
+
     connection = mqtt.connection()
     log_to_stderr("ui")
     stop = threading.Event()
@@ -168,4 +176,3 @@ def ui(
             pass
     finally:
         running.close()
-    return ExitCode.OK

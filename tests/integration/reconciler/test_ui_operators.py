@@ -18,6 +18,7 @@ from urllib.parse import urlencode
 from contract.wire import AgentStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.fleet import robotconf_argv
+from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.ui import UiProc
 from tests.support.watch import wait_for
 
@@ -157,3 +158,32 @@ def test_hash_token_refuses_a_bad_token_or_name(tmp_path: Path) -> None:
     assert two.returncode == 2 and "one line" in two.stderr
     bad = hash_token("--new", "al ice")
     assert bad.returncode == 2 and "not an operator name" in bad.stderr
+
+
+def test_a_ui_refuses_a_bad_operators_file_before_it_serves(
+    mosquitto: Mosquitto, tmp_path: Path
+) -> None:
+    def run_ui(*args: str) -> subprocess.CompletedProcess[str]:
+        done = subprocess.run(
+            robotconf_argv(
+                "ui", "--broker", mosquitto.url, "--repo", str(tmp_path),
+                "--listen", f"127.0.0.1:{free_port()}", *args,
+            ),
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+        return done
+
+    path = tmp_path / "operators"
+    path.write_text("alice scrypt$16384$8$1$AAAAAAAAAAA$AAAA\n", encoding="utf-8")
+    assert f"{path}:1: the salt is at least 8 bytes" in run_ui("--operators-file", str(path)).stderr
+    path.write_text("# nobody\n", encoding="utf-8")
+    path.chmod(0o666)
+    assert "chmod go-w" in run_ui("--operators-file", str(path)).stderr
+    token = tmp_path / "token"
+    token.write_text("the-one-token-" + "t" * 20 + "\n", encoding="utf-8")
+    token.chmod(0o600)
+    both = run_ui("--operators-file", str(path), "--operator-token-file", str(token))
+    assert "do not go together" in both.stderr
+    proxy = run_ui("--trusted-proxy", "proxy.lab")
+    assert "--trusted-proxy 'proxy.lab' is not an IP address" in proxy.stderr
