@@ -40,20 +40,32 @@ def _read_token() -> str:
     help="make a new random token for operator NAME: its line `NAME HASH` on stdout, the "
     "token itself on stderr, once",
 )
-def hash_token_command(new_name: str | None) -> ExitCode:
+@click.option(
+    "--name",
+    "name",
+    metavar="NAME",
+    default=None,
+    help="print the whole line, `NAME HASH`, for the token read from stdin",
+)
+def hash_token_command(new_name: str | None, name: str | None) -> ExitCode:
     """Print the hash of an operator's token, for `robotconf ui --operators-file`.
 
     Reads the token from stdin (typed unechoed at a terminal, or piped: never an argument,
-    which ps shows) and prints its hash; the operators file keeps it on a line `NAME HASH`.
+    which ps shows) and prints its hash; the operators file keeps it on a line `NAME HASH`
+    (--name NAME prints that whole line: `robotconf hash-token --name bob >> operators`).
     With --new NAME it makes a new token instead and prints the whole line (append it to the
     file: `robotconf hash-token --new alice >> operators`) and, on stderr, the token to give
     alice; it is not kept anywhere else."""
+    for option, given in (("--name", name), ("--new", new_name)):
+        problem = name_problem(given) if given is not None else None
+        if problem is not None:
+            raise CliError(f"{option} {problem}")
     if new_name is None:
-        print(hash_token(_read_token()).text())
+        line = hash_token(_read_token()).text()
+        print(f"{name} {line}" if name is not None else line)
         return ExitCode.OK
-    problem = name_problem(new_name)
-    if problem is not None:
-        raise CliError(f"--new {problem}")
+    if name is not None:
+        raise CliError("--name names a token read from stdin, --new a new one: give one")
     token = secrets.token_urlsafe(32)
     print(f"{new_name} {hash_token(token).text()}")
     click.echo(f"the token of {new_name} (shown once, give it to them): {token}", err=True)

@@ -40,10 +40,11 @@ def operators_file(folder: Path) -> tuple[Path, dict[str, str]]:
     alice = made.stderr.rsplit(": ", 1)[1].strip()
     assert alice not in made.stdout and made.stdout.startswith("alice scrypt$")
     bob = "bobs-own-token-" + "b7" * 12
-    hashed = hash_token(stdin=bob + "\n")
+    hashed = hash_token("--name", "bob", stdin=bob + "\n")
     assert hashed.returncode == 0 and bob not in hashed.stdout
+    assert hash_token(stdin=bob).stdout.startswith("scrypt$")  # the hash alone
     path = folder / "operators"
-    path.write_text(f"# the lab's operators\n{made.stdout}bob {hashed.stdout}", encoding="utf-8")
+    path.write_text(f"# the lab's operators\n{made.stdout}{hashed.stdout}", encoding="utf-8")
     path.chmod(0o644)
     return path, {"alice": alice, "bob": bob}
 
@@ -158,6 +159,8 @@ def test_hash_token_refuses_a_bad_token_or_name(tmp_path: Path) -> None:
     assert two.returncode == 2 and "one line" in two.stderr
     bad = hash_token("--new", "al ice")
     assert bad.returncode == 2 and "not an operator name" in bad.stderr
+    reserved = hash_token("--name", "cookie", stdin="a-long-enough-token-1\n")
+    assert reserved.returncode == 2 and "reserved" in reserved.stderr
 
 
 def test_a_ui_refuses_a_bad_operators_file_before_it_serves(
