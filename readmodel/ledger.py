@@ -114,6 +114,11 @@ CREATE TABLE streaks (
     failing INTEGER NOT NULL
 );
 """
+# A goal's end looks up its stale record (`_supersede_stale`): only stale rows are indexed.
+_STALE_INDEX = (
+    "CREATE INDEX IF NOT EXISTS outcomes_stale ON outcomes (robot_id, run, goal, seq) "
+    "WHERE outcome = 'stale'"
+)
 # Schema 2: the timeline. Ids grow with each event kept, as the outcomes' do (pruned likewise).
 _EVENTS_SCHEMA = """
 CREATE TABLE IF NOT EXISTS events (
@@ -461,6 +466,7 @@ class Ledger(_LedgerReads):
                 for statement in (_SCHEMA + _EVENTS_SCHEMA).split(";"):
                     if statement.strip():
                         db.execute(statement)
+                db.execute(_STALE_INDEX)
                 db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             return
         if not tables >= _TABLES:
@@ -474,6 +480,9 @@ class Ledger(_LedgerReads):
             db.execute("PRAGMA journal_mode=WAL")
             # Ledgers made before rollouts counted evidence lack it (made once, at open).
             db.execute("CREATE INDEX IF NOT EXISTS outcomes_by_received ON outcomes (received_at)")
+            # Ledgers made before it: without it each goal's end scanned all of its run's
+            # records for a stale one (a long run made adding quadratic).
+            db.execute(_STALE_INDEX)
             if version < SCHEMA_VERSION:
                 self._migrate(version)
 
