@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from contract.errors import CliError, ExitCode
-from contract.files import read_regular
 from contract.lifecycle import log_to_stderr, on_stop_signals, parse_address
 from contract.signing import SigningKeyError
 from contract.textsafe import printable
+from contract.trust import Trust, read_trusted
 from reconciler.notify import (
     MAX_NOTIFY_FILE_BYTES,
     NOTIFY_ENV,
@@ -60,12 +60,13 @@ def keep_desired(source: BranchSource) -> Callable[[str, Mapping[str, DesiredRob
 
 
 def notify_urls(notify: tuple[str, ...], notify_file: Path | None) -> list[GivenUrl]:
-    """The receivers of --notify, --notify-file (read bounded, a regular file) and
-    $ROBOTCONF_NOTIFY together: the last two keep URLs (secrets) off the command line."""
+    """The receivers of --notify, --notify-file (a secret: checked as ssh checks a key, then
+    read bounded) and $ROBOTCONF_NOTIFY together: the last two keep URLs (secrets) off the
+    command line."""
     from_file: list[GivenUrl] = []
     if notify_file is not None:
         try:
-            raw = read_regular(notify_file, MAX_NOTIFY_FILE_BYTES, follow=True)
+            raw = read_trusted(notify_file, Trust.SECRET, MAX_NOTIFY_FILE_BYTES)
             text = raw.decode("utf-8")
         except OSError as exc:
             raise CliError(f"--notify-file {notify_file}: {exc.strerror or exc}") from None

@@ -58,6 +58,7 @@ def test_receivers_from_a_file_and_the_environment_are_told_and_not_in_ps(
 def _file(tmp_path: Path, content: bytes) -> Path:
     path = tmp_path / "receivers"
     path.write_bytes(content)
+    path.chmod(0o600)
     return path
 
 
@@ -77,6 +78,16 @@ def test_a_broken_notify_file_is_a_one_line_error_naming_its_line(
     said_back = refused_reconcile(lab, mosquitto.url, ["--notify-file", str(path)])
     assert f"--notify-file {path}" in said_back
     assert said in said_back and "hunter2" not in said_back
+
+
+def test_a_notify_file_others_may_read_is_refused_as_a_secret(
+    lab: GitLab, mosquitto: Mosquitto, tmp_path: Path
+) -> None:
+    path = _file(tmp_path, b"https://hooks.slack.com/services/T/B/hunter2\n")
+    path.chmod(0o640)  # a Slack webhook's path is its key: readable by the group, refused
+    said_back = refused_reconcile(lab, mosquitto.url, ["--notify-file", str(path)])
+    assert f"--notify-file {path}" in said_back and "chmod 600" in said_back
+    assert "hunter2" not in said_back
 
 
 def test_a_missing_notify_file_and_a_bad_environment_url_are_one_line_errors(
