@@ -367,7 +367,7 @@ class IncrementalMatchesFull(RuleBasedStateMachine):
             assert_same_fleet(got_fleet, expected_fleet)
 
 
-_EXAMPLES = 1_000 if os.environ.get("HYPOTHESIS_PROFILE") == "deep" else 60
+_EXAMPLES = {"deep": 1_000, "quick": 10}.get(os.environ.get("HYPOTHESIS_PROFILE", ""), 60)
 
 TestIncrementalMatchesFull = IncrementalMatchesFull.TestCase
 TestIncrementalMatchesFull.settings = settings(
