@@ -423,7 +423,8 @@ def test_up_stops_a_revision_whose_brains_fail_in_sim(tmp_path: Path, mosquitto:
             "STANDIN_SUCCESS_RATE: 0}",
         )
         bad = lab.commit("delivery brains that fail")
-        status = watch.wait_reconciler(lambda s: rolled_back(s, bad), "stopped in sim")
+        # Goals to gather, then the verdict: a wait longer than one step's (a shared machine).
+        status = watch.wait_reconciler(lambda s: rolled_back(s, bad), "stopped in sim", 180)
         assert status.rollout is not None
         assert [(s.name, s.state) for s in status.rollout.stages] == [
             ("sim", "failed"),
