@@ -260,13 +260,10 @@ class FleetWatch:
         return self.wait(lambda: self.running(requests), f"{sorted(requests)} running")
 
     def wait_reconciler(
-        self,
-        predicate: Callable[[ReconcilerStatus], bool],
-        what: str,
-        timeout: float | None = None,
+        self, predicate: Callable[[ReconcilerStatus], bool], what: str
     ) -> ReconcilerStatus:
         def probe() -> ReconcilerStatus | None:
             status = self.reconciler()
             return status if status is not None and predicate(status) else None
 
-        return self.wait(probe, f"reconciler status: {what}", timeout)
+        return self.wait(probe, f"reconciler status: {what}")

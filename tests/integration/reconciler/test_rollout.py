@@ -70,7 +70,9 @@ def test_a_crashing_canary_stops_the_rollout_and_is_rolled_back(fleet: Fleet) ->
     stable = with_policy(
         fleet,
         "rollout:\n  waves: [{name: canary, selector: {ring: canary}}, {name: all}]\n"
-        "  healthy_after: 1\n  max_failures: 0\n  wave_timeout: 60\n  on_failure: rollback\n",
+        # The canary's brain crashes as it starts: healthy_after outlasts that start on a loaded
+        # machine (at 1 s a slow start could let the canary pass).
+        "  healthy_after: 10\n  max_failures: 0\n  wave_timeout: 60\n  on_failure: rollback\n",
     )
     before = fleet.requests(stable)
     pid_06 = fleet.converged["tb3-06"].pid

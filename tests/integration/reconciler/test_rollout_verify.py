@@ -423,8 +423,7 @@ def test_up_stops_a_revision_whose_brains_fail_in_sim(tmp_path: Path, mosquitto:
             "STANDIN_SUCCESS_RATE: 0}",
         )
         bad = lab.commit("delivery brains that fail")
-        # Goals to gather, then the verdict: a wait longer than one step's (a shared machine).
-        status = watch.wait_reconciler(lambda s: rolled_back(s, bad), "stopped in sim", 180)
+        status = watch.wait_reconciler(lambda s: rolled_back(s, bad), "stopped in sim")
         assert status.rollout is not None
         assert [(s.name, s.state) for s in status.rollout.stages] == [
             ("sim", "failed"),
