@@ -110,6 +110,18 @@ def test_the_operators_file_names_each_operator_with_their_hash() -> None:
         (f"alice {ALICE}\n", "ops:1: a hash reads"),  # a token pasted for its hash
         ("# nobody yet\n", "ops: names no operator"),
     ],
+    # Named, not numbered by their text: a hash's salt is new in each process, and pytest-xdist
+    # needs every worker to collect the same test ids.
+    ids=[
+        "named-twice",
+        "no-hash",
+        "a-third-field",
+        "a-bad-name",
+        "a-reserved-name",
+        "a-weak-hash",
+        "a-token-for-its-hash",
+        "nobody",
+    ],
 )
 def test_a_bad_operators_file_says_where_and_what(text: str, said: str) -> None:
     with pytest.raises(CliError) as caught:
