@@ -5,6 +5,7 @@ it is."""
 
 from __future__ import annotations
 
+import select
 import signal
 import subprocess
 import sys
@@ -52,12 +53,23 @@ def test_alone_on_a_request_file_it_prints_the_wire_s_lines(tmp_path: Path) -> N
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(5)  # two goals of 2 s each
+    assert brain.stderr is not None
+    # Its lines are read as they come, until the second goal has ended (two goals of 2 s each;
+    # a loaded machine takes longer), and only then is it stopped.
+    lines: list[str] = []
+    deadline = time.monotonic() + 60
+    while not any('"task":"Patrol"' in line and '"failed"' in line for line in lines):
+        assert time.monotonic() < deadline, f"the Patrol goal never ended: {lines}"
+        ready, _, _ = select.select([brain.stderr], [], [], 1.0)
+        if ready:
+            line = brain.stderr.readline()
+            assert line, f"the brain ended early: {lines}"
+            lines.append(line)
     brain.send_signal(signal.SIGTERM)
     out, err = brain.communicate(timeout=30)
     assert brain.returncode == 0, err
     assert out.startswith(f"{ROBOT} runs delivery-gazebo at rev-1")
-    said = [MESSAGE.validate_json(line) for line in err.splitlines()]
+    said = [MESSAGE.validate_json(line) for line in [*lines, *err.splitlines()]]
     assert isinstance(said[0], Ready)
     ends = [(m.task, m.state, m.code) for m in said if isinstance(m, GoalLine)]
     assert ("Delivery", "succeeded", None) in ends

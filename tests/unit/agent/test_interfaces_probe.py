@@ -101,9 +101,14 @@ def test_a_process_left_behind_without_the_output_does_not_hold_the_reading(
     grouped, detached = tmp_path / "grouped.pid", tmp_path / "detached.pid"
     listed = json.dumps({"topics": [{"name": "/scan", "type": "sensor_msgs/msg/LaserScan"}]})
     quiet = "</dev/null >/dev/null 2>&1"
+    # The daemon names itself once it is in its own session (written then renamed, so whole),
+    # and the reading ends only after: a kill of the group before setsid() ran would take it
+    # too, which a loaded machine showed.
+    daemon_script = f"echo $$ > {detached}.part && mv {detached}.part {detached}; exec sleep 60"
     script = (
         f"sleep 60 {quiet} & echo $! > {grouped}; "
-        f"setsid sleep 60 {quiet} & echo $! > {detached}; echo '{listed}'"
+        f"setsid sh -c '{daemon_script}' {quiet} & "
+        f"while [ ! -e {detached} ]; do sleep 0.01; done; echo '{listed}'"
     )
     report = drive(probe_of(probes, tmp_path, ["sh", "-c", script]))
     left, daemon = int(grouped.read_text()), int(detached.read_text())
