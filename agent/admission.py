@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from contract.launch import (
+from robotconf.contract.launch import (
     API_VERSION,
     LaunchRequest,
     RestartRequest,
@@ -21,9 +21,9 @@ from contract.launch import (
     canonical_json,
     template_mismatch,
 )
-from contract.safejson import PayloadError, parse_object
-from contract.typing_errors import error_line
-from contract.wire import LogsRequest, RobotDescription
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.typing_errors import error_line
+from robotconf.contract.wire import LogsRequest, RobotDescription
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,20 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from agent import process
-from agent.config import AgentConfig
-from agent.events import BrainExited, Inbox
-from agent.logs import LogStream
-from agent.supervisor import Effect, Kill, Reload, Spawn, Supervisor, Terminate, describe_exit
-from agent.workdir import (
+from robotconf.agent import process
+from robotconf.agent.config import AgentConfig
+from robotconf.agent.events import BrainExited, Inbox
+from robotconf.agent.logs import LogStream
+from robotconf.agent.supervisor import (
+    Effect,
+    Kill,
+    Reload,
+    Spawn,
+    Supervisor,
+    Terminate,
+    describe_exit,
+)
+from robotconf.agent.workdir import (
     PID_FILE,
     REQUEST_FILE,
     SOCKET_FILE,
@@ -30,8 +38,8 @@ from agent.workdir import (
     remove_hold,
     write_atomic,
 )
-from contract.launch import LaunchRequest
-from contract.wire import AgentState
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.wire import AgentState
 
 log = logging.getLogger("robotconf.agent")
 

@@ -20,8 +20,8 @@ import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agent.relay import TokenBucket
-from contract.goals import MAX_LINE_BYTES
+from robotconf.agent.relay import TokenBucket
+from robotconf.contract.goals import MAX_LINE_BYTES
 
 log = logging.getLogger("robotconf.agent")
 

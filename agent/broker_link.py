@@ -19,8 +19,8 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import MQTTErrorCode
 from paho.mqtt.reasoncodes import ReasonCode
 
-from agent.admission import MAX_COMMAND_BYTES, MAX_REQUEST_BYTES
-from agent.events import (
+from robotconf.agent.admission import MAX_COMMAND_BYTES, MAX_REQUEST_BYTES
+from robotconf.agent.events import (
     Connected,
     ConnectFailed,
     Disconnected,
@@ -30,11 +30,22 @@ from agent.events import (
     RestartMessage,
     StatusMessage,
 )
-from agent.workdir import SeqStore
-from contract.backoff import Backoff
-from contract.mqtt import RECONNECT_MAX_DELAY, RECONNECT_MIN_DELAY, Connection, make_client
-from contract.topics import Role, subscriptions
-from contract.wire import AgentState, AgentStatus, RobotDescription, Topics, agent_client_id
+from robotconf.agent.workdir import SeqStore
+from robotconf.contract.backoff import Backoff
+from robotconf.contract.mqtt import (
+    RECONNECT_MAX_DELAY,
+    RECONNECT_MIN_DELAY,
+    Connection,
+    make_client,
+)
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import (
+    AgentState,
+    AgentStatus,
+    RobotDescription,
+    Topics,
+    agent_client_id,
+)
 
 log = logging.getLogger("robotconf.agent.broker_link")
 

@@ -13,13 +13,13 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from agent import parent_death, process
-from agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
-from agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
-from agent.workdir import WorkdirLock
-from contract.errors import CliError, ExitCode
-from contract.logsafe import SafeFormatter
-from contract.signing import SigningKeyError
+from robotconf.agent import parent_death, process
+from robotconf.agent.config import AgentConfig, ConfigInvalid, load_config, with_broker
+from robotconf.agent.runtime import Agent, RobotIdFilter, install_signal_handlers, run_agents
+from robotconf.agent.workdir import WorkdirLock
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.logsafe import SafeFormatter
+from robotconf.contract.signing import SigningKeyError
 
 PROG = "robotconf agent"
 

@@ -25,13 +25,13 @@ from pydantic import (
 )
 from pydantic_core import ErrorDetails
 
-from contract.diagnostics import did_you_mean
-from contract.models import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
-from contract.mqtt import MAX_TLS_FILE as MAX_CREDENTIAL_BYTES
-from contract.mqtt import Connection
-from contract.trust import Trust, UntrustedFile, check_trusted, read_trusted
-from contract.typing_errors import error_path, error_text, type_error_text
-from contract.wire import (
+from robotconf.contract.diagnostics import did_you_mean
+from robotconf.contract.models import MAX_ROS_DOMAIN_ID, ROBOT_ID_PATTERN, StrictModel
+from robotconf.contract.mqtt import MAX_TLS_FILE as MAX_CREDENTIAL_BYTES
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.trust import Trust, UntrustedFile, check_trusted, read_trusted
+from robotconf.contract.typing_errors import error_path, error_text, type_error_text
+from robotconf.contract.wire import (
     BROKER_ENV,
     DEFAULT_BROKER,
     DEFAULT_PREFIX,
@@ -39,7 +39,7 @@ from contract.wire import (
     parse_broker_url,
     validate_prefix,
 )
-from contract.yamlio import (
+from robotconf.contract.yamlio import (
     MAX_FILE_BYTES,
     YamlDocument,
     YamlProblem,
@@ -567,7 +567,7 @@ def _check_environment(config: AgentConfig, prepare: bool) -> Iterator[tuple[Loc
             ),
         )
     if config.public_key is not None:
-        from contract.signing import SigningKeyError, load_public_key
+        from robotconf.contract.signing import SigningKeyError, load_public_key
 
         try:
             load_public_key(config.public_key)

@@ -9,14 +9,14 @@ import logging
 import time
 from pathlib import Path
 
-from agent import admission, process
-from agent.broker_link import BrokerLink
-from agent.events import RestartMessage
-from agent.logs import LogStream
-from agent.supervisor import Effect, Supervisor
-from agent.workdir import RestartLedger
-from contract.throttle import Throttle
-from contract.wire import now as now_wall
+from robotconf.agent import admission, process
+from robotconf.agent.broker_link import BrokerLink
+from robotconf.agent.events import RestartMessage
+from robotconf.agent.logs import LogStream
+from robotconf.agent.supervisor import Effect, Supervisor
+from robotconf.agent.workdir import RestartLedger
+from robotconf.contract.throttle import Throttle
+from robotconf.contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
 

@@ -13,12 +13,12 @@ import logging
 import secrets
 import time
 
-from agent.brain_socket import BrainSocket
-from agent.broker_link import BrokerLink
-from agent.config import AgentConfig
-from agent.relay import GoalsRelay, Limits, Now, Signal
-from agent.supervisor import Effect, Supervisor
-from agent.workdir import SOCKET_FILE
+from robotconf.agent.brain_socket import BrainSocket
+from robotconf.agent.broker_link import BrokerLink
+from robotconf.agent.config import AgentConfig
+from robotconf.agent.relay import GoalsRelay, Limits, Now, Signal
+from robotconf.agent.supervisor import Effect, Supervisor
+from robotconf.agent.workdir import SOCKET_FILE
 
 log = logging.getLogger("robotconf.agent")
 

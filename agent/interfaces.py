@@ -17,18 +17,18 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agent import process
-from agent.config import InterfacesConfig
-from contract.interfaces import (
+from robotconf.agent import process
+from robotconf.agent.config import InterfacesConfig
+from robotconf.contract.interfaces import (
     MAX_INTERFACE_NAME,
     MAX_INTERFACES,
     MAX_INTERFACES_BYTES,
     Interface,
     RobotInterfaces,
 )
-from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable
-from contract.wire import now as now_wall
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent.interfaces")
 

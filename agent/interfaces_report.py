@@ -9,10 +9,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Mapping
 
-from agent.broker_link import BrokerLink
-from agent.config import AgentConfig
-from agent.interfaces import InterfaceProbe
-from agent.logs import Redactor
+from robotconf.agent.broker_link import BrokerLink
+from robotconf.agent.config import AgentConfig
+from robotconf.agent.interfaces import InterfaceProbe
+from robotconf.agent.logs import Redactor
 
 log = logging.getLogger("robotconf.agent")
 

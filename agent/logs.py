@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from agent.redact import (
+from robotconf.agent.redact import (
     MIN_SECRET_CHARS,
     REDACTED,
     Pem,
@@ -23,7 +23,7 @@ from agent.redact import (
     key_fragment,
     pem_state_after,
 )
-from contract.wire import (
+from robotconf.contract.wire import (
     LOG_FOLLOW_TTL,
     MAX_LOG_MESSAGE_BYTES,
     LogsChunk,

@@ -18,8 +18,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.workdir import write_atomic
-from contract.launch import LaunchRequest
+from robotconf.agent.workdir import write_atomic
+from robotconf.contract.launch import LaunchRequest
 
 log = logging.getLogger("robotconf.agent.process")
 

@@ -20,7 +20,7 @@ from enum import Enum
 
 from pydantic import TypeAdapter, ValidationError
 
-from contract.goals import (
+from robotconf.contract.goals import (
     MAX_EVENTS_KEPT,
     MAX_LINE_BYTES,
     MAX_RECENT_KEPT,
@@ -44,8 +44,8 @@ from contract.goals import (
     VitalsLine,
     VitalValue,
 )
-from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable, shorten
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.textsafe import printable, shorten
 
 MAX_OPEN_GOALS = 32  # goals underway at once; a start beyond is refused (and counted)
 MAX_PENDING_RECORDS = 1000  # records kept while the broker is away; the oldest go first

@@ -19,12 +19,12 @@ from contextvars import ContextVar
 from types import FrameType
 from typing import Any, TypeVar
 
-from agent import admission, process
-from agent.brain_runner import BrainRunner
-from agent.broker_link import BrokerLink
-from agent.config import AgentConfig
-from agent.desk_requests import DeskRequests
-from agent.events import (
+from robotconf.agent import admission, process
+from robotconf.agent.brain_runner import BrainRunner
+from robotconf.agent.broker_link import BrokerLink
+from robotconf.agent.config import AgentConfig
+from robotconf.agent.desk_requests import DeskRequests
+from robotconf.agent.events import (
     BrainExited,
     Connected,
     ConnectFailed,
@@ -37,12 +37,12 @@ from agent.events import (
     Shutdown,
     StatusMessage,
 )
-from agent.goals_report import GoalsReport
-from agent.interfaces_report import InterfacesReport
-from agent.logs import LogStream, Redactor
-from agent.status_report import StatusReport
-from agent.supervisor import Effect, Policy, Supervisor
-from agent.workdir import (
+from robotconf.agent.goals_report import GoalsReport
+from robotconf.agent.interfaces_report import InterfacesReport
+from robotconf.agent.logs import LogStream, Redactor
+from robotconf.agent.status_report import StatusReport
+from robotconf.agent.supervisor import Effect, Policy, Supervisor
+from robotconf.agent.workdir import (
     HOLD_FILE,
     ISSUED_FILE,
     LOG_FILE,
@@ -81,7 +81,7 @@ def verifier_of(config: AgentConfig) -> admission.Verifier | None:
     """How signed requests are verified, when agent.yaml names a public key."""
     if config.public_key is None:
         return None
-    from contract.signing import load_public_key, verify_object
+    from robotconf.contract.signing import load_public_key, verify_object
 
     key = load_public_key(config.public_key)
     return lambda data: verify_object(data, key)

@@ -1,4 +1,5 @@
-"""A stand-in brain service for demos and tests: `python -m agent.standin_brain REQUEST.json`.
+"""A stand-in brain service for demos and tests:
+`python -m robotconf.agent.standin_brain REQUEST.json`.
 
 It loads nothing real: it prints what a brain would load, says it is ready, runs its scenario's
 goal tasks as goals through `robotconf.brain` (each taking STANDIN_GOAL_SECONDS, succeeding at
@@ -22,7 +23,7 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from contract.launch import LaunchRequest
+    from robotconf.contract.launch import LaunchRequest
 
 
 def describe(request: LaunchRequest, environ: Mapping[str, str]) -> list[str]:
@@ -64,7 +65,7 @@ PROGRESS_STEPS = 5  # progress reports per goal
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m agent.standin_brain",
+        prog="python -m robotconf.agent.standin_brain",
         description="Stand-in brain: prints the modules it would load, runs until signalled.",
     )
     parser.add_argument("request", type=Path, help="the launch request JSON file")
@@ -109,7 +110,7 @@ def hold(path: Path, seconds: float | None, marker: Path | None, stop: threading
 
 def _read(path: Path) -> LaunchRequest:
     """The request in `path`; raises OSError or pydantic's ValidationError."""
-    from contract.launch import LaunchRequest
+    from robotconf.contract.launch import LaunchRequest
 
     return LaunchRequest.model_validate_json(path.read_bytes())
 

@@ -83,7 +83,7 @@ def install(bin_dir: Path, python: str = sys.executable) -> Path:
     shim.write_text(
         "#!/bin/sh\n"
         f'PYTHONPATH="{root}${{PYTHONPATH:+:$PYTHONPATH}}" '
-        f'exec "{python}" -m agent.standin_ros2 "$@"\n',
+        f'exec "{python}" -m robotconf.agent.standin_ros2 "$@"\n',
         encoding="utf-8",
     )
     shim.chmod(0o755)

@@ -12,12 +12,12 @@ from collections.abc import Callable
 
 from pydantic import ValidationError
 
-from agent.broker_link import MAX_STATUS_BYTES, BrokerLink
-from agent.supervisor import Supervisor
-from agent.workdir import SeqStore
-from contract.safejson import PayloadError, parse_object
-from contract.wire import AgentState, AgentStatus
-from contract.wire import now as now_wall
+from robotconf.agent.broker_link import MAX_STATUS_BYTES, BrokerLink
+from robotconf.agent.supervisor import Supervisor
+from robotconf.agent.workdir import SeqStore
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
 

@@ -14,9 +14,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
-from contract.backoff import exponential_delay
-from contract.launch import LaunchRequest
-from contract.wire import AgentState, AgentStatus
+from robotconf.contract.backoff import exponential_delay
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.wire import AgentState, AgentStatus
 
 log = logging.getLogger("robotconf.agent.supervisor")
 

@@ -14,9 +14,9 @@ import threading
 import time
 from pathlib import Path
 
-from contract.files import write_atomic
-from contract.pidlock import PidLock
-from contract.trust import euid, owner_trusted
+from robotconf.contract.files import write_atomic
+from robotconf.contract.pidlock import PidLock
+from robotconf.contract.trust import euid, owner_trusted
 
 __all__ = ["write_atomic"]  # kept here too: the agent's modules import it from its workdir
 

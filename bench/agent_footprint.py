@@ -30,7 +30,7 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
-from contract.wire import AgentState, AgentStatus, Topics  # noqa: E402
+from robotconf.contract.wire import AgentState, AgentStatus, Topics  # noqa: E402
 from tests.support.agents import make_request  # noqa: E402
 from tests.support.mosquitto import Mosquitto  # noqa: E402
 
@@ -111,7 +111,7 @@ def measure(seconds: float, interval: float, work: Path) -> Footprint:
         config = {
             "broker": broker.url,
             "description": {"id": ROBOT, "recommended_template": "turtlebot3-camera"},
-            "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+            "command": [sys.executable, "-m", "robotconf.agent.standin_brain", "{launch_request}"],
             "workdir": str(work / "agent"),
         }
         config_path = work / "agent.yaml"
@@ -119,7 +119,7 @@ def measure(seconds: float, interval: float, work: Path) -> Footprint:
         robotconf = Path(sys.executable).parent / "robotconf"
         argv = [str(robotconf), "agent"]
         if not robotconf.exists():
-            argv = [sys.executable, "-m", "agent.cli"]
+            argv = [sys.executable, "-m", "robotconf.agent.cli"]
         with (work / "agent.stderr").open("wb") as log:
             agent = subprocess.Popen([*argv, "--config", str(config_path)], stdout=log, stderr=log)
         watch = StatusWatch(broker)

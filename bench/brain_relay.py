@@ -34,7 +34,7 @@ import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
 from bench.agent_footprint import TICKS, StatusWatch, cpu_ticks  # noqa: E402
-from contract.wire import Topics  # noqa: E402
+from robotconf.contract.wire import Topics  # noqa: E402
 from tests.support.agents import make_request  # noqa: E402
 from tests.support.mosquitto import Mosquitto  # noqa: E402
 
@@ -133,7 +133,7 @@ def measure(seconds: float, rate: float, work: Path) -> Run:
         robotconf = Path(sys.executable).parent / "robotconf"
         argv = [str(robotconf), "agent"]
         if not robotconf.exists():
-            argv = [sys.executable, "-m", "agent.cli"]
+            argv = [sys.executable, "-m", "robotconf.agent.cli"]
         with (work / "agent.stderr").open("wb") as log:
             agent = subprocess.Popen([*argv, "--config", str(config_path)], stdout=log, stderr=log)
         watch = StatusWatch(broker)

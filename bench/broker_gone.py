@@ -51,14 +51,17 @@ def free_port() -> int:
 def cases(before: Path | None, silent_url: str | None) -> list[Case]:
     entry, repo = robotconf(), str(ROOT)
     gone = f"mqtt://127.0.0.1:{free_port()}"  # nobody listens: refused at once
-    status = [entry, "status", "--repo", repo, "--broker", gone]
-    logs = [entry, "logs", "tb3-01", "--repo", repo, "--broker", gone]
-    floor = [entry, "status", "--help"]
-    versions: list[tuple[str, dict[str, str]]] = [("", {})]
+    versions: list[tuple[str, dict[str, str], list[str]]] = [("", {}, [entry])]
     if before is not None:
-        versions.append(("before: ", {"PYTHONPATH": str(before)}))
+        sys.path.insert(0, str(ROOT))
+        from bench.startup import older_entry
+
+        versions.append(("before: ", {"PYTHONPATH": str(before)}, older_entry(before, entry)))
     table: list[Case] = []
-    for prefix, env in versions:
+    for prefix, env, command in versions:
+        status = [*command, "status", "--repo", repo, "--broker", gone]
+        logs = [*command, "logs", "tb3-01", "--repo", repo, "--broker", gone]
+        floor = [*command, "status", "--help"]
         table += [
             (f"{prefix}status --help (floor)", floor, env, 0),
             (f"{prefix}status, refused", status, env, 2),

@@ -18,11 +18,11 @@ import statistics
 import time
 from pathlib import Path
 
-from configurator.drift import DriftMemo, Need, drift_of, needs_of_rendered
-from configurator.render import render_fleet
-from configurator.rendered import RenderedRequest
-from configurator.workspace import check
-from contract.interfaces import Interface, KeptInterfaces, RobotInterfaces
+from robotconf.configurator.drift import DriftMemo, Need, drift_of, needs_of_rendered
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.workspace import check
+from robotconf.contract.interfaces import Interface, KeptInterfaces, RobotInterfaces
 
 ROOT = Path(__file__).resolve().parents[1]
 

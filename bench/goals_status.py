@@ -26,13 +26,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from contract.goals import CurrentGoal  # noqa: E402
-from contract.wire import AgentState, AgentStatus, Topics  # noqa: E402
-from readmodel.observed import ReadMemo, parse_retained  # noqa: E402
-from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows  # noqa: E402
+from robotconf.contract.goals import CurrentGoal  # noqa: E402
+from robotconf.contract.wire import AgentState, AgentStatus, Topics  # noqa: E402
+from robotconf.readmodel.observed import ReadMemo, parse_retained  # noqa: E402
+from robotconf.readmodel.verdicts import DesiredRobot, FleetStatus, build_rows  # noqa: E402
+from robotconf.workstation.ui.goals_html import rates_box  # noqa: E402
+from robotconf.workstation.ui.model import FleetQuery, Snapshot  # noqa: E402
 from tests.support.goals_summaries import AT, ended, summary  # noqa: E402
-from workstation.ui.goals_html import rates_box  # noqa: E402
-from workstation.ui.model import FleetQuery, Snapshot  # noqa: E402
 
 T = Topics()
 DIGEST = "sha256:" + "a" * 64

@@ -27,9 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import generate  # bench/generate.py, next to this file
 
-from configurator.ruleconfig import ignore_comments, judge
-from configurator.workspace import check
-from contract.yamlio import parse_document
+from robotconf.configurator.ruleconfig import ignore_comments, judge
+from robotconf.configurator.workspace import check
+from robotconf.contract.yamlio import parse_document
 
 FLEET = "configs/fleet.yaml"
 COMMENT = b"  # robotconf: ignore RC505"

@@ -42,7 +42,7 @@ BUILD_TARGET = 1.3  # a full build of a commit may take at most this many times 
 FULL_BUILD = """\
 import sys, time
 from pathlib import Path
-from reconciler.desired import load_desired
+from robotconf.reconciler.desired import load_desired
 desired = load_desired(Path(sys.argv[1]), "HEAD")
 assert desired.ok, desired.problems[:3]
 print(len(desired.fleet.requests), "requests")
@@ -51,13 +51,13 @@ print(len(desired.fleet.requests), "requests")
 REBUILD = """\
 import json, resource, statistics, subprocess, sys, time
 from pathlib import Path
-from configurator.render import render_fleet
-from configurator.workspace import check
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.workspace import check
 
 try:
-    from reconciler.desired import DesiredBuilder
+    from robotconf.reconciler.desired import DesiredBuilder
 except ImportError:  # before incremental builds (measuring an older checkout): full builds
-    from reconciler.desired import load_desired as build
+    from robotconf.reconciler.desired import load_desired as build
     rendered_again = lambda: -1
 else:
     build = DesiredBuilder()

@@ -35,8 +35,8 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
-from agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install  # noqa: E402
-from contract.wire import Topics  # noqa: E402
+from robotconf.agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install  # noqa: E402
+from robotconf.contract.wire import Topics  # noqa: E402
 from tests.support.agents import agent_argv, make_request  # noqa: E402
 from tests.support.mosquitto import Mosquitto  # noqa: E402
 
@@ -134,7 +134,7 @@ def _start_agent(
     config = {
         "broker": broker.url,
         "description": {"id": ROBOT, "recommended_template": "turtlebot3-camera"},
-        "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+        "command": [sys.executable, "-m", "robotconf.agent.standin_brain", "{launch_request}"],
         "workdir": str(work / "agent"),
         "interfaces": {"interval": INTERVAL},
         "env": env,

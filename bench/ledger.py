@@ -26,11 +26,11 @@ import paho.mqtt.client as paho
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from contract.goals import OutcomeRecord, OutcomeState
-from contract.mqtt import Connection, make_client
-from contract.wire import Topics
-from readmodel.ledger import Ledger, ledger_path
-from reconciler.ledger_feed import LedgerFeed, LedgerSettings
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.ledger import Ledger, ledger_path
+from robotconf.reconciler.ledger_feed import LedgerFeed, LedgerSettings
 from tests.support.mosquitto import Mosquitto
 
 ROBOTS = 10_000

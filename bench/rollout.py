@@ -61,10 +61,10 @@ import paho.mqtt.client as paho  # noqa: E402
 import yaml  # noqa: E402
 from paho.mqtt.enums import CallbackAPIVersion  # noqa: E402
 
-from configurator.brokerconf import queue_lines  # noqa: E402
-from configurator.render import render_fleet  # noqa: E402
-from configurator.workspace import check  # noqa: E402
-from contract.wire import AgentStatus  # noqa: E402
+from robotconf.configurator.brokerconf import queue_lines  # noqa: E402
+from robotconf.configurator.render import render_fleet  # noqa: E402
+from robotconf.configurator.workspace import check  # noqa: E402
+from robotconf.contract.wire import AgentStatus  # noqa: E402
 from tests.support.mosquitto import find_mosquitto, free_port  # noqa: E402
 from tests.support.watch import FleetWatch  # noqa: E402
 
@@ -79,7 +79,7 @@ TIMEOUT = 120.0
 ROBOTCONF = [
     sys.executable,
     "-c",
-    "import sys; from workstation.cli import main; sys.exit(main())",
+    "import sys; from robotconf.workstation.cli import main; sys.exit(main())",
 ]
 TARGETS = {100: (1.0, None), 1000: (3.0, 10.0)}  # size: (p50 seconds, ratio to the floor)
 WAVE_GAP_TARGET = 0.1  # seconds from a wave's last healthy robot to the next wave's publish
@@ -301,7 +301,7 @@ def agent_config(
 def host_command(paths: Sequence[Path]) -> list[str]:
     """One agent process for several robots: the agent's own `--config` repeated."""
     configs = [arg for path in paths for arg in ("--config", str(path))]
-    return [sys.executable, "-m", "agent.cli", "--log-level", "warning", *configs]
+    return [sys.executable, "-m", "robotconf.agent.cli", "--log-level", "warning", *configs]
 
 
 def start_agents(folder: Path, size: int, url: str, options: Options) -> subprocess.Popen[bytes]:
@@ -312,7 +312,9 @@ def start_agents(folder: Path, size: int, url: str, options: Options) -> subproc
         agent_config(folder, r, url, options.startsecs, brain, reload) for r in robot_ids(size)
     ]
     if size <= options.process_max:
-        commands = [[sys.executable, "-m", "agent.cli", "--config", str(p)] for p in paths]
+        commands = [
+            [sys.executable, "-m", "robotconf.agent.cli", "--config", str(p)] for p in paths
+        ]
     else:
         # Robots dealt out like cards: the reconciler publishes in robot order, and consecutive
         # robots in one worker would make each worker busy in turn, unlike robots that each

@@ -137,8 +137,8 @@ def publishing_time(log: Path) -> float:
 
 def whole_fleet_read(url: str) -> tuple[float, int, str | None]:
     """`robotconf status`'s view of the broker: seconds until synced, messages, loss known."""
-    from contract.mqtt import Connection
-    from workstation.fleet_status import open_view
+    from robotconf.contract.mqtt import Connection
+    from robotconf.workstation.fleet_status import open_view
 
     view = open_view(Connection(url), "robotconf")
     started = time.perf_counter()

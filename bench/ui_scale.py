@@ -59,7 +59,7 @@ import paho.mqtt.client as paho  # noqa: E402
 from rollout import ROBOTCONF, Broker, client, connect, start_reconciler  # noqa: E402
 from scale import Launches, assignments  # noqa: E402
 
-from contract.wire import AgentState, AgentStatus  # noqa: E402
+from robotconf.contract.wire import AgentState, AgentStatus  # noqa: E402
 from tests.support.mosquitto import free_port  # noqa: E402
 
 TIMEOUT = 600.0

@@ -24,10 +24,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from contract.goals import OutcomeRecord, OutcomeState
-from readmodel.ledger import Ledger, ledger_path
-from reconciler.evidence import EvidenceKey, Roles, WaveEvidence, judge, new_evidence
-from reconciler.evidence_feed import EvidenceCounter
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.readmodel.ledger import Ledger, ledger_path
+from robotconf.reconciler.evidence import EvidenceKey, Roles, WaveEvidence, judge, new_evidence
+from robotconf.reconciler.evidence_feed import EvidenceCounter
 
 ROBOTS = 10_000
 NEW = "sha256:" + "ab" * 32
@@ -75,7 +75,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=10)
     args = parser.parse_args()
 
-    from configurator.types import Verify
+    from robotconf.configurator.types import Verify
 
     verify = Verify(min_goals=1000, success_rate=0.8, compare="stable", timeout="1d")
     roles = Roles(

@@ -17,10 +17,10 @@ import statistics
 import time
 from typing import Any
 
-from configurator.render import FleetRender
-from configurator.types import RolloutPolicy, Wave
-from contract.wire import AgentState, AgentStatus
-from reconciler.rollout import RolloutInput, RolloutStep, roll_out
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.types import RolloutPolicy, Wave
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.reconciler.rollout import RolloutInput, RolloutStep, roll_out
 
 T0 = 1_000_000.0
 

@@ -10,9 +10,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from configurator.composition import missing_requires, why_unavailable
-from configurator.repository import Repository
-from configurator.types import (
+from robotconf.configurator.composition import missing_requires, why_unavailable
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.types import (
     Action,
     CapabilityConfiguration,
     Logic,
@@ -21,7 +21,7 @@ from configurator.types import (
     logic_choice,
     logic_names,
 )
-from contract.yamlio import document_text
+from robotconf.contract.yamlio import document_text
 
 # (action name, action, logic name, logic) -> why the logic cannot run; empty: it fits.
 LogicFit = Callable[[str, Action, str, Logic], list[str]]

@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from configurator.types import SERVICE_USERS
-from contract.topics import SERVICES, TOPICS, Role, pattern_lines, role_lines
+from robotconf.configurator.types import SERVICE_USERS
+from robotconf.contract.topics import SERVICES, TOPICS, Role, pattern_lines, role_lines
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from configurator.repository import Repository
+from robotconf.configurator.repository import Repository
 
 
 def catalogue_summary(repo: Repository) -> dict[str, Any]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 
-from configurator.types import (
+from robotconf.configurator.types import (
     Action,
     Environment,
     JsonScalar,
@@ -19,7 +19,7 @@ from configurator.types import (
     SettingDefinition,
     Task,
 )
-from contract.diagnostics import describe_value
+from robotconf.contract.diagnostics import describe_value
 
 
 def template_gaps(logic: Logic, template: RobotTemplate) -> list[str]:

@@ -13,17 +13,17 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from configurator.repository import Repository
-from configurator.rosnames import (
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.rosnames import (
     UnresolvableName,
     absolute_namespace,
     mapping_name_problem,
     resolve_name,
 )
-from configurator.types import MappingBinding, MappingKind, MappingScheme, RobotTemplate
-from configurator.types import SettingDefinition as Setting
-from contract.diagnostics import did_you_mean
-from contract.interfaces import (
+from robotconf.configurator.types import MappingBinding, MappingKind, MappingScheme, RobotTemplate
+from robotconf.configurator.types import SettingDefinition as Setting
+from robotconf.contract.diagnostics import did_you_mean
+from robotconf.contract.interfaces import (
     KIND_OF_MAPPING,
     MAX_INTERFACES,
     Interface,
@@ -31,7 +31,7 @@ from contract.interfaces import (
     RobotInterfaces,
     same_type,
 )
-from contract.yamlio import document_text
+from robotconf.contract.yamlio import document_text
 
 # The ROS graph's own plumbing, which no brain is configured with: a draft leaves it out.
 INFRASTRUCTURE_TOPICS = frozenset({"/rosout", "/parameter_events"})

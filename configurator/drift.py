@@ -10,10 +10,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from configurator.rendered import RenderedRequest
-from configurator.rosnames import resolve_in
-from configurator.types import Action
-from contract.interfaces import (
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.rosnames import resolve_in
+from robotconf.configurator.types import Action
+from robotconf.contract.interfaces import (
     KIND_OF_MAPPING,
     InterfacesVerdict,
     Reported,
@@ -21,7 +21,7 @@ from contract.interfaces import (
     interfaces_verdict,
     same_type,
 )
-from contract.launch import LaunchCapability, LaunchRequest
+from robotconf.contract.launch import LaunchCapability, LaunchRequest
 
 DriftPolicy = Literal["warn", "hold"]
 DRIFT_POLICIES: tuple[DriftPolicy, ...] = ("warn", "hold")

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from configurator.rosnames import UnresolvableName, resolve_name
-from configurator.types import Action, Logic, MappingScheme
-from contract.interfaces import KIND_OF_MAPPING, RobotInterfaces, index, same_type
+from robotconf.configurator.rosnames import UnresolvableName, resolve_name
+from robotconf.configurator.types import Action, Logic, MappingScheme
+from robotconf.contract.interfaces import KIND_OF_MAPPING, RobotInterfaces, index, same_type
 
 
 def logic_fits_interfaces(

@@ -29,25 +29,25 @@ from collections.abc import Callable, Hashable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-from configurator.drift import logics_needing
-from configurator.gcpause import collector_paused
-from configurator.loader import LoadedFile, load_repository
-from configurator.render import (
+from robotconf.configurator.drift import logics_needing
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.configurator.loader import LoadedFile, load_repository
+from robotconf.configurator.render import (
     FleetRender,
     needed_by,
     render_fleet,
     request_for,
     scenario_requests,
 )
-from configurator.rendered import FleetRequests, RenderedRequest, ScenarioRequests
-from configurator.repository import Entry, Platform, Repository
-from configurator.rules import DERIVED, Unit, rule_units
-from configurator.rules.report import Reporter
-from configurator.source import Source
-from configurator.types import Action, Fleet, RobotAssignment
-from configurator.workspace import Checked, judged
-from contract.diagnostics import Diagnostic
-from contract.launch import LaunchCapability, LaunchScenario, canonical_json
+from robotconf.configurator.rendered import FleetRequests, RenderedRequest, ScenarioRequests
+from robotconf.configurator.repository import Entry, Platform, Repository
+from robotconf.configurator.rules import DERIVED, Unit, rule_units
+from robotconf.configurator.rules.report import Reporter
+from robotconf.configurator.source import Source
+from robotconf.configurator.types import Action, Fleet, RobotAssignment
+from robotconf.configurator.workspace import Checked, judged
+from robotconf.contract.diagnostics import Diagnostic
+from robotconf.contract.launch import LaunchCapability, LaunchScenario, canonical_json
 
 V = TypeVar("V")
 

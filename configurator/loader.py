@@ -12,10 +12,10 @@ from typing import Any, Protocol
 
 from pydantic import BaseModel, ValidationError
 
-from configurator.repository import Entry, Platform, Repository
-from configurator.ruleconfig import IgnoreComment, ignore_comments
-from configurator.source import RULE_CONFIGURATION, FileTooLarge, Source
-from configurator.types import (
+from robotconf.configurator.repository import Entry, Platform, Repository
+from robotconf.configurator.ruleconfig import IgnoreComment, ignore_comments
+from robotconf.configurator.source import RULE_CONFIGURATION, FileTooLarge, Source
+from robotconf.configurator.types import (
     Action,
     CapabilityConfiguration,
     Environment,
@@ -27,9 +27,9 @@ from configurator.types import (
     ScenarioConfiguration,
     Task,
 )
-from contract.diagnostics import Diagnostic, Severity
-from contract.typing_errors import typing_diagnostics
-from contract.yamlio import YamlDocument, YamlReadError, parse_document
+from robotconf.contract.diagnostics import Diagnostic, Severity
+from robotconf.contract.typing_errors import typing_diagnostics
+from robotconf.contract.yamlio import YamlDocument, YamlReadError, parse_document
 
 
 @dataclass(frozen=True)

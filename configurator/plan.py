@@ -7,15 +7,21 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
-from configurator.render import FleetRender
-from configurator.rendered import RenderedRequest
-from configurator.stages import plan_waves
-from configurator.types import RolloutPolicy, Stage, Verify
-from configurator.waves import assign_waves
-from contract.interfaces import Reported as Report
-from contract.textsafe import markdown_code, markdown_text, printable, printable_lines, shorten
-from contract.wire import short_rev
+from robotconf.configurator.drift import Drift, drift_lines, drift_of, needs_of_rendered
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.stages import plan_waves
+from robotconf.configurator.types import RolloutPolicy, Stage, Verify
+from robotconf.configurator.waves import assign_waves
+from robotconf.contract.interfaces import Reported as Report
+from robotconf.contract.textsafe import (
+    markdown_code,
+    markdown_text,
+    printable,
+    printable_lines,
+    shorten,
+)
+from robotconf.contract.wire import short_rev
 
 ChangeKind = Literal["added", "removed", "changed", "held"]
 

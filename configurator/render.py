@@ -9,14 +9,14 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from configurator.composition import achievable_tasks, find_location
-from configurator.drift import logics_needing
-from configurator.gcpause import collector_paused
-from configurator.rendered import FleetRequests, RenderedRequest, ScenarioRequests
-from configurator.repository import Repository
-from configurator.resolve import bound_mappings, resolve_capability
-from configurator.rosnames import UnresolvableName, absolute_namespace
-from configurator.types import (
+from robotconf.configurator.composition import achievable_tasks, find_location
+from robotconf.configurator.drift import logics_needing
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.configurator.rendered import FleetRequests, RenderedRequest, ScenarioRequests
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.resolve import bound_mappings, resolve_capability
+from robotconf.configurator.rosnames import UnresolvableName, absolute_namespace
+from robotconf.configurator.types import (
     Action,
     JsonObject,
     RobotAssignment,
@@ -26,8 +26,8 @@ from configurator.types import (
     logic_choice,
     logic_names,
 )
-from contract.diagnostics import did_you_mean
-from contract.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
+from robotconf.contract.diagnostics import did_you_mean
+from robotconf.contract.launch import LaunchCapability, LaunchGoal, LaunchRequest, LaunchScenario
 
 
 class RenderError(Exception):

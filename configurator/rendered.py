@@ -15,9 +15,9 @@ from collections.abc import ItemsView, Iterator, Mapping, MutableMapping
 from json.encoder import encode_basestring
 from typing import Any
 
-from configurator.rosnames import resolve_in
-from configurator.types import MappingBinding
-from contract.launch import (
+from robotconf.configurator.rosnames import resolve_in
+from robotconf.configurator.types import MappingBinding
+from robotconf.contract.launch import (
     LaunchCapability,
     LaunchRequest,
     LaunchScenario,

@@ -9,8 +9,8 @@ from typing import Generic, TypeVar
 
 from pydantic import BaseModel
 
-from configurator.ruleconfig import IgnoreComment
-from configurator.types import (
+from robotconf.configurator.ruleconfig import IgnoreComment
+from robotconf.configurator.types import (
     Action,
     CapabilityConfiguration,
     Environment,
@@ -22,7 +22,7 @@ from configurator.types import (
     ScenarioConfiguration,
     Task,
 )
-from contract.yamlio import YamlDocument
+from robotconf.contract.yamlio import YamlDocument
 
 M = TypeVar("M", bound=BaseModel)
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from configurator.repository import Platform, Repository
-from configurator.types import (
+from robotconf.configurator.repository import Platform, Repository
+from robotconf.configurator.types import (
     Action,
     CapabilityConfiguration,
     Logic,

@@ -11,10 +11,10 @@ from typing import Protocol
 
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from configurator.types import RuleConfiguration
-from contract.codes import RULES, Severity
-from contract.diagnostics import Diagnostic, did_you_mean
-from contract.yamlio import YamlDocument, decode
+from robotconf.configurator.types import RuleConfiguration
+from robotconf.contract.codes import RULES, Severity
+from robotconf.contract.diagnostics import Diagnostic, did_you_mean
+from robotconf.contract.yamlio import YamlDocument, decode
 
 
 class Configured(Protocol):

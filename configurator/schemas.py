@@ -12,12 +12,12 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from configurator.loader import KIND_BY_NAME
-from configurator.repository import Repository
-from configurator.resolve import resolve_capability
-from configurator.types import ROBOT_ID_PATTERN, RuleConfiguration, SettingDefinition
-from contract.codes import RULES
-from contract.launch import LaunchRequest
+from robotconf.configurator.loader import KIND_BY_NAME
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.resolve import resolve_capability
+from robotconf.configurator.types import ROBOT_ID_PATTERN, RuleConfiguration, SettingDefinition
+from robotconf.contract.codes import RULES
+from robotconf.contract.launch import LaunchRequest
 
 # "0%" to "100%": the plain spellings of what configurator.waves.failure_budget reads
 SHARE_PATTERN = r"^(100|[1-9]?[0-9])%$"

@@ -13,8 +13,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Protocol
 
-from contract.files import NotRegularFile, file_kind, read_regular
-from contract.yamlio import MAX_FILE_BYTES
+from robotconf.contract.files import NotRegularFile, file_kind, read_regular
+from robotconf.contract.yamlio import MAX_FILE_BYTES
 
 if TYPE_CHECKING:
     import subprocess

@@ -9,11 +9,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from configurator.types import Stage
-from configurator.waves import assign_waves, matches
+from robotconf.configurator.types import Stage
+from robotconf.configurator.waves import assign_waves, matches
 
 if TYPE_CHECKING:  # validate places robots without the rendering's models
-    from configurator.render import FleetRender
+    from robotconf.configurator.render import FleetRender
 
 
 class SelectorError(ValueError):

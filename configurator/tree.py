@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from configurator.composition import implementation_for, missing_requires, why_unavailable
-from configurator.repository import Repository
-from configurator.resolve import ResolvedCapability, resolve_capability
+from robotconf.configurator.composition import implementation_for, missing_requires, why_unavailable
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.resolve import ResolvedCapability, resolve_capability
 
 
 @dataclass

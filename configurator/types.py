@@ -10,19 +10,19 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-from contract.durations import parse_duration
-from contract.models import CODE_PATTERN
-from contract.models import MAX_ROS_DOMAIN_ID as MAX_ROS_DOMAIN_ID
-from contract.models import ROBOT_ID_PATTERN as ROBOT_ID_PATTERN
-from contract.models import ROS_DOMAIN_DESCRIPTION as ROS_DOMAIN_DESCRIPTION
-from contract.models import SERVICE_USERS as SERVICE_USERS
-from contract.models import JsonObject as JsonObject
-from contract.models import JsonScalar as JsonScalar
-from contract.models import MappingBinding as MappingBinding
-from contract.models import MappingKind as MappingKind
-from contract.models import StrictModel as StrictModel
-from contract.models import is_robot_id as is_robot_id
-from contract.models import reserved_robot_id as reserved_robot_id
+from robotconf.contract.durations import parse_duration
+from robotconf.contract.models import CODE_PATTERN
+from robotconf.contract.models import MAX_ROS_DOMAIN_ID as MAX_ROS_DOMAIN_ID
+from robotconf.contract.models import ROBOT_ID_PATTERN as ROBOT_ID_PATTERN
+from robotconf.contract.models import ROS_DOMAIN_DESCRIPTION as ROS_DOMAIN_DESCRIPTION
+from robotconf.contract.models import SERVICE_USERS as SERVICE_USERS
+from robotconf.contract.models import JsonObject as JsonObject
+from robotconf.contract.models import JsonScalar as JsonScalar
+from robotconf.contract.models import MappingBinding as MappingBinding
+from robotconf.contract.models import MappingKind as MappingKind
+from robotconf.contract.models import StrictModel as StrictModel
+from robotconf.contract.models import is_robot_id as is_robot_id
+from robotconf.contract.models import reserved_robot_id as reserved_robot_id
 
 
 # Empty defaults made by functions of ours, not by `dict` and `list`: pydantic reads each

@@ -7,7 +7,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 
-from configurator.types import Wave
+from robotconf.configurator.types import Wave
 
 _SHARE = re.compile(r"^([0-9]{1,3})%$")  # not \d, which takes any script's digits
 

@@ -6,13 +6,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from configurator.gcpause import collector_paused
-from configurator.loader import load_repository
-from configurator.repository import Repository
-from configurator.ruleconfig import judge
-from configurator.rules import check_repository
-from configurator.source import OverlaySource, Source, open_source
-from contract.diagnostics import Diagnostic
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.configurator.loader import load_repository
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.ruleconfig import judge
+from robotconf.configurator.rules import check_repository
+from robotconf.configurator.source import OverlaySource, Source, open_source
+from robotconf.contract.diagnostics import Diagnostic
 
 
 @dataclass

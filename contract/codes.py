@@ -1,8 +1,9 @@
 """Every diagnostic code, declared once: its severity and the rule it stands for.
 
 Diagnostics refuse a code that is not declared here, and the docs' table of rule codes
-(docs/reference/rules.md) is generated from it: `python -m contract.codes FILE` rewrites the
-table in any file, found by its head row (`python -m workstation.docs` writes every page).
+(docs/reference/rules.md) is generated from it: `python -m robotconf.contract.codes FILE`
+rewrites the table in any file, found by its head row (`python -m robotconf.workstation.docs`
+writes every page).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
-from contract.errors import ExitCode
+from robotconf.contract.errors import ExitCode
 
 
 class Severity(str, Enum):
@@ -395,14 +396,15 @@ def with_readme_table(readme: str) -> str:
 def main(argv: list[str]) -> int:
     if len(argv) != 1:
         print(
-            "usage: python -m contract.codes FILE (e.g. docs/reference/rules.md)", file=sys.stderr
+            "usage: python -m robotconf.contract.codes FILE (e.g. docs/reference/rules.md)",
+            file=sys.stderr,
         )
         return ExitCode.TOOL
     path = Path(argv[0])
     try:
         path.write_text(with_readme_table(path.read_text(encoding="utf-8")), encoding="utf-8")
     except (OSError, UnicodeDecodeError, ValueError) as exc:
-        print(f"python -m contract.codes: {path}: {exc}", file=sys.stderr)
+        print(f"python -m robotconf.contract.codes: {path}: {exc}", file=sys.stderr)
         return ExitCode.TOOL
     return ExitCode.OK
 

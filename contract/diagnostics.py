@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
-from contract.codes import Severity as Severity
-from contract.codes import require
-from contract.textsafe import printable
+from robotconf.contract.codes import Severity as Severity
+from robotconf.contract.codes import require
+from robotconf.contract.textsafe import printable
 
 
 @dataclass(frozen=True, order=True)

@@ -12,7 +12,7 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import Field
 
-from contract.models import (
+from robotconf.contract.models import (
     MAX_ROS_DOMAIN_ID,
     ROBOT_ID_PATTERN,
     JsonObject,

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 
-from contract.logsafe import SafeFormatter
+from robotconf.contract.logsafe import SafeFormatter
 
 _PORT = re.compile(r"[0-9]{1,5}")
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import traceback
 
-from contract.textsafe import printable
+from robotconf.contract.textsafe import printable
 
 _CAUSE = "The above exception was the direct cause of the following exception:"
 _CONTEXT = "During handling of the above exception, another exception occurred:"

@@ -11,8 +11,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from contract.errors import CliError
-from contract.textsafe import printable, shorten
+from robotconf.contract.errors import CliError
+from robotconf.contract.textsafe import printable, shorten
 
 # A goal's failure code, as brains report them and rollout.verify's `critical` names them:
 # NAV2_TIMEOUT, nav2:104, E_BLOCKED. Here, beside the documents' models: validate reads

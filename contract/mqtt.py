@@ -15,8 +15,8 @@ from pathlib import Path
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
-from contract.trust import Trust, check_trusted, read_secret_text
-from contract.wire import BrokerAddress, parse_broker_url
+from robotconf.contract.trust import Trust, check_trusted, read_secret_text
+from robotconf.contract.wire import BrokerAddress, parse_broker_url
 
 # Seconds between connection attempts: the first retry after 1 s, doubling up to 30 s. paho's
 # own loop uses them for the reconciler and `status`; the agent, driving paho itself, feeds

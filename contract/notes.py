@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from contract.wire import Verdict
+from robotconf.contract.wire import Verdict
 
 NOTES_REF = "refs/notes/robotconf"
 MAX_NOTE_BYTES = 256 * 1024  # a note larger than this is not read: not ours, or not whole

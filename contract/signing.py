@@ -13,15 +13,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from contract.files import write_atomic
-from contract.launch import (
+from robotconf.contract.files import write_atomic
+from robotconf.contract.launch import (
     LaunchRequest,
     RestartRequest,
     RolloutAction,
     StopRequest,
     canonical_json,
 )
-from contract.trust import Trust, UntrustedFile, read_trusted
+from robotconf.contract.trust import Trust, UntrustedFile, read_trusted
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (

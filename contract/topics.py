@@ -1,6 +1,6 @@
 """Every MQTT topic of the project, declared once: pattern, direction, payload, who reads and writes
 it, retained or not. Topic names, the Mosquitto ACL, subscriptions, the checks of `up`'s broker and
-docs/reference/topics.md (written by `python -m workstation.docs`) derive from it.
+docs/reference/topics.md (written by `python -m robotconf.workstation.docs`) derive from it.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
-from contract.files import NotRegularFile, file_kind
+from robotconf.contract.files import NotRegularFile, file_kind
 
 ROOT = 0
 

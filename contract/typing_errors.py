@@ -10,8 +10,8 @@ from typing import Any, Union, get_args, get_origin
 from pydantic import BaseModel, ValidationError
 from pydantic_core import ErrorDetails
 
-from contract.diagnostics import Diagnostic, Severity, describe_value, did_you_mean
-from contract.yamlio import YamlDocument
+from robotconf.contract.diagnostics import Diagnostic, Severity, describe_value, did_you_mean
+from robotconf.contract.yamlio import YamlDocument
 
 _EXPECTED = {
     "bool_type": "true or false",

@@ -16,10 +16,10 @@ from urllib.parse import unquote, urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from contract.diagnostics import Diagnostic
-from contract.models import ROBOT_ID_PATTERN
-from contract.textsafe import printable, shorten
-from contract.topics import BY_KEY
+from robotconf.contract.diagnostics import Diagnostic
+from robotconf.contract.models import ROBOT_ID_PATTERN
+from robotconf.contract.textsafe import printable, shorten
+from robotconf.contract.topics import BY_KEY
 
 DEFAULT_PREFIX = "robotconf"
 BROKER_ENV = "ROBOTCONF_BROKER"

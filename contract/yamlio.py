@@ -19,8 +19,8 @@ import yaml
 from yaml.constructor import SafeConstructor
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from contract.codes import require
-from contract.textsafe import printable
+from robotconf.contract.codes import require
+from robotconf.contract.textsafe import printable
 
 try:  # the C parser is several times faster; fall back where libyaml is missing
     from yaml import CSafeLoader as _Loader

@@ -12,7 +12,7 @@ from collections import OrderedDict
 from collections.abc import Iterable
 from pathlib import Path
 
-from contract.wire import MAX_COMMITS, CommitLine, ReconcilerStatus, is_commit
+from robotconf.contract.wire import MAX_COMMITS, CommitLine, ReconcilerStatus, is_commit
 
 log = logging.getLogger("robotconf.reconciler")
 

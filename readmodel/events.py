@@ -16,10 +16,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from configurator.drift import Drift
-from contract.notes import VerdictNote
-from contract.textsafe import chat_text
-from contract.wire import (
+from robotconf.configurator.drift import Drift
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.textsafe import chat_text
+from robotconf.contract.wire import (
     AgentState,
     AgentStatus,
     ReconcilerReason,

@@ -24,8 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
-from contract.textsafe import printable
-from contract.throttle import Throttle
+from robotconf.contract.textsafe import printable
+from robotconf.contract.throttle import Throttle
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -38,9 +38,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from contract.goals import OutcomeRecord, OutcomeState
-from readmodel.events import Event
-from readmodel.outcomes import (
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.readmodel.events import Event
+from robotconf.readmodel.outcomes import (
     NO_REVISION,
     NO_SCENARIO,
     Group,
@@ -52,7 +52,7 @@ from readmodel.outcomes import (
     advance,
     aggregate,
 )
-from readmodel.timeline import EventQuery, KeptEvent, stored
+from robotconf.readmodel.timeline import EventQuery, KeptEvent, stored
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -13,16 +13,16 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from contract.goals import GoalsSummary
-from contract.interfaces import (
+from robotconf.contract.goals import GoalsSummary
+from robotconf.contract.interfaces import (
     MAX_INTERFACES,
     MAX_INTERFACES_BYTES,
     KeptInterfaces,
     RobotInterfaces,
 )
-from contract.launch import LaunchRequest, StopRequest, canonical_json
-from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError
-from contract.wire import (
+from robotconf.contract.launch import LaunchRequest, StopRequest, canonical_json
+from robotconf.contract.safejson import MAX_PAYLOAD_BYTES, PayloadError
+from robotconf.contract.wire import (
     ACTIVE_STATES,
     AgentStatus,
     ReconcilerStatus,
@@ -30,8 +30,8 @@ from contract.wire import (
     Topics,
     is_online,
 )
-from readmodel.retained import Ignored, read_object
-from readmodel.robot_goals import bounded
+from robotconf.readmodel.retained import Ignored, read_object
+from robotconf.readmodel.robot_goals import bounded
 
 RECONCILER_STATUS = "reconciler-status"
 WAVE_RECORD = "rollout-record"  # reconciler.wave_memory, read by the reconciler alone

@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 from pydantic import ValidationError
 
-from contract.goals import (
+from robotconf.contract.goals import (
     CODE_PATTERN,
     GOAL_ID_PATTERN,
     MAX_TEXT,
@@ -24,9 +24,9 @@ from contract.goals import (
     OutcomeState,
     success_rate,
 )
-from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable, shorten
-from readmodel.events import Event, Kind
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.textsafe import printable, shorten
+from robotconf.readmodel.events import Event, Kind
 
 MAX_RECORD_BYTES = 8 * 1024  # one OutcomeRecord: its texts are cut at MAX_TEXT by the agent
 MAX_ID = 80  # characters of a run, a revision or a digest

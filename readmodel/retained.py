@@ -24,10 +24,10 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import MQTTProtocolVersion
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
-from configurator.gcpause import collector_paused
-from contract.mqtt import Connection, connect_failure, make_client
-from contract.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
-from contract.throttle import Throttle
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.contract.mqtt import Connection, connect_failure, make_client
+from robotconf.contract.safejson import MAX_PAYLOAD_BYTES, PayloadError, parse_object
+from robotconf.contract.throttle import Throttle
 
 log = logging.getLogger("robotconf.mqtt")
 

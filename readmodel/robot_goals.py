@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from contract.goals import (
+from robotconf.contract.goals import (
     MAX_EVENTS_KEPT,
     MAX_RECENT_KEPT,
     MAX_TASKS_KEPT,
@@ -26,7 +26,7 @@ from contract.goals import (
     VitalValue,
     success_rate,
 )
-from contract.textsafe import shorten
+from robotconf.contract.textsafe import shorten
 
 MAX_ID = 128  # characters of a goal id or a task name kept (the contract's own bound)
 UNKNOWN = "unknown"  # the goals cell and state of a robot that does not report its goals

@@ -19,10 +19,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from contract.durations import parse_duration
-from contract.models import is_robot_id
-from contract.textsafe import printable
-from contract.wire import (
+from robotconf.contract.durations import parse_duration
+from robotconf.contract.models import is_robot_id
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import (
     AgentState,
     AgentStatus,
     ReconcilerReason,
@@ -30,7 +30,7 @@ from contract.wire import (
     RolloutStatus,
     short_rev,
 )
-from readmodel.events import REMEMBERED, Event, Kind
+from robotconf.readmodel.events import REMEMBERED, Event, Kind
 
 KINDS = tuple(kind.value for kind in Kind)  # what --kind and the page's filter accept
 DEFAULT_LIMIT = 200  # events listed unless asked for more

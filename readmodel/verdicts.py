@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from configurator.drift import (
+from robotconf.configurator.drift import (
     UNKNOWN,
     Drift,
     DriftMemo,
@@ -22,12 +22,12 @@ from configurator.drift import (
     needs_of,
     needs_of_rendered,
 )
-from configurator.render import FleetRender
-from configurator.waves import assign_waves, matches
-from contract.interfaces import interfaces_verdict
-from contract.launch import template_mismatch
-from contract.textsafe import printable, shorten
-from contract.wire import (
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.waves import assign_waves, matches
+from robotconf.contract.interfaces import interfaces_verdict
+from robotconf.contract.launch import template_mismatch
+from robotconf.contract.textsafe import printable, shorten
+from robotconf.contract.wire import (
     ACTIVE_STATES,
     RESUME_COMMAND,
     VERIFY_COMMANDS,
@@ -36,10 +36,10 @@ from contract.wire import (
     RolloutStatus,
     WaveVerification,
 )
-from contract.wire import short_digest as _short_digest
-from contract.wire import short_rev as _short_rev
-from readmodel.observed import Retained, RobotSeen
-from readmodel.robot_goals import NO_GOALS, RobotGoals
+from robotconf.contract.wire import short_digest as _short_digest
+from robotconf.contract.wire import short_rev as _short_rev
+from robotconf.readmodel.observed import Retained, RobotSeen
+from robotconf.readmodel.robot_goals import NO_GOALS, RobotGoals
 
 
 class Verdict(str, enum.Enum):

@@ -14,15 +14,15 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from configurator.render import FleetRender
-from configurator.rendered import RenderedRequest
-from contract.launch import LaunchRequest
-from contract.safejson import MAX_PAYLOAD_BYTES
-from contract.wire import ReconcilerStatus, StatusDiagnostic, is_commit, short_rev
-from reconciler import heap
-from reconciler.decide import Reason
-from reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
-from reconciler.rollout import stage_bases
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.safejson import MAX_PAYLOAD_BYTES
+from robotconf.contract.wire import ReconcilerStatus, StatusDiagnostic, is_commit, short_rev
+from robotconf.reconciler import heap
+from robotconf.reconciler.decide import Reason
+from robotconf.reconciler.desired import FLEET_FILE, Desired, DesiredBuilder
+from robotconf.reconciler.rollout import stage_bases
 
 log = logging.getLogger("robotconf.reconciler")
 

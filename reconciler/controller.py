@@ -25,23 +25,23 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
-from configurator.rendered import RenderedRequest
-from configurator.source import SourceError
-from contract.backoff import Backoff
-from contract.mqtt import Connection
-from contract.notes import VerdictNote
-from contract.safejson import PayloadError
-from contract.topics import Role, subscriptions
-from contract.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
-from readmodel.commits import CommitBook, named_revisions
-from readmodel.observed import (
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.source import SourceError
+from robotconf.contract.backoff import Backoff
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.safejson import PayloadError
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import ReconcilerStatus, StatusDiagnostic, Topics, short_rev
+from robotconf.readmodel.commits import CommitBook, named_revisions
+from robotconf.readmodel.observed import (
     RECONCILER_STATUS,
     LaunchDigests,
     summarise_launches,
 )
-from readmodel.retained import Ignored, Presence, RetainedView, read_object
-from reconciler.builds import Builder, Builds
-from reconciler.decide import (
+from robotconf.readmodel.retained import Ignored, Presence, RetainedView, read_object
+from robotconf.reconciler.builds import Builder, Builds
+from robotconf.reconciler.decide import (
     HANDLING,
     Condition,
     Decision,
@@ -52,13 +52,13 @@ from reconciler.decide import (
     internal_error,
     retry_of,
 )
-from reconciler.delivery import Delivery, Signer
-from reconciler.desired import Desired
-from reconciler.diff import Actions
-from reconciler.report import Followed, StatusWriter, one_line, status_of
-from reconciler.robot_watch import RobotWatch
-from reconciler.rollout_memory import RolloutMemory
-from reconciler.source import BranchSource
+from robotconf.reconciler.delivery import Delivery, Signer
+from robotconf.reconciler.desired import Desired
+from robotconf.reconciler.diff import Actions
+from robotconf.reconciler.report import Followed, StatusWriter, one_line, status_of
+from robotconf.reconciler.robot_watch import RobotWatch
+from robotconf.reconciler.rollout_memory import RolloutMemory
+from robotconf.reconciler.source import BranchSource
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey

@@ -11,12 +11,12 @@ import enum
 from collections.abc import Mapping, Sequence, Set
 from dataclasses import dataclass, field, replace
 
-from configurator.drift import Drift, drift_of, needs_of_rendered
-from configurator.render import FleetRender
-from configurator.rendered import RenderedRequest
-from contract.interfaces import Reported
-from contract.notes import VerdictNote
-from contract.wire import (
+from robotconf.configurator.drift import Drift, drift_of, needs_of_rendered
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.interfaces import Reported
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import (
     MAX_LISTED,
     AgentStatus,
     HeldRobot,
@@ -26,11 +26,11 @@ from contract.wire import (
     StatusDiagnostic,
     short_rev,
 )
-from reconciler.desired import Desired
-from reconciler.diff import Actions, diff
-from reconciler.evidence import Counts, WaveEvidence
-from reconciler.rollout import RolloutInput, RolloutStep, roll_out
-from reconciler.wave_memory import WaveRecord
+from robotconf.reconciler.desired import Desired
+from robotconf.reconciler.diff import Actions, diff
+from robotconf.reconciler.evidence import Counts, WaveEvidence
+from robotconf.reconciler.rollout import RolloutInput, RolloutStep, roll_out
+from robotconf.reconciler.wave_memory import WaveRecord
 
 Reason = ReconcilerReason
 

@@ -13,14 +13,14 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
-from configurator.rendered import RenderedRequest
-from contract.launch import StopRequest
-from contract.signing import Signed
-from contract.wire import Topics, short_rev
-from readmodel.observed import launch_summary
-from readmodel.retained import Payload, RetainedView
-from reconciler import heap
-from reconciler.decide import Condition, Decision
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.launch import StopRequest
+from robotconf.contract.signing import Signed
+from robotconf.contract.wire import Topics, short_rev
+from robotconf.readmodel.observed import launch_summary
+from robotconf.readmodel.retained import Payload, RetainedView
+from robotconf.reconciler import heap
+from robotconf.reconciler.decide import Condition, Decision
 
 log = logging.getLogger("robotconf.reconciler")
 

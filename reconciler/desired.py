@@ -6,11 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from configurator.incremental import BuildCache
-from configurator.render import FleetRender, RenderError, render_fleet
-from configurator.source import SourceError
-from configurator.workspace import check
-from contract.wire import ReconcilerReason, StatusDiagnostic
+from robotconf.configurator.incremental import BuildCache
+from robotconf.configurator.render import FleetRender, RenderError, render_fleet
+from robotconf.configurator.source import SourceError
+from robotconf.configurator.workspace import check
+from robotconf.contract.wire import ReconcilerReason, StatusDiagnostic
 
 MAX_DIAGNOSTICS = 50  # a retained status message must stay small
 FLEET_FILE = "configs/fleet.yaml"

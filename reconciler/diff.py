@@ -6,7 +6,7 @@ from collections.abc import Mapping, Set
 from dataclasses import dataclass, field
 from typing import Generic, Protocol, TypeVar
 
-from configurator.rendered import FleetRequests
+from robotconf.configurator.rendered import FleetRequests
 
 
 class HasDigest(Protocol):

@@ -17,10 +17,10 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-from configurator.types import Verify
-from contract.goals import OutcomeState, success_rate
-from contract.wire import Verdict, WaveVerification
-from readmodel.outcomes import Row
+from robotconf.configurator.types import Verify
+from robotconf.contract.goals import OutcomeState, success_rate
+from robotconf.contract.wire import Verdict, WaveVerification
+from robotconf.readmodel.outcomes import Row
 
 _SUCCEEDED, _FAILED, _CANCELED = (
     OutcomeState.SUCCEEDED.value,

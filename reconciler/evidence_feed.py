@@ -15,12 +15,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from configurator.render import FleetRender
-from configurator.stages import plan_waves
-from contract.wire import RolloutStatus
-from readmodel.ledger import Ledger, LedgerError
-from reconciler.evidence import Counts, EvidenceKey, WaveEvidence, new_evidence
-from reconciler.rollout import criteria, kept_requests, stage_bases, wave_roles
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.stages import plan_waves
+from robotconf.contract.wire import RolloutStatus
+from robotconf.readmodel.ledger import Ledger, LedgerError
+from robotconf.reconciler.evidence import Counts, EvidenceKey, WaveEvidence, new_evidence
+from robotconf.reconciler.rollout import criteria, kept_requests, stage_bases, wave_roles
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -33,12 +33,12 @@ from typing import TYPE_CHECKING, Any
 
 import paho.mqtt.client as paho
 
-from contract.backoff import Backoff
-from contract.goals import OutcomeRecord
-from contract.mqtt import Connection, make_client
-from contract.throttle import Throttle
-from contract.wire import Topics
-from readmodel.ledger import (
+from robotconf.contract.backoff import Backoff
+from robotconf.contract.goals import OutcomeRecord
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.throttle import Throttle
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.ledger import (
     DEFAULT_MAX_AGE,
     DEFAULT_MAX_EVENTS,
     DEFAULT_MAX_RECORDS,
@@ -49,12 +49,12 @@ from readmodel.ledger import (
     ledger_path,
     set_aside,
 )
-from readmodel.outcomes import DEFAULT_STREAK, RecordRefused, check_record, streak_event
-from readmodel.retained import Ignored, _guarded
+from robotconf.readmodel.outcomes import DEFAULT_STREAK, RecordRefused, check_record, streak_event
+from robotconf.readmodel.retained import Ignored, _guarded
 
 if TYPE_CHECKING:
-    from readmodel.events import Event
-    from reconciler.metrics import Metrics
+    from robotconf.readmodel.events import Event
+    from robotconf.reconciler.metrics import Metrics
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -24,17 +24,17 @@ from prometheus_client import (
 from prometheus_client.core import GaugeMetricFamily
 from prometheus_client.registry import Collector
 
-from configurator.drift import Drift
-from contract.goals import OutcomeRecord
-from contract.notes import VerdictNote
-from contract.wire import ReconcilerReason, RolloutStatus
-from contract.wire import Verdict as WaveVerdict
-from readmodel.http_edge import EdgeListener, Limits, Request, Response
-from readmodel.outcomes import MAX_LABEL_VALUES, NO_SCENARIO, OTHER, BoundedLabels
-from readmodel.verdicts import Verdict
-from reconciler.decide import state_of
-from reconciler.notify import OUTCOMES
-from reconciler.webhook import SERVERS, UNKNOWN, Outcome
+from robotconf.configurator.drift import Drift
+from robotconf.contract.goals import OutcomeRecord
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import ReconcilerReason, RolloutStatus
+from robotconf.contract.wire import Verdict as WaveVerdict
+from robotconf.readmodel.http_edge import EdgeListener, Limits, Request, Response
+from robotconf.readmodel.outcomes import MAX_LABEL_VALUES, NO_SCENARIO, OTHER, BoundedLabels
+from robotconf.readmodel.verdicts import Verdict
+from robotconf.reconciler.decide import state_of
+from robotconf.reconciler.notify import OUTCOMES
+from robotconf.reconciler.webhook import SERVERS, UNKNOWN, Outcome
 
 INTERFACES_VERDICTS = ("reported", "unknown", "error")
 LEDGER_RESULTS = ("kept", "duplicate", "refused")

@@ -15,7 +15,7 @@ import subprocess
 from collections.abc import Sequence
 from pathlib import Path
 
-from contract.notes import MAX_NOTE_BYTES, NOTES_REF, VerdictNote, read_notes
+from robotconf.contract.notes import MAX_NOTE_BYTES, NOTES_REF, VerdictNote, read_notes
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import unquote, urlsplit, urlunsplit
 
-from contract.backoff import Backoff
-from readmodel.events import Event
+from robotconf.contract.backoff import Backoff
+from robotconf.readmodel.events import Event
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
-from contract.launch import RolloutAction
-from contract.notes import VerdictNote
-from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable
-from contract.typing_errors import error_line
-from contract.wire import OperatorAnswer, RolloutStatus, short_rev
+from robotconf.contract.launch import RolloutAction
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.textsafe import printable
+from robotconf.contract.typing_errors import error_line
+from robotconf.contract.wire import OperatorAnswer, RolloutStatus, short_rev
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
@@ -54,7 +54,7 @@ def judge_action(
     data, action = read
     why: str | None = None
     if key is not None:
-        from contract.signing import verify_object
+        from robotconf.contract.signing import verify_object
 
         problem = verify_object(data, key)
         why = problem.replace("this agent", "this reconciler") if problem else None

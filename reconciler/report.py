@@ -13,14 +13,14 @@ from dataclasses import dataclass
 
 from pydantic import ValidationError
 
-from configurator.rendered import RenderedRequest
-from contract.safejson import PayloadError
-from contract.wire import ReconcilerStatus, Topics, now
-from readmodel.observed import RECONCILER_STATUS
-from readmodel.retained import Ignored, Presence, RetainedView, read_object
-from reconciler.decide import Condition, Reason
-from reconciler.desired import Desired
-from reconciler.diff import Actions
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.safejson import PayloadError
+from robotconf.contract.wire import ReconcilerStatus, Topics, now
+from robotconf.readmodel.observed import RECONCILER_STATUS
+from robotconf.readmodel.retained import Ignored, Presence, RetainedView, read_object
+from robotconf.reconciler.decide import Condition, Reason
+from robotconf.reconciler.desired import Desired
+from robotconf.reconciler.diff import Actions
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -12,12 +12,12 @@ import logging
 import threading
 from collections.abc import Callable
 
-from contract.interfaces import Reported
-from contract.mqtt import Connection
-from contract.topics import Role, subscriptions
-from contract.wire import AgentState, AgentStatus, ReconcilerStatus, Topics, is_online
-from readmodel.observed import ReadMemo, parse_retained
-from readmodel.retained import Ignored, RetainedView, take_snapshot_said
+from robotconf.contract.interfaces import Reported
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import AgentState, AgentStatus, ReconcilerStatus, Topics, is_online
+from robotconf.readmodel.observed import ReadMemo, parse_retained
+from robotconf.readmodel.retained import Ignored, RetainedView, take_snapshot_said
 
 log = logging.getLogger("robotconf.reconciler")
 SAMPLE_TIMEOUT = 10.0  # seconds to wait for a sample of the robots' statuses

@@ -16,14 +16,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from configurator.render import FleetRender
-from configurator.rendered import RenderedRequest
-from configurator.stages import WavePlan, plan_waves
-from configurator.waves import failure_budget
-from contract.notes import VerdictNote
-from contract.wire import VERIFY_COMMANDS, RolloutState, RolloutStatus, WaveVerification
-from reconciler.evidence import Roles
-from reconciler.rollout_gate import (
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.stages import WavePlan, plan_waves
+from robotconf.configurator.waves import failure_budget
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import VERIFY_COMMANDS, RolloutState, RolloutStatus, WaveVerification
+from robotconf.reconciler.evidence import Roles
+from robotconf.reconciler.rollout_gate import (
     VERIFY_POLL,
     WaveGate,
     criteria,
@@ -32,10 +32,10 @@ from reconciler.rollout_gate import (
     revocation,
     wave_verification,
 )
-from reconciler.rollout_health import DARK_GRACE, Health, WaveJudge, deferral_deadline
-from reconciler.rollout_report import rollout_status, verdict_note
-from reconciler.rollout_requests import back, hold, kept_requests, stage_bases
-from reconciler.rollout_scope import RolloutInput, RolloutScope, RolloutStep
+from robotconf.reconciler.rollout_health import DARK_GRACE, Health, WaveJudge, deferral_deadline
+from robotconf.reconciler.rollout_report import rollout_status, verdict_note
+from robotconf.reconciler.rollout_requests import back, hold, kept_requests, stage_bases
+from robotconf.reconciler.rollout_scope import RolloutInput, RolloutScope, RolloutStep
 
 # What callers import from here: the step, its input and result, and the rules the
 # reconciler's evidence feed and builds share with it (defined in the parts).

@@ -7,16 +7,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from configurator.render import FleetRender
-from configurator.stages import WaveSpec
-from configurator.types import Verify
-from configurator.waves import failure_budget
-from contract.notes import VerdictNote
-from contract.wire import WaveVerification, is_online, short_rev
-from reconciler.evidence import EvidenceKey, Roles, judge, new_evidence
-from reconciler.rollout_health import FAILED_STATES
-from reconciler.rollout_report import verdict_note
-from reconciler.rollout_scope import RolloutScope
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.stages import WaveSpec
+from robotconf.configurator.types import Verify
+from robotconf.configurator.waves import failure_budget
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import WaveVerification, is_online, short_rev
+from robotconf.reconciler.evidence import EvidenceKey, Roles, judge, new_evidence
+from robotconf.reconciler.rollout_health import FAILED_STATES
+from robotconf.reconciler.rollout_report import verdict_note
+from robotconf.reconciler.rollout_scope import RolloutScope
 
 # Seconds between looks at a wave's evidence while it is gathered: outcomes arrive on their own
 # schedule (the ledger's feed), and a verdict a second or two later is soon enough.

@@ -9,10 +9,10 @@ import math
 from collections.abc import Callable, Mapping
 from enum import Enum
 
-from configurator.types import RolloutPolicy
-from contract.wire import AgentState, AgentStatus, is_online
-from reconciler.rollout_scope import RolloutInput, RolloutScope
-from reconciler.wave_memory import WaveMemory, memory_of
+from robotconf.configurator.types import RolloutPolicy
+from robotconf.contract.wire import AgentState, AgentStatus, is_online
+from robotconf.reconciler.rollout_scope import RolloutInput, RolloutScope
+from robotconf.reconciler.wave_memory import WaveMemory, memory_of
 
 # An agent reporting these about the new request has failed it.
 FAILED_STATES = {AgentState.FAILED, AgentState.BACKOFF, AgentState.EXITED}

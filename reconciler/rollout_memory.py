@@ -19,20 +19,20 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
-from configurator.render import FleetRender
-from contract.notes import VerdictNote
-from contract.safejson import PayloadError
-from contract.wire import OperatorAnswer, ReconcilerStatus, Topics, short_rev
-from readmodel.observed import WAVE_RECORD
-from readmodel.retained import Ignored, RetainedView, read_object
-from reconciler.decide import Condition
-from reconciler.desired import Desired
-from reconciler.evidence import Counts, WaveEvidence
-from reconciler.evidence_feed import EvidenceCounter
-from reconciler.notes_store import NotesError, NotesStore
-from reconciler.operator_actions import Refused, judge_action
-from reconciler.report import one_line
-from reconciler.wave_memory import WaveRecord
+from robotconf.configurator.render import FleetRender
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.safejson import PayloadError
+from robotconf.contract.wire import OperatorAnswer, ReconcilerStatus, Topics, short_rev
+from robotconf.readmodel.observed import WAVE_RECORD
+from robotconf.readmodel.retained import Ignored, RetainedView, read_object
+from robotconf.reconciler.decide import Condition
+from robotconf.reconciler.desired import Desired
+from robotconf.reconciler.evidence import Counts, WaveEvidence
+from robotconf.reconciler.evidence_feed import EvidenceCounter
+from robotconf.reconciler.notes_store import NotesError, NotesStore
+from robotconf.reconciler.operator_actions import Refused, judge_action
+from robotconf.reconciler.report import one_line
+from robotconf.reconciler.wave_memory import WaveRecord
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from contract.notes import VerdictNote
-from contract.wire import (
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import (
     MAX_LISTED,
     RolloutState,
     RolloutStatus,
@@ -15,8 +15,8 @@ from contract.wire import (
     WaveVerification,
     is_online,
 )
-from reconciler.rollout_health import Health, status_unknown
-from reconciler.rollout_scope import RolloutScope
+from robotconf.reconciler.rollout_health import Health, status_unknown
+from robotconf.reconciler.rollout_scope import RolloutScope
 
 
 def rollout_status(

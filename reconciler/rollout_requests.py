@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from configurator.render import FleetRender
-from configurator.rendered import RenderedRequest
-from configurator.stages import WavePlan
-from contract.wire import RolloutStatus, short_rev
-from reconciler.rollout_scope import RolloutScope, RolloutStep
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.stages import WavePlan
+from robotconf.contract.wire import RolloutStatus, short_rev
+from robotconf.reconciler.rollout_scope import RolloutScope, RolloutStep
 
 
 def stage_bases(

@@ -9,14 +9,14 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from configurator.render import FleetRender
-from configurator.rendered import RenderedRequest
-from configurator.stages import WavePlan, WaveSpec
-from configurator.types import RolloutPolicy
-from contract.notes import VerdictNote
-from contract.wire import AgentStatus, RolloutStatus
-from reconciler.evidence import Counts, WaveEvidence
-from reconciler.wave_memory import WaveRecord
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.configurator.stages import WavePlan, WaveSpec
+from robotconf.configurator.types import RolloutPolicy
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import AgentStatus, RolloutStatus
+from robotconf.reconciler.evidence import Counts, WaveEvidence
+from robotconf.reconciler.wave_memory import WaveRecord
 
 
 @dataclass(frozen=True)

@@ -5,12 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contract.signing import Signed
+from robotconf.contract.signing import Signed
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
-    from reconciler.delivery import Signer
+    from robotconf.reconciler.delivery import Signer
 
 
 def make_signer(key_path: Path | None) -> Signer | None:
@@ -18,7 +18,7 @@ def make_signer(key_path: Path | None) -> Signer | None:
     raises SigningKeyError when the key cannot be read."""
     if key_path is None:
         return None
-    from contract.signing import load_private_key, sign
+    from robotconf.contract.signing import load_private_key, sign
 
     key = load_private_key(key_path)
 
@@ -33,6 +33,6 @@ def make_verifier(key_path: Path | None) -> Ed25519PublicKey | None:
     when the lab signs (None: signing is off, the broker's ACL alone says who may act)."""
     if key_path is None:
         return None
-    from contract.signing import load_private_key
+    from robotconf.contract.signing import load_private_key
 
     return load_private_key(key_path).public_key()

@@ -14,8 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from configurator.source import SourceError
-from contract.wire import redact_url
+from robotconf.configurator.source import SourceError
+from robotconf.contract.wire import redact_url
 
 log = logging.getLogger("robotconf.reconciler")
 

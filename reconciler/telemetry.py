@@ -15,21 +15,27 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
-from configurator.drift import Drift, DriftMemo
-from contract.mqtt import Connection
-from contract.topics import Role, subscriptions
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.events import Event, Seen, Told, WaveRun, resumed, resumers, transitions
-from readmodel.observed import ReadMemo, Retained, RobotSeen, parse_retained
-from readmodel.retained import RetainedView
-from readmodel.timeline import Noted, noted_at_start, timeline_transitions
-from readmodel.verdicts import DesiredRobot, Verdict, desired_from_fleet, robot_drift, verdict
-from reconciler.controller import Step
-from reconciler.decide import state_of
+from robotconf.configurator.drift import Drift, DriftMemo
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.events import Event, Seen, Told, WaveRun, resumed, resumers, transitions
+from robotconf.readmodel.observed import ReadMemo, Retained, RobotSeen, parse_retained
+from robotconf.readmodel.retained import RetainedView
+from robotconf.readmodel.timeline import Noted, noted_at_start, timeline_transitions
+from robotconf.readmodel.verdicts import (
+    DesiredRobot,
+    Verdict,
+    desired_from_fleet,
+    robot_drift,
+    verdict,
+)
+from robotconf.reconciler.controller import Step
+from robotconf.reconciler.decide import state_of
 
 if TYPE_CHECKING:
-    from reconciler.metrics import Metrics
-    from reconciler.notify import Notifier
+    from robotconf.reconciler.metrics import Metrics
+    from robotconf.reconciler.notify import Notifier
 
 log = logging.getLogger("robotconf.reconciler")
 

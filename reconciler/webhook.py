@@ -12,9 +12,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable
-from contract.wire import is_commit
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import is_commit
 
 # A push of a few commits is a few kB (GitHub lists at most 20 commits in one); the repository
 # and sender blocks add a few more. A megabyte is generous, and small enough to hold in memory.

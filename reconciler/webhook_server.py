@@ -10,11 +10,11 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
-from contract.files import NotRegularFile
-from contract.textsafe import printable
-from contract.trust import Trust, read_trusted
-from readmodel.http_edge import EdgeListener, Limits, Request, Response
-from reconciler.webhook import MAX_BODY, Answer, Outcome, judge, refused, server_of
+from robotconf.contract.files import NotRegularFile
+from robotconf.contract.textsafe import printable
+from robotconf.contract.trust import Trust, read_trusted
+from robotconf.readmodel.http_edge import EdgeListener, Limits, Request, Response
+from robotconf.reconciler.webhook import MAX_BODY, Answer, Outcome, judge, refused, server_of
 
 log = logging.getLogger("robotconf.reconciler")
 

@@ -40,7 +40,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from contract.goals import (
+from robotconf.contract.goals import (
     MAX_LINE_BYTES,
     MAX_TEXT,
     EventLine,
@@ -50,8 +50,8 @@ from contract.goals import (
     Severity,
     VitalsLine,
 )
-from contract.launch import LaunchRequest
-from contract.textsafe import shorten
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.textsafe import shorten
 
 __all__ = [
     "Binding",

@@ -17,8 +17,8 @@ from collections.abc import Iterator
 from importlib import metadata
 from typing import Any
 
-from contract.wire import DEFAULT_PREFIX
-from workstation.broker_login import BrokerLogin
+from robotconf.contract.wire import DEFAULT_PREFIX
+from robotconf.workstation.broker_login import BrokerLogin
 
 DEFAULT_PORT = 1883
 START_TIMEOUT = 15.0
@@ -124,7 +124,7 @@ class EmbeddedBroker:
                 "the embedded broker needs amqtt: pip install 'robotconf[server]' "
                 "(or pass --broker mqtt://HOST:PORT to use a running broker)"
             ) from exc
-        from workstation.broker_gate import gated
+        from robotconf.workstation.broker_gate import gated
 
         if not gated():  # amqtt outside the pinned range: its CONNECT is read elsewhere
             logging.getLogger("robotconf.broker").warning(
@@ -162,7 +162,7 @@ class EmbeddedBroker:
             raise BrokerStartError(f"port {port}: {_reason(self._error)}")
 
     def _run(self) -> None:
-        from workstation.broker_gate import GatedBroker, LoginPlugin, TopicRulesPlugin
+        from robotconf.workstation.broker_gate import GatedBroker, LoginPlugin, TopicRulesPlugin
 
         loop = asyncio.new_event_loop()
         self._loop = loop

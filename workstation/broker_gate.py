@@ -26,11 +26,11 @@ from amqtt.mqtt.connack import (
 from amqtt.mqtt.connect import ConnectPacket
 from amqtt.plugins.base import BaseAuthPlugin, BaseTopicPlugin
 
-from configurator.brokerconf import ServiceUsers
-from contract.throttle import Throttle
-from contract.topics import Grants, grants
-from contract.wire import DEFAULT_PREFIX, agent_client_id
-from workstation.broker_login import BrokerLogin, accepts
+from robotconf.configurator.brokerconf import ServiceUsers
+from robotconf.contract.throttle import Throttle
+from robotconf.contract.topics import Grants, grants
+from robotconf.contract.wire import DEFAULT_PREFIX, agent_client_id
+from robotconf.workstation.broker_login import BrokerLogin, accepts
 
 log = logging.getLogger("robotconf.broker")
 GRANTS_CACHED = 1024  # clients (user name and client id) whose compiled rules are kept

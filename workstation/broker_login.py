@@ -10,8 +10,8 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from contract.models import file_name_problem, is_robot_id
-from contract.trust import read_secret_text
+from robotconf.contract.models import file_name_problem, is_robot_id
+from robotconf.contract.trust import read_secret_text
 
 USERNAME = "operator"  # the operator's commands (the desk); up's reconciler and robots have theirs
 RECONCILER = "reconciler"

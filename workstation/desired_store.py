@@ -21,11 +21,10 @@ from itertools import chain
 from pathlib import Path
 from typing import Any, TypeGuard, overload
 
-import configurator
-import contract
-from configurator.drift import Need
-from contract.wire import is_commit
-from readmodel.verdicts import DesiredRobot
+from robotconf import configurator, contract
+from robotconf.configurator.drift import Need
+from robotconf.contract.wire import is_commit
+from robotconf.readmodel.verdicts import DesiredRobot
 
 FORMAT = 1
 MAX_BYTES = 256 * 1024 * 1024  # far above 10,000 robots (about 4 MB): a bound, not a size

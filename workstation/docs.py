@@ -1,7 +1,7 @@
 """The docs site's reference pages generated from the code: every command's `--help`, the rule
-codes table, the file formats' fields and the MQTT topic table; `python -m workstation.docs
-[--check]` writes or checks them (rules.md and file-formats.md are hand-written around their
-generated tables).
+codes table, the file formats' fields and the MQTT topic table;
+`python -m robotconf.workstation.docs [--check]` writes or checks them (rules.md and
+file-formats.md are hand-written around their generated tables).
 """
 
 from __future__ import annotations
@@ -21,14 +21,15 @@ from typing import Any
 import click
 from pydantic import BaseModel
 
-from contract.codes import with_readme_table
-from contract.errors import ExitCode
-from contract.topics import CLIENT, EVERYONE, ROBOT, TOPICS, Role, Topic
+from robotconf.contract.codes import with_readme_table
+from robotconf.contract.errors import ExitCode
+from robotconf.contract.topics import CLIENT, EVERYONE, ROBOT, TOPICS, Role, Topic
 
 ROOT = Path(__file__).resolve().parents[1]
 # Help is laid out for an 80-column terminal whatever the terminal generating it is.
 COLUMNS = "80"
-GENERATED = "Generated from the code by `python -m workstation.docs`: edit the code, not this page."
+COMMAND = "python -m robotconf.workstation.docs"
+GENERATED = f"Generated from the code by `{COMMAND}`: edit the code, not this page."
 
 
 # ---- commands.md -------------------------------------------------------------------------
@@ -63,7 +64,7 @@ def _fixed_terminal() -> Iterator[None]:
 def command_help(words: list[str]) -> str:
     """What `robotconf WORDS --help` prints, taken from the same entry point the shell runs
     (so `robotconf agent --help` is the agent's argparse help)."""
-    from workstation.cli.main import main
+    from robotconf.workstation.cli.main import main
 
     out = io.StringIO()
     with _fixed_terminal(), contextlib.redirect_stdout(out):
@@ -75,7 +76,7 @@ def command_help(words: list[str]) -> str:
 
 def command_paths() -> list[list[str]]:
     """Every command and subcommand, depth first in the order `robotconf --help` lists them."""
-    from workstation.cli.main import cli
+    from robotconf.workstation.cli.main import cli
 
     found: list[list[str]] = []
 
@@ -148,9 +149,9 @@ def _place(pattern: re.Pattern[str]) -> str:
 
 def formats() -> list[Format]:
     """Every document format, the catalogue's first, then the lab's, then the others."""
-    from agent.config import AgentConfig
-    from configurator.loader import KIND_BY_NAME, RULE_CONFIGURATION_KIND
-    from contract.launch import LaunchRequest
+    from robotconf.agent.config import AgentConfig
+    from robotconf.configurator.loader import KIND_BY_NAME, RULE_CONFIGURATION_KIND
+    from robotconf.contract.launch import LaunchRequest
 
     catalogue = ["platform", "robot-template", "mapping-scheme", "action", "task", "environment"]
     order = [*catalogue, "capability", "scenario", "fleet"]
@@ -387,7 +388,7 @@ reconciler's `--prefix` say otherwise). `<id>` is a robot's id: a robot may use 
 `<client>` is a client's id. Generated from `contract/topics.py`, the one declaration the
 broker ACL (`robotconf broker-config`), the agent's and the reconciler's subscriptions and the
 checks of `robotconf up`'s embedded broker are derived from: rewrite this page with
-`python -m workstation.docs`.
+`python -m robotconf.workstation.docs`.
 
 """
 TOPICS_TABLE_HEAD = (
@@ -460,7 +461,7 @@ def wanted(root: Path) -> dict[str, tuple[str, str]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m workstation.docs",
+        prog="python -m robotconf.workstation.docs",
         description="Write the docs site's generated reference pages (commands, rule codes, "
         "file formats); --check fails when one is stale.",
     )
@@ -468,17 +469,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path, default=ROOT, help="the repository (default: ours)")
     args = parser.parse_args(argv)
     if not (args.root / "docs").is_dir():
-        print(f"python -m workstation.docs: {args.root} has no docs/ folder", file=sys.stderr)
+        print(f"{COMMAND}: {args.root} has no docs/ folder", file=sys.stderr)
         return ExitCode.TOOL
     try:
         pages = wanted(args.root)
     except (OSError, UnicodeDecodeError, ValueError, RuntimeError) as exc:
-        print(f"python -m workstation.docs: {exc}", file=sys.stderr)
+        print(f"python -m robotconf.workstation.docs: {exc}", file=sys.stderr)
         return ExitCode.TOOL
     stale = [page for page, (now, new) in pages.items() if now != new]
     if args.check:
         if stale:
-            print(f"stale: {', '.join(stale)}; run: python -m workstation.docs", file=sys.stderr)
+            print(f"stale: {', '.join(stale)}; run: {COMMAND}", file=sys.stderr)
             return ExitCode.FINDINGS
         print(f"docs are current ({len(pages)} generated pages)")
         return ExitCode.OK

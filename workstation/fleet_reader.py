@@ -10,12 +10,12 @@ import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 
-from configurator.drift import DriftMemo
-from contract.mqtt import Connection
-from contract.wire import ReconcilerStatus, Topics
-from readmodel.observed import ReadMemo, parse_retained
-from readmodel.retained import RetainedView
-from readmodel.verdicts import (
+from robotconf.configurator.drift import DriftMemo
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import ReconcilerStatus, Topics
+from robotconf.readmodel.observed import ReadMemo, parse_retained
+from robotconf.readmodel.retained import RetainedView
+from robotconf.readmodel.verdicts import (
     DesiredRobot,
     FleetStatus,
     RobotRow,
@@ -23,7 +23,7 @@ from readmodel.verdicts import (
     desired_from_retained,
     row_order,
 )
-from workstation.fleet_status import (
+from robotconf.workstation.fleet_status import (
     Desired,
     DesiredSource,
     Given,

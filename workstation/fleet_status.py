@@ -9,17 +9,17 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
-from configurator.drift import DriftMemo
-from configurator.gcpause import collector_paused
-from configurator.render import RenderError, render_fleet
-from configurator.source import SourceError
-from configurator.workspace import check
-from contract.mqtt import Connection
-from contract.topics import Role, subscriptions
-from contract.wire import ReconcilerStatus, Topics
-from readmodel.observed import ReadMemo, parse_retained
-from readmodel.retained import RetainedView
-from readmodel.verdicts import (
+from robotconf.configurator.drift import DriftMemo
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.configurator.render import RenderError, render_fleet
+from robotconf.configurator.source import SourceError
+from robotconf.configurator.workspace import check
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import ReconcilerStatus, Topics
+from robotconf.readmodel.observed import ReadMemo, parse_retained
+from robotconf.readmodel.retained import RetainedView
+from robotconf.readmodel.verdicts import (
     DesiredRobot,
     FleetStatus,
     Verdict,
@@ -28,7 +28,7 @@ from readmodel.verdicts import (
     desired_from_retained,
     short_rev,
 )
-from workstation import desired_store
+from robotconf.workstation import desired_store
 
 CONFIRM_TIMEOUT = 5.0  # seconds for the few topics a lossy-looking read is checked with
 

@@ -29,20 +29,20 @@ from urllib.parse import quote
 
 import yaml
 
-from agent.parent_death import ENV as DIE_WITH_PARENT
-from agent.standin_ros2 import GRAPH_ENV
-from agent.standin_ros2 import install as install_ros2
-from agent.workdir import HOLD_FILE, LOCK_FILE, WorkdirLock
-from configurator.render import FleetRender
-from configurator.source import SourceError
-from contract.errors import CliError, ExitCode
-from contract.files import read_regular, write_atomic
-from contract.lifecycle import log_to_file, on_stop_signals
-from contract.models import file_name
-from contract.mqtt import Connection
-from contract.pidlock import PidLock
-from contract.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
-from contract.wire import (
+from robotconf.agent.parent_death import ENV as DIE_WITH_PARENT
+from robotconf.agent.standin_ros2 import GRAPH_ENV
+from robotconf.agent.standin_ros2 import install as install_ros2
+from robotconf.agent.workdir import HOLD_FILE, LOCK_FILE, WorkdirLock
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.source import SourceError
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.files import read_regular, write_atomic
+from robotconf.contract.lifecycle import log_to_file, on_stop_signals
+from robotconf.contract.models import file_name
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.pidlock import PidLock
+from robotconf.contract.signing import PRIVATE_NAME, PUBLIC_NAME, KeyPair, generate_keys
+from robotconf.contract.wire import (
     BROKER_ENV,
     ReconcilerReason,
     ReconcilerStatus,
@@ -50,28 +50,28 @@ from contract.wire import (
     redact_url,
     short_rev,
 )
-from readmodel.ledger import ledger_path
-from readmodel.retained import RetainedView
-from readmodel.verdicts import (
+from robotconf.readmodel.ledger import ledger_path
+from robotconf.readmodel.retained import RetainedView
+from robotconf.readmodel.verdicts import (
     FleetStatus,
     clean,
     desired_from_fleet,
     diagnostic_lines,
     rollout_line,
 )
-from reconciler.controller import Controller
-from reconciler.desired import DesiredBuilder
-from reconciler.signer import make_signer, make_verifier
-from reconciler.source import LocalBranch, open_repo
-from reconciler.telemetry import Telemetry
-from workstation import desired_store
-from workstation.fleet_reader import FleetReader, open_reader
-from workstation.fleet_status import Desired, change_key
-from workstation.up_desk import UpDesk, write_desk
+from robotconf.reconciler.controller import Controller
+from robotconf.reconciler.desired import DesiredBuilder
+from robotconf.reconciler.signer import make_signer, make_verifier
+from robotconf.reconciler.source import LocalBranch, open_repo
+from robotconf.reconciler.telemetry import Telemetry
+from robotconf.workstation import desired_store
+from robotconf.workstation.fleet_reader import FleetReader, open_reader
+from robotconf.workstation.fleet_status import Desired, change_key
+from robotconf.workstation.up_desk import UpDesk, write_desk
 
 if TYPE_CHECKING:
-    from reconciler.ledger_feed import LedgerFeed
-    from workstation.ui.run import RunningUi, UiOptions
+    from robotconf.reconciler.ledger_feed import LedgerFeed
+    from robotconf.workstation.ui.run import RunningUi, UiOptions
 
 log = logging.getLogger("robotconf.up")
 
@@ -212,7 +212,7 @@ def agent_yaml(
         "broker": connection.url,
         "prefix": prefix,
         "description": description,
-        "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+        "command": [sys.executable, "-m", "robotconf.agent.standin_brain", "{launch_request}"],
         "workdir": str(workdir / robot_id),
         "stop_timeout": AGENT_STOP_TIMEOUT,
         # The stand-in brain re-reads its request on SIGHUP: a settings-only commit reloads it.
@@ -300,7 +300,7 @@ def recover_agents(workdir: Path, say: Callable[[str], None]) -> None:
 def standin_graph(fleet: FleetRender, robot_id: str) -> dict[str, Any]:
     """The graph the robot's stand-in `ros2` prints: every interface its request needs, with
     the types it needs, and the ROS graph's own two topics, as a robot built for it reports."""
-    from configurator.drift import needs_of_rendered
+    from robotconf.configurator.drift import needs_of_rendered
 
     kinds = {"topic": "topics", "service": "services", "action_client": "actions"}
     graph: dict[str, Any] = {
@@ -373,7 +373,7 @@ class Agents:
                 (folder / GRAPH_FILE).write_text(graph, encoding="utf-8")
             with (folder / "agent.log").open("ab") as out:
                 self.procs[robot_id] = subprocess.Popen(
-                    [sys.executable, "-m", "agent.cli", "--config", str(config)],
+                    [sys.executable, "-m", "robotconf.agent.cli", "--config", str(config)],
                     stdin=subprocess.DEVNULL,
                     stdout=out,
                     stderr=out,
@@ -510,7 +510,7 @@ class Logins:
         """The connection of `user`: a robot (its id) or a service user of the embedded broker."""
         if self.folder is None:
             return self._connection
-        from workstation.broker_login import broker_login
+        from robotconf.workstation.broker_login import broker_login
 
         return self._as(broker_login(self.folder, user))
 
@@ -530,8 +530,8 @@ def _start_broker(
     if given_broker:
         say(f"broker: {redact_url(given_broker)} (given by {setup.broker_origin})")
         return None, None, given_broker
-    from workstation.broker import BrokerStartError, EmbeddedBroker
-    from workstation.broker_login import RECONCILER, USERNAME, broker_login, prune_logins
+    from robotconf.workstation.broker import BrokerStartError, EmbeddedBroker
+    from robotconf.workstation.broker_login import RECONCILER, USERNAME, broker_login, prune_logins
 
     folder = setup.workdir / "broker"
     login = broker_login(folder)
@@ -671,8 +671,8 @@ def _start_ledger(
 ) -> LedgerFeed | None:
     """The outcome ledger under up's folder (`robotconf history` finds it there); a state
     folder that cannot be written is said, and `up` runs without a ledger."""
-    from readmodel.ledger import LedgerError
-    from reconciler.ledger_feed import LedgerFeed, LedgerSettings
+    from robotconf.readmodel.ledger import LedgerError
+    from robotconf.reconciler.ledger_feed import LedgerFeed, LedgerSettings
 
     feed = LedgerFeed(connection, prefix, LedgerSettings(setup.state_dir))
     try:
@@ -694,10 +694,10 @@ def _start_ui(
     with up's key (its agents verify it); its address and login link said."""
     if setup.ui is None:
         return None
-    from contract.signing import load_private_key
-    from readmodel.ledger import ledger_path
-    from workstation.ui.revisions import LedgerHistory
-    from workstation.ui.run import RunningUi
+    from robotconf.contract.signing import load_private_key
+    from robotconf.readmodel.ledger import ledger_path
+    from robotconf.workstation.ui.revisions import LedgerHistory
+    from robotconf.workstation.ui.run import RunningUi
 
     history = LedgerHistory(ledger_path(setup.state_dir))
     key = load_private_key(private_key) if private_key is not None else None
@@ -719,7 +719,7 @@ def with_operator(setup: UpSetup) -> UpSetup:
     mode 0600; a wider mode is refused, CliError), who logs in with the link `up` prints."""
     if setup.ui is None:
         return setup
-    from workstation.ui.auth import OperatorAuth, own_token
+    from robotconf.workstation.ui.auth import OperatorAuth, own_token
 
     token, made = own_token(setup.workdir / UI_TOKEN, "up's operator token file")
     ui = dataclasses.replace(setup.ui, auth=OperatorAuth(token), link_login=True)

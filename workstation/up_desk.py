@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from contract.trust import Trust, UntrustedFile, euid, folder_refusal, open_trusted
+from robotconf.contract.trust import Trust, UntrustedFile, euid, folder_refusal, open_trusted
 
 DESK_FILE = Path(".robotconf") / "up" / "desk.json"
 MAX_DESK_BYTES = 16 * 1024  # a few paths; anything larger is not up's

@@ -11,20 +11,25 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from configurator.repository import Repository
-from configurator.resolve import ResolvedCapability, resolve_capability
-from configurator.rules.catalogue import (
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.resolve import ResolvedCapability, resolve_capability
+from robotconf.configurator.rules.catalogue import (
     check_action,
     check_environment,
     check_scheme,
     check_task,
     check_template,
 )
-from configurator.rules.configs import check_capability, check_fleet, check_scenario
-from configurator.rules.namespaces import ScenarioNames, check_namespaces, scenario_names
-from configurator.rules.report import Reporter
-from configurator.rules.rollout import check_groups, check_labels, check_rollout, check_stages
-from contract.diagnostics import Diagnostic
+from robotconf.configurator.rules.configs import check_capability, check_fleet, check_scenario
+from robotconf.configurator.rules.namespaces import ScenarioNames, check_namespaces, scenario_names
+from robotconf.configurator.rules.report import Reporter
+from robotconf.configurator.rules.rollout import (
+    check_groups,
+    check_labels,
+    check_rollout,
+    check_stages,
+)
+from robotconf.contract.diagnostics import Diagnostic
 
 # Values worked out from the repository once per name and argument (a scenario's ROS names),
 # shared by the units that need them: memoised in one build, and across builds by the

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from configurator.composition import definition_problems
-from configurator.repository import Entry, Platform, Repository
-from configurator.rosnames import mapping_name_problem
-from configurator.rules.report import Reporter
-from configurator.types import (
+from robotconf.configurator.composition import definition_problems
+from robotconf.configurator.repository import Entry, Platform, Repository
+from robotconf.configurator.rosnames import mapping_name_problem
+from robotconf.configurator.rules.report import Reporter
+from robotconf.configurator.types import (
     Action,
     Environment,
     MappingScheme,

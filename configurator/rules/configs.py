@@ -6,7 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from configurator.composition import (
+from robotconf.configurator.composition import (
     find_location,
     implementation_for,
     missing_requires,
@@ -14,10 +14,10 @@ from configurator.composition import (
     setting_problem,
     template_gaps,
 )
-from configurator.repository import Entry, Repository
-from configurator.resolve import ResolvedCapability, resolve_capability
-from configurator.rules.report import Reporter
-from configurator.types import (
+from robotconf.configurator.repository import Entry, Repository
+from robotconf.configurator.resolve import ResolvedCapability, resolve_capability
+from robotconf.configurator.rules.report import Reporter
+from robotconf.configurator.types import (
     CapabilityConfiguration,
     Environment,
     Goal,
@@ -27,7 +27,7 @@ from configurator.types import (
     is_robot_id,
     reserved_robot_id,
 )
-from contract.diagnostics import closest
+from robotconf.contract.diagnostics import closest
 
 
 def check_capability(

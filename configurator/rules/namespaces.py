@@ -8,9 +8,9 @@ import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
-from configurator.repository import Entry, Repository
-from configurator.resolve import bound_mappings, resolve_capability
-from configurator.rosnames import (
+from robotconf.configurator.repository import Entry, Repository
+from robotconf.configurator.resolve import bound_mappings, resolve_capability
+from robotconf.configurator.rosnames import (
     NAME_BUDGET,
     NAMESPACE_SUBSTITUTION,
     absolute_namespace,
@@ -22,8 +22,8 @@ from configurator.rosnames import (
     resolve_name,
     suggest_namespace,
 )
-from configurator.rules.report import Reporter
-from configurator.types import MAX_ROS_DOMAIN_ID, Fleet, MappingBinding
+from robotconf.configurator.rules.report import Reporter
+from robotconf.configurator.types import MAX_ROS_DOMAIN_ID, Fleet, MappingBinding
 
 # A service is a server the robots call: one of the world (a door controller) is shared on
 # purpose, and two clients calling it do not drive each other. Topics and actions are a robot's

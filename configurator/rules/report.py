@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from configurator.repository import Entry
-from contract.codes import severity_of
-from contract.diagnostics import Diagnostic, did_you_mean
+from robotconf.configurator.repository import Entry
+from robotconf.contract.codes import severity_of
+from robotconf.contract.diagnostics import Diagnostic, did_you_mean
 
 
 class Reporter:

@@ -3,11 +3,11 @@ selector naming labels that exist."""
 
 from __future__ import annotations
 
-from configurator.repository import Entry, Repository
-from configurator.rules.report import Reporter
-from configurator.stages import Placement, SelectorError, assign_stages, parse_selector
-from configurator.types import Fleet, RolloutPolicy, Stage, is_robot_id
-from configurator.waves import assign_waves, failure_budget, matches
+from robotconf.configurator.repository import Entry, Repository
+from robotconf.configurator.rules.report import Reporter
+from robotconf.configurator.stages import Placement, SelectorError, assign_stages, parse_selector
+from robotconf.configurator.types import Fleet, RolloutPolicy, Stage, is_robot_id
+from robotconf.configurator.waves import assign_waves, failure_budget, matches
 
 # An error listing robots names this many, then how many more.
 _SHOWN = 5

@@ -18,11 +18,16 @@ from typing import Any
 import paho.mqtt.client as paho
 import yaml
 
-from agent.process import is_alive, read_pidfile
-from configurator.types import MappingBinding
-from contract.launch import LaunchCapability, LaunchRequest, LaunchScenario, make_launch_request
-from contract.mqtt import Connection, make_client
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.agent.process import is_alive, read_pidfile
+from robotconf.configurator.types import MappingBinding
+from robotconf.contract.launch import (
+    LaunchCapability,
+    LaunchRequest,
+    LaunchScenario,
+    make_launch_request,
+)
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
 
@@ -40,13 +45,13 @@ FAILS_ONCE = [
 
 TIMEOUT = 20.0
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
-STANDIN = [sys.executable, "-m", "agent.standin_brain"]
+STANDIN = [sys.executable, "-m", "robotconf.agent.standin_brain"]
 
 
 def agent_argv() -> list[str]:
     if ROBOTCONF.exists():
         return [str(ROBOTCONF), "agent"]
-    return [sys.executable, "-m", "agent.cli"]
+    return [sys.executable, "-m", "robotconf.agent.cli"]
 
 
 def make_request(
@@ -264,7 +269,7 @@ class AgentProc:
 def _is_standin(pid: int) -> bool:
     """Only ever kill our own stand-in brains, never a process that reused a pid."""
     try:
-        return b"agent.standin_brain" in Path(f"/proc/{pid}/cmdline").read_bytes()
+        return b"robotconf.agent.standin_brain" in Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return False
 

@@ -16,11 +16,11 @@ from typing import Any
 
 import yaml
 
-from configurator.rendered import RenderedRequest
-from contract.mqtt import Connection
-from reconciler.controller import Controller
-from reconciler.desired import load_desired
-from reconciler.source import BranchSource
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.mqtt import Connection
+from robotconf.reconciler.controller import Controller
+from robotconf.reconciler.desired import load_desired
+from robotconf.reconciler.source import BranchSource
 from tests.support.lab import Lab
 
 ROBOTCONF = Path(sys.executable).parent / "robotconf"
@@ -46,7 +46,7 @@ def robotconf_argv(*args: str) -> list[str]:
     return [
         sys.executable,
         "-c",
-        "import sys; from workstation.cli import main; sys.exit(main())",
+        "import sys; from robotconf.workstation.cli import main; sys.exit(main())",
         *args,
     ]
 
@@ -153,7 +153,7 @@ def start_agent(
         "command": [
             sys.executable,
             "-m",
-            "agent.standin_brain",
+            "robotconf.agent.standin_brain",
             "{launch_request}",
             *brain_options,
         ],

@@ -3,7 +3,7 @@ what `status`, `up` and the browser view show of them; and published retained to
 
 from __future__ import annotations
 
-from contract.goals import (
+from robotconf.contract.goals import (
     BrainEvent,
     CurrentGoal,
     GoalsSummary,
@@ -12,7 +12,7 @@ from contract.goals import (
     Severity,
     TaskCounts,
 )
-from contract.wire import Topics
+from robotconf.contract.wire import Topics
 from tests.support.agents import Broker, publish
 
 REV1 = "1" * 40

@@ -12,9 +12,9 @@ from typing import Any, TypeVar
 
 import paho.mqtt.client as paho
 
-from contract.goals import GoalsSummary, OutcomeRecord
-from contract.mqtt import Connection, make_client
-from contract.wire import Topics
+from robotconf.contract.goals import GoalsSummary, OutcomeRecord
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import Topics
 from tests.support.watch import TIMEOUT, wait_for
 
 T = TypeVar("T")

@@ -45,13 +45,17 @@ def run(argv: list[str], cwd: Path | None = None) -> str:
 
 
 def copy_project(dest: Path) -> Path:
-    """The files a build reads, copied so that the build's egg-info stays out of the checkout."""
+    """The files a build reads, copied so that the build's egg-info stays out of the checkout:
+    the folders as they are, robotconf/'s links to them (robotconf/agent -> ../agent) kept."""
     dest.mkdir(parents=True)
     for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy2(ROOT / name, dest / name)
     for package in PACKAGES:
         shutil.copytree(
-            ROOT / package, dest / package, ignore=shutil.ignore_patterns("__pycache__")
+            ROOT / package,
+            dest / package,
+            symlinks=True,
+            ignore=shutil.ignore_patterns("__pycache__"),
         )
     return dest
 
@@ -66,11 +70,33 @@ def build_wheel(dest: Path) -> Path:
     return wheel
 
 
-def fresh_install(root: Path, *requirements: str) -> Path:
+def fresh_install(root: Path, *requirements: str, decoys: bool = False) -> Path:
     """A new virtual environment under `root` with robotconf's wheel (and `requirements`)
-    installed as pip resolves them from the package index; returns the environment."""
+    installed as pip resolves them from the package index; returns the environment. With
+    `decoys`, packages of other people named `agent` and `contract` are there first."""
     wheel = build_wheel(root)
     env = root / "venv"
     run([sys.executable, "-m", "venv", str(env)])
+    if decoys:
+        add_decoys(env)
     run([str(env / "bin" / "python"), "-m", "pip", "install", "-q", str(wheel), *requirements])
     return env
+
+
+# Unrelated packages that share a name with a folder of this repository: a robot or a
+# workstation may well hold an `agent` or a `contract` of its own.
+DECOYS = ("agent", "contract")
+
+
+def site_packages(env: Path) -> Path:
+    """The environment's one site-packages folder."""
+    (found,) = env.glob("lib/python3*/site-packages")
+    return found
+
+
+def add_decoys(env: Path) -> None:
+    """Installs DECOYS into `env`, each a package that says whose it is (`OWNER`)."""
+    for name in DECOYS:
+        package = site_packages(env) / name
+        package.mkdir()
+        (package / "__init__.py").write_text(f'OWNER = "someone else\'s {name}"\n')

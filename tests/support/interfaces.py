@@ -7,9 +7,9 @@ import itertools
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
-from contract.interfaces import Interface, RobotInterfaces
-from contract.mqtt import parse_broker_url
-from contract.wire import Topics
+from robotconf.contract.interfaces import Interface, RobotInterfaces
+from robotconf.contract.mqtt import parse_broker_url
+from robotconf.contract.wire import Topics
 
 _ids = itertools.count(1)
 

@@ -7,10 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from configurator.render import render_robot
-from configurator.workspace import Checked, check
-from contract.diagnostics import Diagnostic
-from contract.launch import LaunchRequest
+from robotconf.configurator.render import render_robot
+from robotconf.configurator.workspace import Checked, check
+from robotconf.contract.diagnostics import Diagnostic
+from robotconf.contract.launch import LaunchRequest
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOTCONF = str(Path(sys.executable).parent / "robotconf")

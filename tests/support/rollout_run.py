@@ -4,13 +4,13 @@ them (the roles and criteria of the step the rollout stands in)."""
 
 from __future__ import annotations
 
-from configurator.render import FleetRender
-from configurator.stages import plan_waves
-from contract.notes import VerdictNote
-from contract.wire import AgentState, AgentStatus, RolloutStatus
-from readmodel.outcomes import Row
-from reconciler.evidence import EvidenceKey, WaveEvidence, new_evidence
-from reconciler.rollout import (
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.stages import plan_waves
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import AgentState, AgentStatus, RolloutStatus
+from robotconf.readmodel.outcomes import Row
+from robotconf.reconciler.evidence import EvidenceKey, WaveEvidence, new_evidence
+from robotconf.reconciler.rollout import (
     RolloutInput,
     RolloutStep,
     criteria,

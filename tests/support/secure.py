@@ -7,8 +7,8 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
-from configurator.types import SERVICE_USERS
-from contract.mqtt import Connection
+from robotconf.configurator.types import SERVICE_USERS
+from robotconf.contract.mqtt import Connection
 from tests.support.lab import ROBOTCONF
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.tlsutil import Pki, make_pki

@@ -14,12 +14,18 @@ from typing import Any, Protocol, TypeVar
 import paho.mqtt.client as paho
 from pydantic import ValidationError
 
-from configurator.rendered import RenderedRequest
-from contract.mqtt import Connection
-from contract.safejson import PayloadError
-from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
-from readmodel.observed import parse_retained
-from readmodel.retained import RetainedView, read_object
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.safejson import PayloadError
+from robotconf.contract.wire import (
+    AgentState,
+    AgentStatus,
+    ReconcilerStatus,
+    RobotDescription,
+    Topics,
+)
+from robotconf.readmodel.observed import parse_retained
+from robotconf.readmodel.retained import RetainedView, read_object
 
 TIMEOUT = 60.0  # generous: CI machines are slow and shared
 T = TypeVar("T")

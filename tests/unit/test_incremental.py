@@ -23,10 +23,10 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, rule
 
-from configurator.incremental import BuildCache
-from configurator.loader import blob_id
-from configurator.render import FleetRender, RenderError, render_fleet
-from configurator.workspace import Checked, check_source
+from robotconf.configurator.incremental import BuildCache
+from robotconf.configurator.loader import blob_id
+from robotconf.configurator.render import FleetRender, RenderError, render_fleet
+from robotconf.configurator.workspace import Checked, check_source
 
 ROOT = Path(__file__).resolve().parents[2]
 FLEET = "configs/fleet.yaml"

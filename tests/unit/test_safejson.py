@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from contract.safejson import PayloadError, parse_json, parse_object
+from robotconf.contract.safejson import PayloadError, parse_json, parse_object
 
 
 @pytest.mark.parametrize(

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from contract import yamlio
-from contract.yamlio import (
+from robotconf.contract import yamlio
+from robotconf.contract.yamlio import (
     MAX_DEPTH,
     MAX_EVENTS,
     MAX_PROBLEMS,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from contract.errors import ExitCode
+from robotconf.contract.errors import ExitCode
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -12,17 +12,17 @@ def main(argv: list[str] | None = None) -> int:
 
     A robot-only install (`pip install robotconf`, no `[server]` extra) has no click: there
     `robotconf agent ...` still runs the agent, and any other command says what to install."""
-    from configurator.gcpause import collector_paused
+    from robotconf.configurator.gcpause import collector_paused
 
     try:
         with collector_paused():  # as in LazyGroup.get_command: what importing makes lives on
-            from workstation.cli.main import main as run
+            from robotconf.workstation.cli.main import main as run
     except ModuleNotFoundError as exc:
         if exc.name != "click":
             raise
         args = sys.argv[1:] if argv is None else argv
         if args[:1] == ["agent"]:
-            from agent.cli import main as run_agent
+            from robotconf.agent.cli import main as run_agent
 
             return run_agent(args[1:])
         print(

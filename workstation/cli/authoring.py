@@ -7,18 +7,18 @@ from pathlib import Path
 
 import click
 
-from configurator.autofill import AutofillResult, to_yaml
-from configurator.autofill import autofill as fill_capability
-from configurator.fitting import interfaces_fit
-from configurator.repository import Repository
-from configurator.schemas import dump, generate, modeline_ref
-from configurator.workspace import check
-from contract.diagnostics import did_you_mean, format_text
-from contract.errors import CliError, ExitCode
-from contract.models import file_name, file_name_problem
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.draft import from_broker, from_file, robot_namespace, usable
-from workstation.cli.options import repo_option
+from robotconf.configurator.autofill import AutofillResult, to_yaml
+from robotconf.configurator.autofill import autofill as fill_capability
+from robotconf.configurator.fitting import interfaces_fit
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.schemas import dump, generate, modeline_ref
+from robotconf.configurator.workspace import check
+from robotconf.contract.diagnostics import did_you_mean, format_text
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.models import file_name, file_name_problem
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.draft import from_broker, from_file, robot_namespace, usable
+from robotconf.workstation.cli.options import repo_option
 
 
 @click.command("autofill")

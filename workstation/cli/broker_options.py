@@ -11,11 +11,11 @@ from typing import Any
 
 import click
 
-from contract.errors import CliError
-from contract.logsafe import escape_stray_records
-from contract.mqtt import Connection, check_tls_files
-from contract.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX, validate_prefix
-from workstation.cli.options import F
+from robotconf.contract.errors import CliError
+from robotconf.contract.logsafe import escape_stray_records
+from robotconf.contract.mqtt import Connection, check_tls_files
+from robotconf.contract.wire import BROKER_ENV, DEFAULT_BROKER, DEFAULT_PREFIX, validate_prefix
+from robotconf.workstation.cli.options import F
 
 
 def prefix_option(command: F) -> F:
@@ -94,7 +94,7 @@ def _given(name: str) -> bool:
 def with_up_desk(mqtt: BrokerOptions, start: Path) -> BrokerOptions:
     """`mqtt`, completed from the desk file of a `robotconf up` running in `start` (or above)
     when no broker was given (--broker, $ROBOTCONF_BROKER); options given still win."""
-    from workstation.up_desk import find_desk
+    from robotconf.workstation.up_desk import find_desk
 
     if _given("broker"):
         return mqtt

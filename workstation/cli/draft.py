@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from configurator.draft import (
+from robotconf.configurator.draft import (
     Draft,
     ReportError,
     catalogue,
@@ -19,25 +19,25 @@ from configurator.draft import (
     scheme_yaml,
     template_yaml,
 )
-from configurator.repository import Repository
-from configurator.rosnames import namespace_problem
-from configurator.schemas import modeline_ref
-from configurator.types import SettingDefinition, is_robot_id
-from configurator.workspace import check, check_with
-from contract.diagnostics import Diagnostic, did_you_mean, format_text
-from contract.errors import CliError, ExitCode
-from contract.files import read_regular, write_atomic
-from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
-from contract.models import file_name
-from contract.safejson import PayloadError, parse_object
-from contract.textsafe import printable
-from contract.topics import Role, subscriptions
-from contract.wire import Topics
-from contract.yamlio import MAX_FILE_BYTES
-from readmodel.retained import RetainedView, read_object
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import repo_option
-from workstation.desk.broker import wait_for_broker
+from robotconf.configurator.repository import Repository
+from robotconf.configurator.rosnames import namespace_problem
+from robotconf.configurator.schemas import modeline_ref
+from robotconf.configurator.types import SettingDefinition, is_robot_id
+from robotconf.configurator.workspace import check, check_with
+from robotconf.contract.diagnostics import Diagnostic, did_you_mean, format_text
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.files import read_regular, write_atomic
+from robotconf.contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
+from robotconf.contract.models import file_name
+from robotconf.contract.safejson import PayloadError, parse_object
+from robotconf.contract.textsafe import printable
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import Topics
+from robotconf.contract.yamlio import MAX_FILE_BYTES
+from robotconf.readmodel.retained import RetainedView, read_object
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import repo_option
+from robotconf.workstation.desk.broker import wait_for_broker
 
 SHOWN = 20  # interfaces left out for a reason, listed one by one (a hostile report has 4,096)
 

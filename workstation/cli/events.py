@@ -10,11 +10,11 @@ from pathlib import Path
 
 import click
 
-from contract.errors import CliError, ExitCode
-from readmodel.ledger import Ledger, LedgerError, find_ledger
-from readmodel.timeline import DEFAULT_LIMIT, MAX_LIMIT, QueryRefused, event_query
-from workstation.cli.broker_options import prefix_option
-from workstation.cli.options import ledger_dir_option, repo_option
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.readmodel.ledger import Ledger, LedgerError, find_ledger
+from robotconf.readmodel.timeline import DEFAULT_LIMIT, MAX_LIMIT, QueryRefused, event_query
+from robotconf.workstation.cli.broker_options import prefix_option
+from robotconf.workstation.cli.options import ledger_dir_option, repo_option
 
 
 @click.command("events")

@@ -6,8 +6,14 @@ from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
-from readmodel.verdicts import FleetStatus, RobotRow, Verdict, reconciler_lines, short_digest
-from workstation.cli.terminal import plain_text, safe
+from robotconf.readmodel.verdicts import (
+    FleetStatus,
+    RobotRow,
+    Verdict,
+    reconciler_lines,
+    short_digest,
+)
+from robotconf.workstation.cli.terminal import plain_text, safe
 
 COLUMNS = (
     "ROBOT",

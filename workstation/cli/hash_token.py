@@ -10,9 +10,9 @@ import sys
 
 import click
 
-from contract.errors import CliError, ExitCode
-from workstation.ui.auth import MAX_TOKEN_FILE, token_in
-from workstation.ui.operators import hash_token, name_problem
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.workstation.ui.auth import MAX_TOKEN_FILE, token_in
+from robotconf.workstation.ui.operators import hash_token, name_problem
 
 STDIN = "the token on stdin"
 

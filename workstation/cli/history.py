@@ -9,14 +9,14 @@ from pathlib import Path
 
 import click
 
-from contract.durations import parse_duration
-from contract.errors import CliError, ExitCode
-from contract.textsafe import printable
-from contract.wire import short_rev
-from readmodel.ledger import Ledger, LedgerError, find_ledger
-from readmodel.outcomes import History, RevisionReport, Tally
-from workstation.cli.broker_options import prefix_option
-from workstation.cli.options import ledger_dir_option, repo_option
+from robotconf.contract.durations import parse_duration
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import short_rev
+from robotconf.readmodel.ledger import Ledger, LedgerError, find_ledger
+from robotconf.readmodel.outcomes import History, RevisionReport, Tally
+from robotconf.workstation.cli.broker_options import prefix_option
+from robotconf.workstation.cli.options import ledger_dir_option, repo_option
 
 ROBOTS_SHOWN = 10  # robots listed in the text form, worst first (--json: all)
 

@@ -9,14 +9,14 @@ from pathlib import Path
 
 import click
 
-from configurator.types import is_robot_id
-from contract.errors import CliError, ExitCode
-from contract.lifecycle import on_stop_signals
-from contract.wire import MAX_TAIL_LINES, LogsChunk
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import repo_option
-from workstation.desk.logs import log_chunks, shown
-from workstation.desk.robot import RobotDesk
+from robotconf.configurator.types import is_robot_id
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.lifecycle import on_stop_signals
+from robotconf.contract.wire import MAX_TAIL_LINES, LogsChunk
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import repo_option
+from robotconf.workstation.desk.logs import log_chunks, shown
+from robotconf.workstation.desk.robot import RobotDesk
 
 
 def _print(chunk: LogsChunk) -> None:

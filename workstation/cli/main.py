@@ -13,83 +13,89 @@ from importlib import import_module
 
 import click
 
-from configurator import __version__
-from configurator.gcpause import collector_paused
-from contract.errors import CliError, ExitCode
+from robotconf.configurator import __version__
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.contract.errors import CliError, ExitCode
 
 # name -> ("module:attribute", the short help `robotconf --help` shows), in the docs' order.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "validate": ("workstation.cli.validate:validate", "validate the whole repository"),
-    "catalog": ("workstation.cli.views:catalog", "list what exists in the catalogue"),
-    "tree": ("workstation.cli.views:tree", "show a capability's tasks > actions > logics"),
+    "validate": ("robotconf.workstation.cli.validate:validate", "validate the whole repository"),
+    "catalog": ("robotconf.workstation.cli.views:catalog", "list what exists in the catalogue"),
+    "tree": (
+        "robotconf.workstation.cli.views:tree",
+        "show a capability's tasks > actions > logics",
+    ),
     "autofill": (
-        "workstation.cli.authoring:autofill",
+        "robotconf.workstation.cli.authoring:autofill",
         "write a capability configuration that fits a template",
     ),
     "draft": (
-        "workstation.cli.draft:draft_command",
+        "robotconf.workstation.cli.draft:draft_command",
         "write a robot template and mapping scheme from a robot's interfaces",
     ),
-    "render": ("workstation.cli.views:render", "print a robot's Launch Request as JSON"),
+    "render": ("robotconf.workstation.cli.views:render", "print a robot's Launch Request as JSON"),
     "plan": (
-        "workstation.cli.views:plan",
+        "robotconf.workstation.cli.views:plan",
         "what would change per robot between two revisions",
     ),
-    "schemas": ("workstation.cli.authoring:schemas", "write the JSON Schemas under schemas/"),
+    "schemas": (
+        "robotconf.workstation.cli.authoring:schemas",
+        "write the JSON Schemas under schemas/",
+    ),
     "reconcile": (
-        "workstation.cli.reconcile:reconcile",
+        "robotconf.workstation.cli.reconcile:reconcile",
         "make the fleet match a git branch (runs until signalled)",
     ),
     "agent": (
-        "workstation.cli.robot_agent:agent",
+        "robotconf.workstation.cli.robot_agent:agent",
         "run a robot's agent: --config agent.yaml (see robotconf agent --help)",
     ),
     "status": (
-        "workstation.cli.status:status",
+        "robotconf.workstation.cli.status:status",
         "show the fleet: desired vs reported, worst first",
     ),
     "history": (
-        "workstation.cli.history:history",
+        "robotconf.workstation.cli.history:history",
         "what a revision's robots achieved, beside the revision before (the outcome ledger)",
     ),
     "events": (
-        "workstation.cli.events:events",
+        "robotconf.workstation.cli.events:events",
         "the fleet's timeline, newest first: commits, waves, rollbacks, restarts (the ledger)",
     ),
     "ui": (
-        "workstation.cli.ui:ui",
+        "robotconf.workstation.cli.ui:ui",
         "serve the fleet as a live web page (the reconciler, rollouts, every robot)",
     ),
     "logs": (
-        "workstation.cli.logs:logs",
+        "robotconf.workstation.cli.logs:logs",
         "show a robot's brain log from the desk (--follow for new lines)",
     ),
     "restart": (
-        "workstation.cli.restart:restart",
+        "robotconf.workstation.cli.restart:restart",
         "start a robot's brain again from the desk, without a commit",
     ),
     "rollout": (
-        "workstation.cli.rollout:rollout",
+        "robotconf.workstation.cli.rollout:rollout",
         "resume a paused rollout's wave, or abort the rollout, from the desk",
     ),
     "promote": (
-        "workstation.cli.rollout:promote",
+        "robotconf.workstation.cli.rollout:promote",
         "promote the revision under way to a stage by hand (fleet.yaml stages)",
     ),
     "up": (
-        "workstation.cli.up:up",
+        "robotconf.workstation.cli.up:up",
         "the whole loop on this machine: broker, reconciler, agents, status",
     ),
     "keys": (
-        "workstation.cli.security:keys",
+        "robotconf.workstation.cli.security:keys",
         "make the Ed25519 key pair that signs Launch Requests",
     ),
     "broker-config": (
-        "workstation.cli.security:broker_config",
+        "robotconf.workstation.cli.security:broker_config",
         "write Mosquitto ACL, password file and TLS listener from configs/fleet.yaml",
     ),
     "hash-token": (
-        "workstation.cli.hash_token:hash_token_command",
+        "robotconf.workstation.cli.hash_token:hash_token_command",
         "hash an operator's token for robotconf ui --operators-file",
     ),
 }
@@ -175,14 +181,14 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `robotconf ... | head` closed the pipe: nothing left to say
         return ExitCode.OK
     except Exception as exc:  # a tool failure is exit 2 with one line, never a traceback
-        from configurator.source import SourceError
+        from robotconf.configurator.source import SourceError
 
         if isinstance(exc, SourceError):
             print(f"robotconf: {exc}", file=sys.stderr)
             return ExitCode.TOOL
         if os.environ.get("ROBOTCONF_DEBUG"):
             raise
-        from contract.textsafe import printable
+        from robotconf.contract.textsafe import printable
 
         print(
             f"robotconf: internal error: {type(exc).__name__}: {printable(str(exc))} "

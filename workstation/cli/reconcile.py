@@ -12,33 +12,33 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from contract.errors import CliError, ExitCode
-from contract.lifecycle import log_to_stderr, on_stop_signals, parse_address
-from contract.signing import SigningKeyError
-from contract.textsafe import printable
-from contract.trust import Trust, read_trusted
-from reconciler.notify import (
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.lifecycle import log_to_stderr, on_stop_signals, parse_address
+from robotconf.contract.signing import SigningKeyError
+from robotconf.contract.textsafe import printable
+from robotconf.contract.trust import Trust, read_trusted
+from robotconf.reconciler.notify import (
     MAX_NOTIFY_FILE_BYTES,
     NOTIFY_ENV,
     GivenUrl,
     given_urls,
     notify_file_urls,
 )
-from reconciler.signer import make_signer, make_verifier
-from reconciler.source import BranchSource, LocalBranch, RemoteBranch
-from workstation.cli.broker_options import BrokerOptions, broker_options
-from workstation.cli.options import repo_option
-from workstation.cli.ui import ui_beside, ui_option
+from robotconf.reconciler.signer import make_signer, make_verifier
+from robotconf.reconciler.source import BranchSource, LocalBranch, RemoteBranch
+from robotconf.workstation.cli.broker_options import BrokerOptions, broker_options
+from robotconf.workstation.cli.options import repo_option
+from robotconf.workstation.cli.ui import ui_beside, ui_option
 
 if TYPE_CHECKING:
-    from contract.mqtt import Connection
-    from readmodel.verdicts import DesiredRobot
-    from reconciler.controller import Controller
-    from reconciler.ledger_feed import LedgerFeed, LedgerSettings
-    from reconciler.metrics import Metrics
-    from reconciler.telemetry import Telemetry
-    from reconciler.webhook_server import WebhookServer
-    from workstation.ui.run import RunningUi, UiOptions
+    from robotconf.contract.mqtt import Connection
+    from robotconf.readmodel.verdicts import DesiredRobot
+    from robotconf.reconciler.controller import Controller
+    from robotconf.reconciler.ledger_feed import LedgerFeed, LedgerSettings
+    from robotconf.reconciler.metrics import Metrics
+    from robotconf.reconciler.telemetry import Telemetry
+    from robotconf.reconciler.webhook_server import WebhookServer
+    from robotconf.workstation.ui.run import RunningUi, UiOptions
 
 
 def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | None) -> BranchSource:
@@ -52,7 +52,7 @@ def make_source(repo: Path, branch: str, remote: str | None, cache_dir: str | No
 def keep_desired(source: BranchSource) -> Callable[[str, Mapping[str, DesiredRobot]], None] | None:
     """Where the served revisions' desired robots are kept for `status` and the browser view:
     beside a local repository's git data (a remote one's clone is no reader's)."""
-    from workstation import desired_store
+    from robotconf.workstation import desired_store
 
     if isinstance(source, LocalBranch):
         return partial(desired_store.write, source.root)
@@ -87,8 +87,8 @@ def make_telemetry(
     """Alerts (to the receivers of notify_urls) and metrics when asked for, and the timeline's
     events always (`start_ledger` hands them to the ledger); a bad URL or address, or a port
     that cannot be listened on, is a one-line error."""
-    from reconciler.notify import Notifier, parse_receiver
-    from reconciler.telemetry import Telemetry
+    from robotconf.reconciler.notify import Notifier, parse_receiver
+    from robotconf.reconciler.telemetry import Telemetry
 
     given = notify_urls(notify, notify_file)
     try:
@@ -99,7 +99,7 @@ def make_telemetry(
         raise CliError(str(exc)) from None
     metrics = None
     if metrics_at is not None:
-        from reconciler.metrics import Metrics
+        from robotconf.reconciler.metrics import Metrics
 
         try:
             host, port = parse_address(metrics_at, "--metrics", "127.0.0.1:9108")
@@ -131,9 +131,9 @@ def ledger_settings(
 ) -> LedgerSettings:
     """Where and how the outcome ledger is kept (`state_options`), checked before anything
     starts."""
-    from contract.durations import parse_duration
-    from readmodel.ledger import default_state_dir
-    from reconciler.ledger_feed import LedgerSettings
+    from robotconf.contract.durations import parse_duration
+    from robotconf.readmodel.ledger import default_state_dir
+    from robotconf.reconciler.ledger_feed import LedgerSettings
 
     try:
         age = parse_duration(ledger_max_age)
@@ -153,8 +153,8 @@ def start_ledger(
     """The outcome ledger's feed, started: its file opened (an unreadable one set aside and
     a new one started, said in the log), its session connecting; the telemetry's events are
     kept in it (the timeline). CliError when no ledger can be kept in the state folder at all."""
-    from readmodel.ledger import LedgerError
-    from reconciler.ledger_feed import LedgerFeed
+    from robotconf.readmodel.ledger import LedgerError
+    from robotconf.reconciler.ledger_feed import LedgerFeed
 
     notifier = telemetry.notifier if telemetry is not None else None
     feed = LedgerFeed(
@@ -237,7 +237,7 @@ def webhook_options(webhook_at: str | None, secret_file: Path | None) -> Webhook
             "--webhook needs --webhook-secret-file FILE: the secret the git server signs its "
             "pushes with (never on the command line); refusing to accept unsigned pushes"
         )
-    from reconciler.webhook_server import read_secret
+    from robotconf.reconciler.webhook_server import read_secret
 
     try:
         return WebhookOptions(host, port, read_secret(secret_file))
@@ -249,7 +249,7 @@ def start_webhook(
     webhook: WebhookOptions, branch: str, on_push: Callable[[], None], metrics: Metrics | None
 ) -> WebhookServer:
     """The push receiver, listening; a port that cannot be listened on is a one-line error."""
-    from reconciler.webhook_server import WebhookServer
+    from robotconf.reconciler.webhook_server import WebhookServer
 
     receiver = WebhookServer(
         webhook.secret, branch, on_push, metrics.webhook if metrics is not None else None
@@ -280,8 +280,8 @@ def start_ui(
     revision pages read the reconciler's own outcome ledger (`ledger`)."""
     if options is None:
         return None
-    from workstation.ui.revisions import LedgerHistory
-    from workstation.ui.run import RunningUi
+    from robotconf.workstation.ui.revisions import LedgerHistory
+    from robotconf.workstation.ui.run import RunningUi
 
     ui = RunningUi(connection, prefix, repo, options, history=LedgerHistory(ledger))
     logging.getLogger("robotconf.reconciler").info("ui: serving the fleet at %s", ui.url)
@@ -363,8 +363,8 @@ def reconcile(
 ) -> ExitCode:
     """Make the fleet match a git branch: publish one Launch Request per robot, resync every
     --interval seconds, and at once when --webhook receives a push; runs until signalled."""
-    from readmodel.retained import speaks_mqtt5
-    from reconciler.controller import Controller
+    from robotconf.readmodel.retained import speaks_mqtt5
+    from robotconf.reconciler.controller import Controller
 
     connection = mqtt.connection()
     if interval <= 0:

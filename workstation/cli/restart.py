@@ -9,14 +9,14 @@ from pathlib import Path
 
 import click
 
-from configurator.types import is_robot_id
-from contract.errors import CliError, ExitCode
-from contract.launch import REQUESTER_PATTERN
-from contract.textsafe import printable
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import F, repo_option
-from workstation.desk.restart import request_restart
-from workstation.desk.signing import private_key
+from robotconf.configurator.types import is_robot_id
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.launch import REQUESTER_PATTERN
+from robotconf.contract.textsafe import printable
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import F, repo_option
+from robotconf.workstation.desk.restart import request_restart
+from robotconf.workstation.desk.signing import private_key
 
 _REQUESTER = re.compile(REQUESTER_PATTERN)
 

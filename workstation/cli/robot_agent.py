@@ -16,6 +16,6 @@ import click
 @click.argument("args", nargs=-1, type=click.UNPROCESSED)
 def agent(args: tuple[str, ...]) -> int:
     """Run a robot's agent: robotconf agent --config agent.yaml [--broker URL] [--check]."""
-    from agent.cli import main
+    from robotconf.agent.cli import main
 
     return main(list(args))

@@ -7,14 +7,14 @@ from pathlib import Path
 
 import click
 
-from contract.errors import ExitCode
-from contract.textsafe import printable
-from contract.wire import short_rev
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import F, repo_option
-from workstation.cli.restart import requester, signing_key_option
-from workstation.desk.rollout import Action, send_action
-from workstation.desk.signing import private_key
+from robotconf.contract.errors import ExitCode
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import short_rev
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import F, repo_option
+from robotconf.workstation.cli.restart import requester, signing_key_option
+from robotconf.workstation.desk.rollout import Action, send_action
+from robotconf.workstation.desk.signing import private_key
 
 
 @click.group("rollout")

@@ -11,16 +11,22 @@ from pathlib import Path
 
 import click
 
-from configurator.brokerconf import Listener, ServiceUsers, clashes, render_acl, render_conf
-from configurator.workspace import check
-from contract.diagnostics import format_text
-from contract.errors import CliError, ExitCode
-from contract.files import write_atomic
-from contract.models import file_name
-from contract.signing import SigningKeyError, generate_keys
-from contract.trust import UntrustedFile, read_secret_text
-from contract.wire import DEFAULT_PREFIX, validate_prefix
-from workstation.cli.options import repo_option, rev_option
+from robotconf.configurator.brokerconf import (
+    Listener,
+    ServiceUsers,
+    clashes,
+    render_acl,
+    render_conf,
+)
+from robotconf.configurator.workspace import check
+from robotconf.contract.diagnostics import format_text
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.files import write_atomic
+from robotconf.contract.models import file_name
+from robotconf.contract.signing import SigningKeyError, generate_keys
+from robotconf.contract.trust import UntrustedFile, read_secret_text
+from robotconf.contract.wire import DEFAULT_PREFIX, validate_prefix
+from robotconf.workstation.cli.options import repo_option, rev_option
 
 
 @click.command("keys")

@@ -12,20 +12,20 @@ import click
 from rich.live import Live
 from rich.text import Text
 
-from configurator.gcpause import collector_paused
-from configurator.types import is_robot_id
-from contract.errors import CliError, ExitCode
-from contract.lifecycle import on_stop_signals
-from contract.wire import Topics
-from readmodel.retained import RetainedView
-from readmodel.verdicts import FleetStatus
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.fleet_view import fleet_status_view
-from workstation.cli.options import repo_option, rev_option
-from workstation.cli.terminal import is_terminal, plain_text, show, terminal_console
-from workstation.desk.broker import wait_for_broker
-from workstation.fleet_reader import FleetReader, open_reader, watch
-from workstation.fleet_status import (
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.configurator.types import is_robot_id
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.lifecycle import on_stop_signals
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.retained import RetainedView
+from robotconf.readmodel.verdicts import FleetStatus
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.fleet_view import fleet_status_view
+from robotconf.workstation.cli.options import repo_option, rev_option
+from robotconf.workstation.cli.terminal import is_terminal, plain_text, show, terminal_console
+from robotconf.workstation.desk.broker import wait_for_broker
+from robotconf.workstation.fleet_reader import FleetReader, open_reader, watch
+from robotconf.workstation.fleet_status import (
     DesiredCache,
     confirm_loss,
     fleet_status,

@@ -13,7 +13,7 @@ from typing import TextIO
 from rich.console import Console, RenderableType
 from rich.text import Text
 
-from contract.textsafe import printable
+from robotconf.contract.textsafe import printable
 
 PLAIN_WIDTH = 100_000  # wide enough that no table or tree line is ever wrapped or cut
 

@@ -9,15 +9,15 @@ from typing import TYPE_CHECKING
 
 import click
 
-from contract.errors import CliError, ExitCode
-from contract.lifecycle import log_to_stderr, on_stop_signals
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import F, ledger_dir_option, repo_option
-from workstation.cli.restart import signing_key_option
-from workstation.ui import DEFAULT_LISTEN
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.lifecycle import log_to_stderr, on_stop_signals
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import F, ledger_dir_option, repo_option
+from robotconf.workstation.cli.restart import signing_key_option
+from robotconf.workstation.ui import DEFAULT_LISTEN
 
 if TYPE_CHECKING:
-    from workstation.ui.run import UiOptions
+    from robotconf.workstation.ui.run import UiOptions
 
 _path = click.Path(path_type=Path)
 
@@ -41,9 +41,9 @@ def ui_beside(ui_at: str | None) -> UiOptions | None:
     """`--ui` of `reconcile` and `up`, checked before anything starts: read-only, loopback."""
     if ui_at is None:
         return None
-    from contract.lifecycle import parse_address
-    from workstation.ui.run import ui_options
-    from workstation.ui.server import is_loopback
+    from robotconf.contract.lifecycle import parse_address
+    from robotconf.workstation.ui.run import ui_options
+    from robotconf.workstation.ui.server import is_loopback
 
     try:
         host, _ = parse_address(ui_at, "--ui", DEFAULT_LISTEN)
@@ -135,7 +135,7 @@ def ui(
     A revision's page (/revisions/REV) shows what it achieved beside the revision before,
     from the reconciler's outcome ledger (read-only; --state-dir says where it is); the
     timeline (/timeline) lists the fleet's events kept in the same ledger, newest first."""
-    from workstation.ui.run import ui_options
+    from robotconf.workstation.ui.run import ui_options
 
     options = ui_options(
         listen,
@@ -153,9 +153,9 @@ def ui(
 
 def _serve(repo: Path, mqtt: BrokerOptions, options: UiOptions, state_dir: Path | None) -> None:
     """The UI of checked `options` serving the fleet until the process is signalled."""
-    from readmodel.ledger import find_ledger
-    from workstation.ui.revisions import LedgerHistory
-    from workstation.ui.run import RunningUi
+    from robotconf.readmodel.ledger import find_ledger
+    from robotconf.workstation.ui.revisions import LedgerHistory
+    from robotconf.workstation.ui.run import RunningUi
 
     connection = mqtt.connection()
     log_to_stderr("ui")

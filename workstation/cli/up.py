@@ -13,14 +13,14 @@ from rich.console import Group, RenderableType
 from rich.live import Live
 from rich.panel import Panel
 
-from contract.errors import ExitCode
-from contract.wire import BROKER_ENV
-from readmodel.verdicts import FleetStatus
-from workstation.cli.broker_options import BrokerOptions, broker_options
-from workstation.cli.fleet_view import fleet_status_view
-from workstation.cli.options import repo_option
-from workstation.cli.terminal import is_terminal, safe, terminal_console
-from workstation.cli.ui import ui_beside, ui_option
+from robotconf.contract.errors import ExitCode
+from robotconf.contract.wire import BROKER_ENV
+from robotconf.readmodel.verdicts import FleetStatus
+from robotconf.workstation.cli.broker_options import BrokerOptions, broker_options
+from robotconf.workstation.cli.fleet_view import fleet_status_view
+from robotconf.workstation.cli.options import repo_option
+from robotconf.workstation.cli.terminal import is_terminal, safe, terminal_console
+from robotconf.workstation.cli.ui import ui_beside, ui_option
 
 
 class Screen:
@@ -71,7 +71,7 @@ class Screen:
     def show(self, fleet: FleetStatus) -> None:
         if self._live is None:
             return
-        from workstation.up import refusal_lines
+        from robotconf.workstation.up import refusal_lines
 
         parts: list[RenderableType] = [safe(line) for line in self._header]
         refused = refusal_lines(fleet.reconciler)
@@ -138,7 +138,7 @@ def up(
     needs: edit it and the robot drifts; robotconf draft ROBOT measures it), and
     `touch .robotconf/up/ROBOT/brain.hold` makes it busy (restarts and reloads wait) until
     the file is removed."""
-    from workstation.up import prepare, run_up, with_operator
+    from robotconf.workstation.up import prepare, run_up, with_operator
 
     source = click.get_current_context().get_parameter_source("broker")
     origin = f"${BROKER_ENV}" if source is ParameterSource.ENVIRONMENT else "--broker"

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import click
 
-from configurator.gcpause import collector_paused
-from configurator.workspace import Checked, check
-from contract.diagnostics import format_github, format_json, format_text, summary_line
-from contract.errors import ExitCode
-from workstation.cli.options import repo_option, rev_option
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.configurator.workspace import Checked, check
+from robotconf.contract.diagnostics import format_github, format_json, format_text, summary_line
+from robotconf.contract.errors import ExitCode
+from robotconf.workstation.cli.options import repo_option, rev_option
 
 
 @click.command("validate")

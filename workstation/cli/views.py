@@ -11,9 +11,9 @@ import click
 from rich.console import Group
 from rich.tree import Tree
 
-from configurator.catalog import Section, catalogue_sections, catalogue_summary
-from configurator.incremental import BuildCache
-from configurator.plan import (
+from robotconf.configurator.catalog import Section, catalogue_sections, catalogue_summary
+from robotconf.configurator.incremental import BuildCache
+from robotconf.configurator.plan import (
     FleetRead,
     Plan,
     PlanBase,
@@ -25,9 +25,9 @@ from configurator.plan import (
     plan_as_json,
     with_drift,
 )
-from configurator.render import FleetRender, RenderError, render_robot
-from configurator.source import SourceError
-from configurator.tree import (
+from robotconf.configurator.render import FleetRender, RenderError, render_robot
+from robotconf.configurator.source import SourceError
+from robotconf.configurator.tree import (
     CapabilityTree,
     action_label,
     alternative_label,
@@ -36,16 +36,16 @@ from configurator.tree import (
     logic_label,
     task_label,
 )
-from configurator.types import RolloutPolicy
-from configurator.workspace import Checked, check
-from contract.diagnostics import did_you_mean, format_text, summary_line
-from contract.errors import CliError, ExitCode
-from contract.textsafe import json_printable, markdown_text, printable
-from contract.topics import Role, subscriptions
-from contract.wire import Topics
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import repo_option, rev_option
-from workstation.cli.terminal import safe, show
+from robotconf.configurator.types import RolloutPolicy
+from robotconf.configurator.workspace import Checked, check
+from robotconf.contract.diagnostics import did_you_mean, format_text, summary_line
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.textsafe import json_printable, markdown_text, printable
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import Topics
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import repo_option, rev_option
+from robotconf.workstation.cli.terminal import safe, show
 
 
 def catalogue_view(sections: list[Section]) -> Group:
@@ -187,8 +187,8 @@ def _does_not_validate(checked: Checked, rev: str | None, label: str) -> str:
 def _reported_interfaces(mqtt: BrokerOptions, wait: float) -> Reported | None:
     """Each robot's retained interfaces report (or why it cannot be read); None, said on
     stderr, when the broker does not answer: the plan stands without drift."""
-    from readmodel.observed import parse_retained
-    from readmodel.retained import take_snapshot_said
+    from robotconf.readmodel.observed import parse_retained
+    from robotconf.readmodel.retained import take_snapshot_said
 
     connection = mqtt.connection()
     topics = Topics(mqtt.prefix)
@@ -216,9 +216,9 @@ def _fleet_runs(mqtt: BrokerOptions, wait: float) -> FleetRead:
     broker within `wait` seconds; a broker that refuses or is not there is known at once."""
     from pydantic import ValidationError
 
-    from contract.safejson import PayloadError
-    from contract.wire import ReconcilerStatus
-    from readmodel.retained import RetainedView, read_object
+    from robotconf.contract.safejson import PayloadError
+    from robotconf.contract.wire import ReconcilerStatus
+    from robotconf.readmodel.retained import RetainedView, read_object
 
     connection = mqtt.connection()
     url = connection.address.url
@@ -263,7 +263,7 @@ def _fleets(
 
 def _subjects(repo: Path, result: Plan) -> dict[str, str]:
     """The commit subjects of the plan's revisions (the work tree's side has none)."""
-    from readmodel.commits import CommitBook
+    from robotconf.readmodel.commits import CommitBook
 
     revisions = (result.base, result.head)  # the work tree's is no commit: left out
     return {line.revision: line.subject for line in CommitBook(repo).lines(revisions)}

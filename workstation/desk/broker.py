@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from contract.errors import CliError
-from contract.mqtt import NOTHING_LISTENS
+from robotconf.contract.errors import CliError
+from robotconf.contract.mqtt import NOTHING_LISTENS
 
 if TYPE_CHECKING:
-    from readmodel.retained import RetainedView
+    from robotconf.readmodel.retained import RetainedView
 
 # What to do when nothing listens at the broker's address, and when something there turned
 # the connection away: said by every desk command alike.

@@ -10,10 +10,10 @@ import secrets
 import time
 from collections.abc import Callable, Iterator
 
-from contract.errors import CliError, ExitCode
-from contract.textsafe import printable
-from contract.wire import LOG_FOLLOW_TTL, AgentState, AgentStatus, LogsChunk, LogsRequest
-from workstation.desk.robot import RobotDesk, online_robot
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import LOG_FOLLOW_TTL, AgentState, AgentStatus, LogsChunk, LogsRequest
+from robotconf.workstation.desk.robot import RobotDesk, online_robot
 
 # A follower asks again this often, so that the agent (which stops LOG_FOLLOW_TTL after the
 # newest ask) streams on while it runs and stops soon after it is gone.

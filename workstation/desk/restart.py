@@ -8,11 +8,11 @@ import queue
 import time
 from typing import TYPE_CHECKING
 
-from contract.errors import CliError, ExitCode
-from contract.launch import RestartRequest
-from contract.mqtt import Connection
-from contract.wire import AgentState, AgentStatus
-from workstation.desk.robot import RobotDesk, online_robot
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.launch import RestartRequest
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.workstation.desk.robot import RobotDesk, online_robot
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -39,7 +39,7 @@ def _send_restart(
     issued_at = round(time.time(), 6)
     request = RestartRequest(robot_id=robot_id, requested_by=by, issued_at=issued_at)
     if key is not None:
-        from contract.signing import sign
+        from robotconf.contract.signing import sign
 
         request = sign(request, key, issued_at)
     if not desk.send(desk.topics.restart(robot_id), request.payload(), timeout):

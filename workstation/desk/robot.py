@@ -13,15 +13,15 @@ from typing import TypeVar
 
 from pydantic import ValidationError
 
-from contract.errors import CliError, ExitCode
-from contract.mqtt import Connection
-from contract.safejson import PayloadError
-from contract.textsafe import printable
-from contract.topics import Role, subscriptions
-from contract.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
-from readmodel.observed import RobotSeen, parse_retained
-from readmodel.retained import RetainedView, read_object, take_snapshot
-from workstation.desk.broker import wait_for_broker
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.safejson import PayloadError
+from robotconf.contract.textsafe import printable
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import MAX_LOG_MESSAGE_BYTES, AgentStatus, LogsChunk, Topics
+from robotconf.readmodel.observed import RobotSeen, parse_retained
+from robotconf.readmodel.retained import RetainedView, read_object, take_snapshot
+from robotconf.workstation.desk.broker import wait_for_broker
 
 # Answers are bounded by the agent; anything much larger is not one of its answers.
 MAX_ANSWER_BYTES = MAX_LOG_MESSAGE_BYTES + 4096

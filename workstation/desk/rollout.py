@@ -10,15 +10,21 @@ from typing import TYPE_CHECKING, Literal
 
 from pydantic import ValidationError
 
-from contract.errors import CliError, ExitCode
-from contract.launch import RolloutAction
-from contract.mqtt import Connection
-from contract.safejson import PayloadError
-from contract.textsafe import printable
-from contract.topics import Role, subscriptions
-from contract.wire import OperatorAnswer, ReconcilerStatus, RolloutStatus, Topics, short_rev
-from readmodel.retained import RetainedView, read_object
-from workstation.desk.broker import wait_for_broker
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.launch import RolloutAction
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.safejson import PayloadError
+from robotconf.contract.textsafe import printable
+from robotconf.contract.topics import Role, subscriptions
+from robotconf.contract.wire import (
+    OperatorAnswer,
+    ReconcilerStatus,
+    RolloutStatus,
+    Topics,
+    short_rev,
+)
+from robotconf.readmodel.retained import RetainedView, read_object
+from robotconf.workstation.desk.broker import wait_for_broker
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -126,7 +132,7 @@ def send_action(
             stage=stage,
         )
         if key is not None:
-            from contract.signing import sign
+            from robotconf.contract.signing import sign
 
             request = sign(request, key, issued_at)
         if not desk.view.publish(desk.topics.rollout_request, request.payload(), min(wait, 10.0)):

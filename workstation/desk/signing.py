@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contract.errors import CliError, ExitCode
+from robotconf.contract.errors import CliError, ExitCode
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -17,7 +17,7 @@ def private_key(path: Path | None) -> Ed25519PrivateKey | None:
     one-line error."""
     if path is None:
         return None
-    from contract.signing import SigningKeyError, load_private_key
+    from robotconf.contract.signing import SigningKeyError, load_private_key
 
     try:
         return load_private_key(path)

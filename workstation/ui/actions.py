@@ -8,17 +8,17 @@ import re
 from collections.abc import Callable
 from urllib.parse import parse_qsl, urlencode
 
-from configurator.types import is_robot_id
-from contract.textsafe import printable
-from readmodel.http_edge import FedStream, Request, Response
-from workstation.ui import forms
-from workstation.ui.auth import MAX_TOKEN, Identity, OperatorAuth, refusal_text
-from workstation.ui.logtail import LogTails
-from workstation.ui.operators import MAX_NAME, name_problem
-from workstation.ui.pages import page
-from workstation.ui.restarts import Restarts
-from workstation.ui.rollout_decisions import Decisions
-from workstation.ui.server import CSP, Handler, Route
+from robotconf.configurator.types import is_robot_id
+from robotconf.contract.textsafe import printable
+from robotconf.readmodel.http_edge import FedStream, Request, Response
+from robotconf.workstation.ui import forms
+from robotconf.workstation.ui.auth import MAX_TOKEN, Identity, OperatorAuth, refusal_text
+from robotconf.workstation.ui.logtail import LogTails
+from robotconf.workstation.ui.operators import MAX_NAME, name_problem
+from robotconf.workstation.ui.pages import page
+from robotconf.workstation.ui.restarts import Restarts
+from robotconf.workstation.ui.rollout_decisions import Decisions
+from robotconf.workstation.ui.server import CSP, Handler, Route
 
 MAX_FORM = 4096  # bytes of a form body: a token, a CSRF token and a path fit
 MAX_FIELDS = 8

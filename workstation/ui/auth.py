@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Protocol
 
-from contract.errors import CliError
-from contract.trust import Trust, UntrustedFile, read_trusted
-from workstation.ui.clients import Network, client_of
-from workstation.ui.operators import (
+from robotconf.contract.errors import CliError
+from robotconf.contract.trust import Trust, UntrustedFile, read_trusted
+from robotconf.workstation.ui.clients import Network, client_of
+from robotconf.workstation.ui.operators import (
     COST,
     Operators,
     TokenHash,

@@ -7,11 +7,17 @@ import json
 from collections.abc import Set
 from dataclasses import dataclass, field
 
-from readmodel.verdicts import RobotRow
-from workstation.ui.goals_html import goals_box, rates_box
-from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
-from workstation.ui.pages import banner_box, reconciler_box, rollout_box, row_html, summary_box
-from workstation.ui.robot_page import robot_box
+from robotconf.readmodel.verdicts import RobotRow
+from robotconf.workstation.ui.goals_html import goals_box, rates_box
+from robotconf.workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
+from robotconf.workstation.ui.pages import (
+    banner_box,
+    reconciler_box,
+    rollout_box,
+    row_html,
+    summary_box,
+)
+from robotconf.workstation.ui.robot_page import robot_box
 
 EVENT = "fleet"  # the name of every event the stream sends
 

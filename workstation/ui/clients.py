@@ -8,7 +8,7 @@ from __future__ import annotations
 import ipaddress
 from collections.abc import Iterable, Sequence
 
-from readmodel.http_edge import client_key
+from robotconf.readmodel.http_edge import client_key
 
 LOOPBACK = "loopback"
 MAX_PROXIES = 16

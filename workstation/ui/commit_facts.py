@@ -7,12 +7,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from configurator.plan import Plan, format_plan_text
-from contract.diagnostics import Diagnostic
-from readmodel.verdicts import short_rev
-from workstation.ui.goals_html import revision_link
-from workstation.ui.pages import diagnostics
-from workstation.ui.text import esc, when
+from robotconf.configurator.plan import Plan, format_plan_text
+from robotconf.contract.diagnostics import Diagnostic
+from robotconf.readmodel.verdicts import short_rev
+from robotconf.workstation.ui.goals_html import revision_link
+from robotconf.workstation.ui.pages import diagnostics
+from robotconf.workstation.ui.text import esc, when
 
 MAX_FILES = 200  # files listed; the rest counted
 MAX_PLAN_LINES = 300  # plan lines shown; the rest counted

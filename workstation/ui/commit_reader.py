@@ -11,13 +11,13 @@ from collections import OrderedDict
 from dataclasses import replace
 from pathlib import Path
 
-from configurator.incremental import BuildCache
-from configurator.plan import make_plan
-from configurator.render import RenderError
-from configurator.source import SourceError
-from configurator.workspace import check
-from contract.textsafe import printable
-from workstation.ui.commit_facts import MAX_FILES, ChangedFile, CommitFacts
+from robotconf.configurator.incremental import BuildCache
+from robotconf.configurator.plan import make_plan
+from robotconf.configurator.render import RenderError
+from robotconf.configurator.source import SourceError
+from robotconf.configurator.workspace import check
+from robotconf.contract.textsafe import printable
+from robotconf.workstation.ui.commit_facts import MAX_FILES, ChangedFile, CommitFacts
 
 log = logging.getLogger("robotconf.ui")
 

@@ -7,11 +7,11 @@ import re
 import time
 from urllib.parse import quote
 
-from workstation.ui.auth import Identity
-from workstation.ui.operators import MAX_NAME
-from workstation.ui.restarts import Outcome
-from workstation.ui.rollout_decisions import Decision
-from workstation.ui.text import esc
+from robotconf.workstation.ui.auth import Identity
+from robotconf.workstation.ui.operators import MAX_NAME
+from robotconf.workstation.ui.restarts import Outcome
+from robotconf.workstation.ui.rollout_decisions import Decision
+from robotconf.workstation.ui.text import esc
 
 MAX_NEXT = 512
 # A path on this site, with a query perhaps: no scheme, no host (`//evil`), no backslash that

@@ -7,13 +7,13 @@ from __future__ import annotations
 
 from urllib.parse import quote
 
-from contract.goals import BrainEvent, CurrentGoal, GoalsSummary, LastOutcome, VitalValue
-from contract.textsafe import shorten
-from contract.wire import ReconcilerStatus
-from readmodel.robot_goals import COUNTS, GoalRate, goal_rates
-from readmodel.verdicts import SUBJECT_SHOWN, RobotRow, short_rev
-from workstation.ui.model import FleetQuery, Snapshot
-from workstation.ui.text import age, definitions, digest, esc, fold
+from robotconf.contract.goals import BrainEvent, CurrentGoal, GoalsSummary, LastOutcome, VitalValue
+from robotconf.contract.textsafe import shorten
+from robotconf.contract.wire import ReconcilerStatus
+from robotconf.readmodel.robot_goals import COUNTS, GoalRate, goal_rates
+from robotconf.readmodel.verdicts import SUBJECT_SHOWN, RobotRow, short_rev
+from robotconf.workstation.ui.model import FleetQuery, Snapshot
+from robotconf.workstation.ui.text import age, definitions, digest, esc, fold
 
 RATES_SHOWN = 50  # (scenario, revision) rows of the fleet page's success rates; the rest counted
 # More (scenario, revision) rows than this and the rates fold to one line: the robots' table,

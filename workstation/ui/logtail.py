@@ -8,11 +8,11 @@ import threading
 from collections.abc import Callable
 from typing import Protocol
 
-from contract.errors import CliError
-from contract.mqtt import Connection
-from contract.wire import LogsChunk
-from workstation.desk.logs import log_chunks, shown
-from workstation.desk.robot import RobotDesk
+from robotconf.contract.errors import CliError
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import LogsChunk
+from robotconf.workstation.desk.logs import log_chunks, shown
+from robotconf.workstation.desk.robot import RobotDesk
 
 log = logging.getLogger("robotconf.ui")
 

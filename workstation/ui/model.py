@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 from urllib.parse import parse_qsl
 
-from configurator.waves import matches
-from contract.models import is_robot_id
-from readmodel.verdicts import WORST_FIRST, FleetStatus, RobotRow, Verdict
+from robotconf.configurator.waves import matches
+from robotconf.contract.models import is_robot_id
+from robotconf.readmodel.verdicts import WORST_FIRST, FleetStatus, RobotRow, Verdict
 
 MAX_QUERY = 2048  # characters of a query string: a longer one is refused (414)
 MAX_FIELDS = 32  # query fields

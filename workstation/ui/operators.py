@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
-from contract.errors import CliError
-from contract.trust import Trust, UntrustedFile, read_trusted
+from robotconf.contract.errors import CliError
+from robotconf.contract.trust import Trust, UntrustedFile, read_trusted
 
 SCHEME = "scrypt"
 COST = 2**15  # scrypt's N: about 32 MiB and a tenth of a second a guess

@@ -6,24 +6,24 @@ from __future__ import annotations
 from collections.abc import Iterable
 from urllib.parse import quote, urlencode
 
-from contract.wire import (
+from robotconf.contract.wire import (
     ABORT_COMMAND,
     RESUME_COMMAND,
     ReconcilerStatus,
     RolloutStatus,
     WaveVerification,
 )
-from readmodel.verdicts import (
+from robotconf.readmodel.verdicts import (
     Health,
     RobotRow,
     Verdict,
     paused_for_evidence,
     reconciler_health,
 )
-from workstation.ui.auth import Identity
-from workstation.ui.goals_html import goals_cell, percent, rates_box, revision_link
-from workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
-from workstation.ui.text import age, definitions, digest, esc, fold, when
+from robotconf.workstation.ui.auth import Identity
+from robotconf.workstation.ui.goals_html import goals_cell, percent, rates_box, revision_link
+from robotconf.workstation.ui.model import FleetQuery, Snapshot, Visible, rank, visible
+from robotconf.workstation.ui.text import age, definitions, digest, esc, fold, when
 
 MAX_LISTED = 300  # items of one list on a robot page (interfaces, mappings); the rest counted
 DIAGNOSTICS = 50  # diagnostics listed; the rest counted

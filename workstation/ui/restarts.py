@@ -11,10 +11,10 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
-from contract.errors import CliError
-from contract.mqtt import Connection
-from contract.textsafe import printable
-from workstation.desk.restart import request_restart
+from robotconf.contract.errors import CliError
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.textsafe import printable
+from robotconf.workstation.desk.restart import request_restart
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey

@@ -6,14 +6,14 @@ from __future__ import annotations
 
 from urllib.parse import quote
 
-from readmodel.outcomes import History, RevisionReport, Tally
-from readmodel.verdicts import short_rev
-from workstation.ui.auth import Identity
-from workstation.ui.goals_html import duration, rate_row, revision_link
-from workstation.ui.model import Snapshot
-from workstation.ui.pages import banner_box, page
-from workstation.ui.revisions import live_rates, rate_change
-from workstation.ui.text import age, esc
+from robotconf.readmodel.outcomes import History, RevisionReport, Tally
+from robotconf.readmodel.verdicts import short_rev
+from robotconf.workstation.ui.auth import Identity
+from robotconf.workstation.ui.goals_html import duration, rate_row, revision_link
+from robotconf.workstation.ui.model import Snapshot
+from robotconf.workstation.ui.pages import banner_box, page
+from robotconf.workstation.ui.revisions import live_rates, rate_change
+from robotconf.workstation.ui.text import age, esc
 
 MAX_ROWS = 300  # task or robot rows listed; the rest counted
 NO_TALLY = Tally()

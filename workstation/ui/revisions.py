@@ -13,10 +13,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Protocol
 
-from readmodel.outcomes import History
-from readmodel.robot_goals import GoalRate, goal_rates
-from readmodel.timeline import EventQuery, KeptEvent
-from readmodel.verdicts import RobotRow
+from robotconf.readmodel.outcomes import History
+from robotconf.readmodel.robot_goals import GoalRate, goal_rates
+from robotconf.readmodel.timeline import EventQuery, KeptEvent
+from robotconf.readmodel.verdicts import RobotRow
 
 REVISION = re.compile(r"[0-9a-f]{4,64}")  # a commit id or a prefix of one, as links carry it
 
@@ -51,7 +51,7 @@ class LedgerHistory:
         self.path = path
 
     def compare(self, revision: str) -> History | None:
-        from readmodel.ledger import Ledger, LedgerError
+        from robotconf.readmodel.ledger import Ledger, LedgerError
 
         try:
             with Ledger.open(self.path, read_only=True, check=False) as ledger:
@@ -62,7 +62,7 @@ class LedgerHistory:
             raise HistoryError(str(exc)) from None
 
     def events(self, query: EventQuery) -> list[KeptEvent]:
-        from readmodel.ledger import Ledger, LedgerError
+        from robotconf.readmodel.ledger import Ledger, LedgerError
 
         try:
             with Ledger.open(self.path, read_only=True, check=False) as ledger:

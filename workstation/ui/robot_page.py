@@ -5,15 +5,15 @@ from __future__ import annotations
 
 from urllib.parse import quote
 
-from contract.interfaces import Interface, RobotInterfaces
-from contract.launch import LaunchRequest
-from contract.wire import ReconcilerStatus
-from readmodel.verdicts import RobotRow
-from workstation.ui.auth import Identity
-from workstation.ui.goals_html import goals_box, revision_link
-from workstation.ui.model import HistoryEntry, Snapshot
-from workstation.ui.pages import MAX_LISTED, banner_box, page
-from workstation.ui.text import age, definitions, digest, esc, when
+from robotconf.contract.interfaces import Interface, RobotInterfaces
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.wire import ReconcilerStatus
+from robotconf.readmodel.verdicts import RobotRow
+from robotconf.workstation.ui.auth import Identity
+from robotconf.workstation.ui.goals_html import goals_box, revision_link
+from robotconf.workstation.ui.model import HistoryEntry, Snapshot
+from robotconf.workstation.ui.pages import MAX_LISTED, banner_box, page
+from robotconf.workstation.ui.text import age, definitions, digest, esc, when
 
 
 def robot_page(

@@ -9,22 +9,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contract.errors import CliError
-from contract.lifecycle import parse_address
-from contract.mqtt import Connection
-from readmodel.http_edge import BoundedHTTPServer
-from workstation.desk.signing import private_key
-from workstation.ui import DEFAULT_LISTEN
-from workstation.ui.actions import Actions
-from workstation.ui.auth import OperatorAuth
-from workstation.ui.clients import parse_proxies
-from workstation.ui.commit_reader import CommitReader
-from workstation.ui.logtail import LogTails
-from workstation.ui.restarts import Restarts
-from workstation.ui.revisions import CachedHistory, LedgerHistory, RevisionHistory
-from workstation.ui.rollout_decisions import Decisions
-from workstation.ui.server import UiService, is_loopback, serve
-from workstation.ui.state import LiveFleet
+from robotconf.contract.errors import CliError
+from robotconf.contract.lifecycle import parse_address
+from robotconf.contract.mqtt import Connection
+from robotconf.readmodel.http_edge import BoundedHTTPServer
+from robotconf.workstation.desk.signing import private_key
+from robotconf.workstation.ui import DEFAULT_LISTEN
+from robotconf.workstation.ui.actions import Actions
+from robotconf.workstation.ui.auth import OperatorAuth
+from robotconf.workstation.ui.clients import parse_proxies
+from robotconf.workstation.ui.commit_reader import CommitReader
+from robotconf.workstation.ui.logtail import LogTails
+from robotconf.workstation.ui.restarts import Restarts
+from robotconf.workstation.ui.revisions import CachedHistory, LedgerHistory, RevisionHistory
+from robotconf.workstation.ui.rollout_decisions import Decisions
+from robotconf.workstation.ui.server import UiService, is_loopback, serve
+from robotconf.workstation.ui.state import LiveFleet
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey

@@ -14,24 +14,24 @@ from importlib import resources
 from typing import TypeVar
 from urllib.parse import unquote, urlsplit
 
-from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
-from contract.launch import LaunchRequest
-from contract.models import is_robot_id
-from contract.textsafe import printable
-from readmodel.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
-from readmodel.retained import read_object
-from readmodel.timeline import QueryRefused
-from workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
-from workstation.ui.changes import Shown
-from workstation.ui.commit_facts import commit_section
-from workstation.ui.commit_reader import CommitError, CommitReader
-from workstation.ui.model import QueryError, parse_query
-from workstation.ui.pages import error_page, fleet_page
-from workstation.ui.revision_page import revision_page
-from workstation.ui.revisions import REVISION, EventLog, HistoryError, RevisionHistory
-from workstation.ui.robot_page import robot_page
-from workstation.ui.state import LiveFleet
-from workstation.ui.timeline_page import timeline_page, timeline_query
+from robotconf.contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.models import is_robot_id
+from robotconf.contract.textsafe import printable
+from robotconf.readmodel.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
+from robotconf.readmodel.retained import read_object
+from robotconf.readmodel.timeline import QueryRefused
+from robotconf.workstation.ui.auth import ANONYMOUS, Identity, OperatorAuth
+from robotconf.workstation.ui.changes import Shown
+from robotconf.workstation.ui.commit_facts import commit_section
+from robotconf.workstation.ui.commit_reader import CommitError, CommitReader
+from robotconf.workstation.ui.model import QueryError, parse_query
+from robotconf.workstation.ui.pages import error_page, fleet_page
+from robotconf.workstation.ui.revision_page import revision_page
+from robotconf.workstation.ui.revisions import REVISION, EventLog, HistoryError, RevisionHistory
+from robotconf.workstation.ui.robot_page import robot_page
+from robotconf.workstation.ui.state import LiveFleet
+from robotconf.workstation.ui.timeline_page import timeline_page, timeline_query
 
 log = logging.getLogger("robotconf.ui")
 
@@ -332,7 +332,7 @@ def _parsed(payload: bytes | None, model: type[M], limit: int | None = None) -> 
 
 
 def _static(name: str) -> bytes:
-    return (resources.files("workstation.ui") / "static" / name).read_bytes()
+    return (resources.files("robotconf.workstation.ui") / "static" / name).read_bytes()
 
 
 def serve(

@@ -13,15 +13,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol
 
-from configurator.gcpause import collector_paused
-from contract.mqtt import Connection
-from contract.textsafe import printable
-from contract.wire import Topics
-from readmodel.verdicts import FleetStatus, reconciler_health
-from workstation.fleet_reader import FleetReader
-from workstation.fleet_status import DesiredCache, open_view
-from workstation.ui.changes import Shown, Views, change, changed_rows, first
-from workstation.ui.model import HISTORY, HistoryEntry, Snapshot
+from robotconf.configurator.gcpause import collector_paused
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.textsafe import printable
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.verdicts import FleetStatus, reconciler_health
+from robotconf.workstation.fleet_reader import FleetReader
+from robotconf.workstation.fleet_status import DesiredCache, open_view
+from robotconf.workstation.ui.changes import Shown, Views, change, changed_rows, first
+from robotconf.workstation.ui.model import HISTORY, HistoryEntry, Snapshot
 
 log = logging.getLogger("robotconf.ui")
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import html
 import time
 
-from contract.textsafe import printable
+from robotconf.contract.textsafe import printable
 
 MAX_TEXT = 500  # characters of one robot- or commit-supplied string shown
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from urllib.parse import parse_qsl, quote
 
-from readmodel.timeline import KINDS, EventQuery, KeptEvent, QueryRefused, event_query
-from workstation.ui.auth import Identity
-from workstation.ui.goals_html import revision_link
-from workstation.ui.pages import page
-from workstation.ui.text import esc, when
+from robotconf.readmodel.timeline import KINDS, EventQuery, KeptEvent, QueryRefused, event_query
+from robotconf.workstation.ui.auth import Identity
+from robotconf.workstation.ui.goals_html import revision_link
+from robotconf.workstation.ui.pages import page
+from robotconf.workstation.ui.text import esc, when
 
 MAX_QUERY = 1024  # characters of the page's query string (three short fields)
 MAX_FIELDS = 8

@@ -7,10 +7,10 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from agent.process import is_alive
-from contract.launch import StopRequest
-from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.agent.process import is_alive
+from robotconf.contract.launch import StopRequest
+from robotconf.contract.signing import generate_keys, load_private_key, sign
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, STANDIN, AgentProc, make_request, publish
 from tests.support.lab import ROBOTCONF

@@ -10,8 +10,8 @@ import os
 import signal
 from pathlib import Path
 
-from agent.process import is_alive
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.agent.process import is_alive
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.integration.agent.test_agent_busy import LOGIC, busy_agent, deferred, run_held
 from tests.support.agents import ROBOT, AgentProc, make_request, publish

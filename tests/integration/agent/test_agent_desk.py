@@ -15,11 +15,11 @@ from typing import Any
 import paho.mqtt.client as paho
 import pytest
 
-from agent.logs import BURST, RATE
-from contract.launch import RestartRequest
-from contract.mqtt import Connection, make_client
-from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import (
+from robotconf.agent.logs import BURST, RATE
+from robotconf.contract.launch import RestartRequest
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.signing import generate_keys, load_private_key, sign
+from robotconf.contract.wire import (
     LOG_FOLLOW_TTL,
     MAX_LOG_MESSAGE_BYTES,
     AgentState,

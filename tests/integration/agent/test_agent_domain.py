@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from contract.launch import LaunchRequest, with_digest
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.contract.launch import LaunchRequest, with_digest
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto

@@ -14,8 +14,8 @@ from typing import Any
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
-from contract.goals import MAX_TEXT, GoalsSummary, OutcomeRecord, OutcomeState
-from contract.wire import AgentState, Topics
+from robotconf.contract.goals import MAX_TEXT, GoalsSummary, OutcomeRecord, OutcomeState
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, AgentProc, make_request, publish
 from tests.support.goals_watch import GoalsWatch

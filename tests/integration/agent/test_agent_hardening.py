@@ -8,8 +8,8 @@ import os
 
 import pytest
 
-from agent.process import is_alive
-from contract.wire import AgentState, Topics
+from robotconf.agent.process import is_alive
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, make_request, publish, start_running
 from tests.support.mosquitto import Mosquitto

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.cli import main
-from agent.process import is_alive
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.agent.cli import main
+from robotconf.agent.process import is_alive
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import make_request, publish, read_retained
 from tests.support.mosquitto import Mosquitto

@@ -18,12 +18,12 @@ from typing import Any
 import paho.mqtt.client as paho
 import pytest
 
-from agent.process import is_alive
-from agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install
-from contract.interfaces import MAX_INTERFACES, RobotInterfaces
-from contract.launch import with_digest
-from contract.mqtt import Connection, make_client
-from contract.wire import AgentState, Topics
+from robotconf.agent.process import is_alive
+from robotconf.agent.standin_ros2 import GRAPH_ENV, LOG_ENV, install
+from robotconf.contract.interfaces import MAX_INTERFACES, RobotInterfaces
+from robotconf.contract.launch import with_digest
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, make_request, publish, read_retained, start_running
 from tests.support.mosquitto import Mosquitto

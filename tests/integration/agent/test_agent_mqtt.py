@@ -11,8 +11,8 @@ import sys
 import textwrap
 from pathlib import Path
 
-from agent.process import is_alive
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.agent.process import is_alive
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import (
     ROBOT,
@@ -442,7 +442,7 @@ def test_a_second_agent_on_the_same_workdir_is_refused(
     agent = make_agent()
     running = start_running(agent, watch, mosquitto)
     intruder = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "--config", str(agent.config_path)],
+        [sys.executable, "-m", "robotconf.agent.cli", "--config", str(agent.config_path)],
         capture_output=True,
         text=True,
         timeout=TIMEOUT,

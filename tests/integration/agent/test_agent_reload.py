@@ -5,8 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from agent.process import is_alive
-from contract.wire import AgentState, Topics
+from robotconf.agent.process import is_alive
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, TIMEOUT, make_request, publish, start_running
 from tests.support.mosquitto import Mosquitto
@@ -115,7 +115,7 @@ def test_a_bad_reload_signal_is_a_located_config_error(make_agent: AgentFactory)
     lines = agent.config_path.read_text(encoding="utf-8").splitlines()
     line = 1 + next(n for n, text in enumerate(lines) if "SIGKILL" in text)
     result = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "--config", str(agent.config_path)],
+        [sys.executable, "-m", "robotconf.agent.cli", "--config", str(agent.config_path)],
         capture_output=True,
         text=True,
         timeout=TIMEOUT,

@@ -17,9 +17,9 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
-from contract.mqtt import Connection
-from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import AgentState, Topics
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.signing import generate_keys, load_private_key, sign
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto

@@ -17,7 +17,7 @@ def write(tmp_path: Path, text: str) -> Path:
 def test_cli_never_shows_a_traceback(tmp_path: Path) -> None:
     path = write(tmp_path, "description: {id: 'a b'}\ncommand: []\nworkdir: /proc/nope\n")
     result = subprocess.run(
-        [sys.executable, "-m", "agent.cli", "--config", str(path)],
+        [sys.executable, "-m", "robotconf.agent.cli", "--config", str(path)],
         capture_output=True,
         text=True,
         check=False,

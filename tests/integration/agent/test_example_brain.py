@@ -14,9 +14,9 @@ from pathlib import Path
 
 from pydantic import TypeAdapter
 
-from contract.goals import BrainMessage, GoalLine, OutcomeState, Ready
-from contract.launch import LaunchGoal, LaunchRequest, make_launch_request
-from contract.wire import AgentState, Topics
+from robotconf.contract.goals import BrainMessage, GoalLine, OutcomeState, Ready
+from robotconf.contract.launch import LaunchGoal, LaunchRequest, make_launch_request
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, make_request, publish
 from tests.support.goals_watch import GoalsWatch

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.process import (
+from robotconf.agent.process import (
     BrainLog,
     PidRecord,
     brain_environment,
@@ -25,7 +25,7 @@ from agent.process import (
     substitute,
     write_pidfile,
 )
-from agent.workdir import SeqStore, WorkdirLock, write_atomic
+from robotconf.agent.workdir import SeqStore, WorkdirLock, write_atomic
 from tests.support.watch import wait_for
 
 IGNORES_SIGTERM = (

@@ -1,5 +1,6 @@
 """The robot side installs alone: `pip install robotconf` into a fresh environment brings only
-paho-mqtt, pydantic and PyYAML, and its `robotconf-agent` runs a brain from a real broker."""
+paho-mqtt, pydantic and PyYAML, and its `robotconf-agent` runs a brain from a real broker, on a
+robot that already holds packages of its own named `agent` and `contract`."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from contract.wire import AgentState, Topics
+from robotconf.contract.wire import AgentState, Topics
 from tests.support.agents import ROBOT, AgentProc, make_request, publish
-from tests.support.install import clean_env, fresh_install, run
+from tests.support.install import DECOYS, clean_env, fresh_install, run, site_packages
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
 
@@ -21,8 +22,9 @@ SERVER_ONLY = {"click", "cryptography", "gitpython", "watchfiles", "amqtt", "ric
 
 @pytest.fixture(scope="module")
 def robot_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A fresh virtual environment with only the robot side: `pip install robotconf`."""
-    return fresh_install(tmp_path_factory.mktemp("robot-install"))
+    """A fresh virtual environment with only the robot side: `pip install robotconf`, into an
+    environment that holds unrelated `agent` and `contract` packages (DECOYS) already."""
+    return fresh_install(tmp_path_factory.mktemp("robot-install"), decoys=True)
 
 
 def _distributions(env: Path) -> set[str]:
@@ -41,7 +43,8 @@ def test_the_robot_install_brings_only_the_three_libraries(robot_env: Path) -> N
     installed = _distributions(robot_env)
     assert installed >= ROBOT_NEEDS
     assert not installed & SERVER_ONLY, installed & SERVER_ONLY
-    where = run([str(robot_env / "bin" / "python"), "-c", "import agent; print(agent.__file__)"])
+    code = "import robotconf.agent as a; print(a.__file__)"
+    where = run([str(robot_env / "bin" / "python"), "-c", code])
     assert where.startswith(str(robot_env)), where
     # The brain library is the robot side's too: it imports with the three alone.
     code = "import sys, robotconf.brain as b; print(b.__file__, 'click' in sys.modules)"
@@ -79,7 +82,7 @@ def test_a_robot_only_agent_runs_a_brain_from_the_broker(
     agent = AgentProc(
         tmp_path / "robot",
         mosquitto.url,
-        command=[python, "-m", "agent.standin_brain", "{launch_request}"],
+        command=[python, "-m", "robotconf.agent.standin_brain", "{launch_request}"],
         program=[str(robot_env / "bin" / "robotconf-agent")],
     )
     try:
@@ -95,3 +98,20 @@ def test_a_robot_only_agent_runs_a_brain_from_the_broker(
         assert cmdline[1].decode() == str(robot_env / "bin" / "robotconf-agent")
     finally:
         agent.cleanup()
+
+
+def test_the_install_lands_under_robotconf_alone_and_leaves_other_packages_be(
+    robot_env: Path,
+) -> None:
+    """Nothing of ours at the top of site-packages but `robotconf`; the robot's own `agent`
+    and `contract` are still theirs after the install (a wheel of top-level packages once
+    wrote over them), and the agent ran beside them (the test above)."""
+    ours = run([str(robot_env / "bin" / "python"), "-m", "pip", "show", "-f", "robotconf"])
+    files = [line.strip() for line in ours.split("Files:", 1)[1].splitlines() if line.strip()]
+    tops = {name.split("/")[0] for name in files if not name.startswith("../")}
+    assert {top for top in tops if not top.endswith(".dist-info")} == {"robotconf"}, tops
+    code = "import agent, contract; print(agent.OWNER); print(contract.OWNER)"
+    owners = run([str(robot_env / "bin" / "python"), "-c", code]).splitlines()
+    assert owners == [f"someone else's {name}" for name in DECOYS]
+    for name in DECOYS:
+        assert (site_packages(robot_env) / name / "__init__.py").read_text().startswith("OWNER")

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from agent.standin_brain import FAILURE_CODE, GOAL_SECONDS_KEY, SUCCESS_RATE_KEY
-from contract.goals import OutcomeState
-from contract.launch import LaunchGoal, LaunchRequest, make_launch_request
-from contract.wire import AgentState, Topics
+from robotconf.agent.standin_brain import FAILURE_CODE, GOAL_SECONDS_KEY, SUCCESS_RATE_KEY
+from robotconf.contract.goals import OutcomeState
+from robotconf.contract.launch import LaunchGoal, LaunchRequest, make_launch_request
+from robotconf.contract.wire import AgentState, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import ROBOT, make_request, publish
 from tests.support.goals_watch import GoalsWatch

@@ -20,8 +20,8 @@ from urllib.parse import urlencode
 
 import pytest
 
-from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.contract.signing import generate_keys, load_private_key, sign
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import FAILS_ONCE, ROBOT, TIMEOUT, make_request, publish
 from tests.support.lab import ROBOTCONF

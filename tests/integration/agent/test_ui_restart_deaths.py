@@ -11,7 +11,7 @@ import signal
 from pathlib import Path
 from typing import Any
 
-from contract.wire import AgentState, AgentStatus
+from robotconf.contract.wire import AgentState, AgentStatus
 from tests.integration.agent.conftest import AgentFactory
 from tests.integration.agent.test_agent_busy import busy_agent, deferred, run_held
 from tests.integration.agent.test_ui_operator import TOKEN, ui_factory  # noqa: F401 (fixture)

@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 from pydantic import TypeAdapter
 
-from contract.goals import MAX_LINE_BYTES, BrainMessage, GoalLine, Hello, Ready
 from robotconf import brain
 from robotconf.brain import MAX_WAITING, BrainError, Link, read_request
+from robotconf.contract.goals import MAX_LINE_BYTES, BrainMessage, GoalLine, Hello, Ready
 from tests.support.agents import make_request
 
 MESSAGE: TypeAdapter[object] = TypeAdapter(BrainMessage)

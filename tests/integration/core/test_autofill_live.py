@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from contract.wire import Topics
-from contract.yamlio import parse_document
+from robotconf.contract.wire import Topics
+from robotconf.contract.yamlio import parse_document
 from tests.support.agents import publish
 from tests.support.lab import ROOT, Lab
 from tests.support.mosquitto import Mosquitto

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 import yaml
 
-from contract.yamlio import MAX_FILE_BYTES
+from robotconf.contract.yamlio import MAX_FILE_BYTES
 from tests.support.lab import ROBOTCONF, ROOT
 
 CORPUS = ROOT / "tests" / "corpus" / "bad-input"

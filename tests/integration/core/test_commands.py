@@ -12,9 +12,9 @@ import click
 import jsonschema
 import pytest
 
-from configurator.loader import classify
-from configurator.plan import changed_fields
-from contract.yamlio import parse_document
+from robotconf.configurator.loader import classify
+from robotconf.configurator.plan import changed_fields
+from robotconf.contract.yamlio import parse_document
 from tests.support.lab import ROBOTCONF, ROOT, Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"
@@ -274,7 +274,7 @@ def test_catalog_lists_what_exists(lab: Lab) -> None:
 
 
 def test_schemas_are_current_in_this_repository() -> None:
-    from workstation.cli.main import main
+    from robotconf.workstation.cli.main import main
 
     assert main(["schemas", "--check", "--repo", str(ROOT)]) == 0
 
@@ -354,7 +354,7 @@ def robotconf(*args: str, env: dict[str, str] | None = None) -> subprocess.Compl
 
 
 def test_help_lists_every_command_the_table_declares() -> None:
-    from workstation.cli.main import COMMANDS
+    from robotconf.workstation.cli.main import COMMANDS
 
     done = robotconf("--help")
     assert done.returncode == 0, done.stderr
@@ -366,7 +366,7 @@ def test_help_lists_every_command_the_table_declares() -> None:
 
 
 def test_every_table_entry_loads_the_command_it_names() -> None:
-    from workstation.cli.main import COMMANDS, cli
+    from robotconf.workstation.cli.main import COMMANDS, cli
 
     ctx = click.Context(cli)
     for name in COMMANDS:
@@ -403,8 +403,8 @@ def test_usage_errors_exit_2(args: tuple[str, ...]) -> None:
 
 
 def test_a_cli_error_is_one_line_with_its_code(capsys: pytest.CaptureFixture[str]) -> None:
-    from contract.errors import CliError, ExitCode
-    from workstation.cli.main import cli, main
+    from robotconf.contract.errors import CliError, ExitCode
+    from robotconf.workstation.cli.main import cli, main
 
     @cli.command("fails-for-test")
     def fails() -> None:
@@ -429,7 +429,8 @@ def test_a_cli_error_is_one_line_with_its_code(capsys: pytest.CaptureFixture[str
 def test_a_command_without_the_server_extra_says_what_to_install() -> None:
     code = (
         "import sys; sys.modules['rich'] = None  # as if rich were not installed\n"
-        "from workstation.cli import main; sys.exit(main(['catalog', '--repo', sys.argv[1]]))"
+        "from robotconf.workstation.cli import main\n"
+        "sys.exit(main(['catalog', '--repo', sys.argv[1]]))"
     )
     done = subprocess.run(
         [sys.executable, "-c", code, str(ROOT)], capture_output=True, text=True, timeout=120

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from configurator.source import FileTooLarge, GitSource, SourceError, WorkTreeSource
-from configurator.workspace import check
-from contract.yamlio import MAX_FILE_BYTES
-from reconciler.desired import load_desired
+from robotconf.configurator.source import FileTooLarge, GitSource, SourceError, WorkTreeSource
+from robotconf.configurator.workspace import check
+from robotconf.contract.yamlio import MAX_FILE_BYTES
+from robotconf.reconciler.desired import load_desired
 from tests.support.lab import Lab
 
 SCENARIO = "configs/scenarios/delivery-gazebo.yaml"
@@ -45,7 +45,7 @@ def test_a_commit_is_read_by_a_fixed_number_of_git_processes(lab: Lab, tmp_path:
     revision = lab.commit("200 more scenarios")
     env, log = _git_counter(tmp_path)
     code = (
-        "import sys; from pathlib import Path; from configurator.workspace import check\n"
+        "import sys; from pathlib import Path; from robotconf.configurator.workspace import check\n"
         f"checked = check(Path({str(lab.root)!r}), {revision!r})\n"
         "print(checked.repo.files_read, len(checked.errors))\n"
     )

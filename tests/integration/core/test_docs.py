@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from robotconf.workstation import docs
 from tests.support.lab import ROOT
-from workstation import docs
 
-FIX = "run `python -m workstation.docs` and commit the pages"
+FIX = "run `python -m robotconf.workstation.docs` and commit the pages"
 
 
 def test_the_reference_pages_are_what_the_code_generates() -> None:
@@ -38,7 +38,7 @@ def test_check_names_the_stale_page_and_writing_makes_it_current(
     capsys.readouterr()
     assert docs.main(["--check", "--root", str(root)]) == 1
     err = capsys.readouterr().err
-    assert "stale: docs/reference/commands.md; run: python -m workstation.docs" in err
+    assert "stale: docs/reference/commands.md; run: python -m robotconf.workstation.docs" in err
     assert "rules.md" not in err
     assert docs.main(["--root", str(root)]) == 0
     assert docs.main(["--check", "--root", str(root)]) == 0

@@ -8,13 +8,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from configurator.workspace import check, check_with
-from contract.wire import Topics
-from contract.yamlio import parse_document
+from robotconf.configurator.workspace import check, check_with
+from robotconf.contract.wire import Topics
+from robotconf.contract.yamlio import parse_document
+from robotconf.workstation.cli.draft import write_validated
 from tests.support.agents import publish
 from tests.support.lab import ROOT, Lab
 from tests.support.mosquitto import Mosquitto, free_port
-from workstation.cli.draft import write_validated
 
 TEMPLATE = "models/platforms/ROS2/robot-templates/{}.yaml"
 SCHEME = "models/platforms/ROS2/mapping-schemes/{}.yaml"

@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from configurator.schemas import dump, generate
+from robotconf.configurator.schemas import dump, generate
 from tests.support.lab import ROOT, Lab
 
 SERVER = ROOT / os.environ.get("ROBOTCONF_VENV", ".venv") / "yaml-language-server"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.install import build_wheel, copy_project
+from tests.support.install import PACKAGES, build_wheel, copy_project
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -75,7 +75,10 @@ def test_the_wheel_carries_the_ui_script_and_stylesheet(tmp_path: Path) -> None:
     """`robotconf ui` serves them from the package: no CDN, no build step."""
     with zipfile.ZipFile(build_wheel(tmp_path)) as built:
         names = set(built.namelist())
-    assert {"workstation/ui/static/ui.js", "workstation/ui/static/ui.css"} <= names
+    assert {
+        "robotconf/workstation/ui/static/ui.js",
+        "robotconf/workstation/ui/static/ui.css",
+    } <= names
 
 
 def test_the_wheel_build_warns_of_nothing_and_carries_every_module(tmp_path: Path) -> None:
@@ -103,15 +106,18 @@ def test_the_wheel_build_warns_of_nothing_and_carries_every_module(tmp_path: Pat
     with zipfile.ZipFile(wheel) as built:
         names = {n for n in built.namelist() if n.endswith(".py")}
     sources = {
-        path.relative_to(project).as_posix()
-        for package in (
-            "robotconf",
-            "contract",
-            "configurator",
-            "readmodel",
-            "reconciler",
-            "workstation",
-        )
+        wheel_path(path.relative_to(project))
+        for package in PACKAGES
         for path in (project / package).rglob("*.py")
-    } | {path.relative_to(project).as_posix() for path in (project / "agent").rglob("*.py")}
+    }
     assert sources - names == set()
+    # One namespace (issue 33): nothing of ours lands beside robotconf in site-packages.
+    with zipfile.ZipFile(wheel) as built:
+        tops = {name.split("/")[0] for name in built.namelist()}
+    assert {top for top in tops if not top.endswith(".dist-info")} == {"robotconf"}, tops
+
+
+def wheel_path(source: Path) -> str:
+    """Where a source file lands in the wheel: agent/cli.py as robotconf/agent/cli.py."""
+    parts = source.parts if source.parts[0] == "robotconf" else ("robotconf", *source.parts)
+    return "/".join(parts)

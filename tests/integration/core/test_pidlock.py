@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from agent.workdir import LOCK_FILE, WorkdirLock
-from contract.errors import CliError
-from contract.pidlock import PidLock, lock_holder
-from workstation.up import UpLock
+from robotconf.agent.workdir import LOCK_FILE, WorkdirLock
+from robotconf.contract.errors import CliError
+from robotconf.contract.pidlock import PidLock, lock_holder
+from robotconf.workstation.up import UpLock
 
 
 def test_a_held_lock_names_its_holder_until_released(tmp_path: Path) -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import json
 
-from configurator.render import render_fleet
-from contract.launch import LaunchRequest
+from robotconf.configurator.render import render_fleet
+from robotconf.contract.launch import LaunchRequest
 from tests.support.lab import Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from configurator.source import GitSource, WorkTreeSource
-from contract.yamlio import MAX_FILE_BYTES
-from reconciler.desired import load_desired
+from robotconf.configurator.source import GitSource, WorkTreeSource
+from robotconf.contract.yamlio import MAX_FILE_BYTES
+from robotconf.reconciler.desired import load_desired
 from tests.support.lab import ROBOTCONF, Lab
 
 CAPABILITY = "configs/capabilities/evil.yaml"

@@ -24,9 +24,13 @@ PACKAGES = (
 
 
 def module_name(path: Path) -> str:
+    """The name `path` is imported by: every folder of PACKAGES is a subpackage of robotconf
+    (robotconf/agent -> ../agent and so on), so agent/cli.py is robotconf.agent.cli."""
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
+    if parts[0] != "robotconf":
+        parts.insert(0, "robotconf")
     return ".".join(parts)
 
 
@@ -103,7 +107,7 @@ def test_the_cycle_finder_finds_a_function_level_cycle(tmp_path: Path) -> None:
     assert find_cycle({"a.x": {"a.y"}, "a.y": set()}) is None
     # Imports inside functions count: they run sooner or later.
     module = ROOT / "workstation" / "up.py"
-    assert "workstation.broker" in imported_modules(module, set(import_graph()))
+    assert "robotconf.workstation.broker" in imported_modules(module, set(import_graph()))
 
 
 # The layers, bottom first: each may import its own and those below. The robot side (agent)
@@ -132,24 +136,30 @@ MAY_IMPORT = {
 }
 # Modules of the workstation that stand at the commands' level though they live beside the
 # services: `up`'s engine starts the browser view; the docs generator reads every command.
-AT_THE_COMMANDS = {"workstation.up", "workstation.docs"}
+AT_THE_COMMANDS = {"robotconf.workstation.up", "robotconf.workstation.docs"}
 # The only modules of the workstation that import the reconciler: they start it (`reconcile`,
 # `up`). Everything else reads the fleet through the read model.
-STARTS_THE_RECONCILER = {"workstation.cli.reconcile", "workstation.up"}
+STARTS_THE_RECONCILER = {"robotconf.workstation.cli.reconcile", "robotconf.workstation.up"}
 
 
 def layer(module: str) -> str:
-    """The layer of `module`: its top package, or the workstation's ui or cli."""
+    """The layer of `module` (robotconf.X.…): its folder X, or the workstation's ui or cli;
+    robotconf's own modules (the brain library) are the layer `robotconf`."""
     if module in AT_THE_COMMANDS:
         return "workstation.cli"
-    top, _, rest = module.partition(".")
-    sub = f"{top}.{rest.partition('.')[0]}"
-    return sub if sub in MAY_IMPORT else top
+    parts = module.split(".")[1:]
+    if not parts or parts[0] not in PACKAGES:
+        return "robotconf"
+    sub = ".".join(parts[:2])
+    return sub if sub in MAY_IMPORT else parts[0]
 
 
 def may_import(module: str, target: str) -> bool:
     """Whether `module` may import `target`: its layer's rule, and the reconciler for the
-    workstation's modules that start it."""
+    workstation's modules that start it. The namespace's root (robotconf/__init__.py) is
+    imported by every import of ours anyway: naming it is no breach."""
+    if target == "robotconf":
+        return True
     if layer(target) in MAY_IMPORT[layer(module)]:
         return True
     return layer(target) == "reconciler" and module in STARTS_THE_RECONCILER
@@ -175,20 +185,29 @@ def test_every_import_goes_down_the_layers() -> None:
 
 def test_the_layer_check_finds_an_upward_import() -> None:
     graph = {
-        "contract.wire": {"configurator.types"},
-        "agent.runtime": {"readmodel.retained", "contract.wire"},
-        "workstation.up": {"agent.workdir", "workstation.ui.run"},
-        "workstation.ui.restarts": {"workstation.cli.restart", "workstation.desk.restart"},
-        "workstation.desk.restart": {"workstation.cli.options", "workstation.desk.robot"},
-        "workstation.cli.ui": {"workstation.ui.run", "workstation.desk.signing"},
-        "reconciler.metrics": {"workstation.ui.server"},
+        "robotconf.contract.wire": {"robotconf.configurator.types"},
+        "robotconf.agent.runtime": {"robotconf.readmodel.retained", "robotconf.contract.wire"},
+        "robotconf.workstation.up": {"robotconf.agent.workdir", "robotconf.workstation.ui.run"},
+        "robotconf.workstation.ui.restarts": {
+            "robotconf.workstation.cli.restart",
+            "robotconf.workstation.desk.restart",
+        },
+        "robotconf.workstation.desk.restart": {
+            "robotconf.workstation.cli.options",
+            "robotconf.workstation.desk.robot",
+        },
+        "robotconf.workstation.cli.ui": {
+            "robotconf.workstation.ui.run",
+            "robotconf.workstation.desk.signing",
+        },
+        "robotconf.reconciler.metrics": {"robotconf.workstation.ui.server"},
     }
     assert layer_breaches(graph) == [
-        "agent.runtime -> readmodel.retained",
-        "contract.wire -> configurator.types",
-        "reconciler.metrics -> workstation.ui.server",
-        "workstation.desk.restart -> workstation.cli.options",
-        "workstation.ui.restarts -> workstation.cli.restart",
+        "robotconf.agent.runtime -> robotconf.readmodel.retained",
+        "robotconf.contract.wire -> robotconf.configurator.types",
+        "robotconf.reconciler.metrics -> robotconf.workstation.ui.server",
+        "robotconf.workstation.desk.restart -> robotconf.workstation.cli.options",
+        "robotconf.workstation.ui.restarts -> robotconf.workstation.cli.restart",
     ]
 
 
@@ -196,21 +215,46 @@ def test_the_layer_check_holds_the_reconciler_to_those_that_start_it() -> None:
     """The workstation reads the fleet through the read model; only `reconcile` and `up`
     import the reconciler (to start it). The read model imports neither of its users."""
     graph = {
-        "workstation.cli.reconcile": {"reconciler.controller", "readmodel.retained"},
-        "workstation.up": {"reconciler.controller", "readmodel.verdicts"},
-        "workstation.cli.status": {"reconciler.telemetry", "readmodel.verdicts"},
-        "workstation.ui.server": {"reconciler.controller", "readmodel.http_edge"},
-        "workstation.fleet_reader": {"reconciler.observed", "readmodel.observed"},
-        "reconciler.controller": {"readmodel.retained", "configurator.render"},
-        "readmodel.verdicts": {"reconciler.decide", "workstation.fleet_status", "contract.wire"},
-        "readmodel.ledger": {"configurator.types", "readmodel.outcomes"},
+        "robotconf.workstation.cli.reconcile": {
+            "robotconf.reconciler.controller",
+            "robotconf.readmodel.retained",
+        },
+        "robotconf.workstation.up": {
+            "robotconf.reconciler.controller",
+            "robotconf.readmodel.verdicts",
+        },
+        "robotconf.workstation.cli.status": {
+            "robotconf.reconciler.telemetry",
+            "robotconf.readmodel.verdicts",
+        },
+        "robotconf.workstation.ui.server": {
+            "robotconf.reconciler.controller",
+            "robotconf.readmodel.http_edge",
+        },
+        "robotconf.workstation.fleet_reader": {
+            "robotconf.reconciler.observed",
+            "robotconf.readmodel.observed",
+        },
+        "robotconf.reconciler.controller": {
+            "robotconf.readmodel.retained",
+            "robotconf.configurator.render",
+        },
+        "robotconf.readmodel.verdicts": {
+            "robotconf.reconciler.decide",
+            "robotconf.workstation.fleet_status",
+            "robotconf.contract.wire",
+        },
+        "robotconf.readmodel.ledger": {
+            "robotconf.configurator.types",
+            "robotconf.readmodel.outcomes",
+        },
     }
     assert layer_breaches(graph) == [
-        "readmodel.verdicts -> reconciler.decide",
-        "readmodel.verdicts -> workstation.fleet_status",
-        "workstation.cli.status -> reconciler.telemetry",
-        "workstation.fleet_reader -> reconciler.observed",
-        "workstation.ui.server -> reconciler.controller",
+        "robotconf.readmodel.verdicts -> robotconf.reconciler.decide",
+        "robotconf.readmodel.verdicts -> robotconf.workstation.fleet_status",
+        "robotconf.workstation.cli.status -> robotconf.reconciler.telemetry",
+        "robotconf.workstation.fleet_reader -> robotconf.reconciler.observed",
+        "robotconf.workstation.ui.server -> robotconf.reconciler.controller",
     ]
 
 
@@ -218,7 +262,7 @@ def loaded_modules(*argv: str) -> set[str]:
     """The modules a `robotconf` run with these arguments has imported when it ends."""
     code = (
         "import sys, io, contextlib\n"
-        "from workstation.cli import main\n"
+        "from robotconf.workstation.cli import main\n"
         "out = io.StringIO()\n"
         "with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):\n"
         f"    code = main({list(argv)!r})\n"
@@ -235,13 +279,14 @@ def loaded_modules(*argv: str) -> set[str]:
 
 
 def _top(modules: set[str]) -> set[str]:
-    return {m.split(".")[0] for m in modules}
+    """The top packages of `modules`, ours by their folder: robotconf.agent.cli is agent."""
+    return {m.split(".")[1] if m.startswith("robotconf.") else m.split(".")[0] for m in modules}
 
 
 def test_help_imports_no_command_module() -> None:
     loaded = loaded_modules("--help")
-    commands = {m for m in loaded if m.startswith("workstation.cli.")}
-    assert commands <= {"workstation.cli.main", "contract.errors"}, commands
+    commands = {m for m in loaded if m.startswith("robotconf.workstation.cli.")}
+    assert commands <= {"robotconf.workstation.cli.main", "robotconf.contract.errors"}, commands
     assert not _top(loaded) & {
         "rich",
         "pydantic",
@@ -255,10 +300,15 @@ def test_help_imports_no_command_module() -> None:
 
 def test_validate_imports_neither_rich_nor_the_broker_side() -> None:
     loaded = loaded_modules("validate", "--repo", str(ROOT))
-    assert "configurator.workspace" in loaded  # it did run
+    assert "robotconf.configurator.workspace" in loaded  # it did run
     assert not _top(loaded) & {"rich", "paho", "git", "readmodel", "reconciler", "agent"}
     # Nor rendering: its models are built at import, and every commit pays validate's start-up.
-    rendering = {"configurator.render", "configurator.drift", "contract.launch", "contract.wire"}
+    rendering = {
+        "robotconf.configurator.render",
+        "robotconf.configurator.drift",
+        "robotconf.contract.launch",
+        "robotconf.contract.wire",
+    }
     assert not loaded & rendering, loaded & rendering
 
 
@@ -269,7 +319,7 @@ def freeze_count(call: str) -> int:
         "import gc, io, sys\n"
         "from contextlib import redirect_stderr, redirect_stdout\n"
         f"sys.argv = ['robotconf', 'validate', '--repo', {str(ROOT)!r}]\n"
-        "from workstation.cli import main\n"
+        "from robotconf.workstation.cli import main\n"
         "with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):\n"
         f"    code = {call}\n"
         "print(code, gc.get_freeze_count())\n"
@@ -289,7 +339,13 @@ def test_robotconf_keeps_the_collector_off_what_its_imports_made() -> None:
 
 
 @pytest.mark.parametrize(
-    "module", ["agent.cli", "agent.runtime", "contract.errors", "robotconf.brain"]
+    "module",
+    [
+        "robotconf.agent.cli",
+        "robotconf.agent.runtime",
+        "robotconf.contract.errors",
+        "robotconf.brain",
+    ],
 )
 def test_the_robot_side_imports_no_workstation_library(module: str) -> None:
     code = f"import sys, {module}; print('\\n'.join(sorted(sys.modules)))"

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from robotconf.workstation.up import prepare
 from tests.support.fleet import GitLab
-from workstation.up import prepare
 
 
 def _added(lab: GitLab) -> list[str]:

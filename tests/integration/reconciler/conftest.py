@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from configurator.rendered import RenderedRequest
-from contract.wire import AgentStatus
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.wire import AgentStatus
 from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start_reconciler
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch

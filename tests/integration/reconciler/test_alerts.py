@@ -18,14 +18,20 @@ import pytest
 import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
-from contract.mqtt import Connection
-from contract.wire import AgentState, AgentStatus, ReconcilerReason, ReconcilerStatus, Topics
-from readmodel.events import Event, Kind
-from readmodel.verdicts import Verdict
-from reconciler.decide import state_of
-from reconciler.notify import QUEUE, Notifier, Sender, parse_receiver
-from reconciler.source import LocalBranch
-from reconciler.telemetry import Telemetry
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import (
+    AgentState,
+    AgentStatus,
+    ReconcilerReason,
+    ReconcilerStatus,
+    Topics,
+)
+from robotconf.readmodel.events import Event, Kind
+from robotconf.readmodel.verdicts import Verdict
+from robotconf.reconciler.decide import state_of
+from robotconf.reconciler.notify import QUEUE, Notifier, Sender, parse_receiver
+from robotconf.reconciler.source import LocalBranch
+from robotconf.reconciler.telemetry import Telemetry
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.agents import publish
 from tests.support.fleet import GitLab, Running, refused_reconcile, start_reconciler

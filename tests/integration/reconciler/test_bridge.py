@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from contract.wire import AgentState, AgentStatus
+from robotconf.contract.wire import AgentState, AgentStatus
 from tests.support.fleet import (
     GitLab,
     Proc,

@@ -12,13 +12,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from configurator.brokerconf import Listener, render_conf
-from contract.mqtt import Connection, make_client
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.configurator.brokerconf import Listener, render_conf
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.workstation.fleet_status import open_view
 from tests.support.fleet import robotconf_argv
 from tests.support.lab import ROOT
 from tests.support.mosquitto import Mosquitto
-from workstation.fleet_status import open_view
 
 sys.path.insert(0, str(ROOT / "bench"))
 import generate

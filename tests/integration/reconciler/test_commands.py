@@ -14,11 +14,11 @@ import termios
 import threading
 from pathlib import Path
 
-from contract.mqtt import Connection
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.retained import RetainedView
-from reconciler.controller import Controller
-from reconciler.source import LocalBranch
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.retained import RetainedView
+from robotconf.reconciler.controller import Controller
+from robotconf.reconciler.source import LocalBranch
 from tests.support.fleet import ROBOTS, GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.watch import FleetWatch, wait_for

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from contract.mqtt import Connection
-from readmodel.retained import RetainedView
-from reconciler.source import LocalBranch, RemoteBranch
+from robotconf.contract.mqtt import Connection
+from robotconf.readmodel.retained import RetainedView
+from robotconf.reconciler.source import LocalBranch, RemoteBranch
 from tests.support.fleet import ROBOTS, GitLab, Running
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for

@@ -10,10 +10,10 @@ import subprocess
 from dataclasses import replace
 from pathlib import Path
 
+from robotconf.workstation import desired_store
 from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
-from workstation import desired_store
 
 
 def _status(lab: GitLab, mosquitto: Mosquitto) -> dict[str, object]:

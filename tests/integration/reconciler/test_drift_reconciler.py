@@ -9,11 +9,11 @@ from collections.abc import Iterator
 
 import pytest
 
-from contract.mqtt import Connection
-from reconciler.metrics import Metrics
-from reconciler.notify import Notifier, parse_receiver
-from reconciler.source import LocalBranch
-from reconciler.telemetry import Telemetry
+from robotconf.contract.mqtt import Connection
+from robotconf.reconciler.metrics import Metrics
+from robotconf.reconciler.notify import Notifier, parse_receiver
+from robotconf.reconciler.source import LocalBranch
+from robotconf.reconciler.telemetry import Telemetry
 from tests.integration.reconciler.test_alerts import Receiver, free_port, scrape, value
 from tests.support.fleet import ROBOTS, GitLab, Running, robotconf_argv
 from tests.support.interfaces import publish_interfaces, report

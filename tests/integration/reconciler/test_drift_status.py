@@ -6,7 +6,7 @@ import json
 import subprocess
 from typing import Any
 
-from contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
+from robotconf.contract.interfaces import MAX_INTERFACES_BYTES, RobotInterfaces
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.interfaces import PATROL_ON_A_PATH_DRIFT, publish_interfaces, report
 from tests.support.mosquitto import Mosquitto, free_port

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 
-from contract.wire import AgentState
+from robotconf.contract.wire import AgentState
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.fleet import pid_alive, robotconf_argv
 from tests.support.watch import wait_for

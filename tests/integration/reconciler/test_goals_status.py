@@ -8,16 +8,16 @@ import json
 import subprocess
 from typing import Any
 
-from contract.goals import CurrentGoal
-from contract.mqtt import Connection
-from contract.wire import Topics
+from robotconf.contract.goals import CurrentGoal
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import Topics
+from robotconf.workstation.fleet_status import DesiredCache, fleet_status
+from robotconf.workstation.ui.state import LiveFleet
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.goals_summaries import AT, REV1, publish_summary, summary
 from tests.support.mosquitto import Mosquitto
 from tests.support.ui import UiProc
 from tests.support.watch import wait_for
-from workstation.fleet_status import DesiredCache, fleet_status
-from workstation.ui.state import LiveFleet
 
 HOSTILE = "<b>bold</b>\x1b[2J\u202e"
 

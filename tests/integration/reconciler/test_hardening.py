@@ -13,16 +13,16 @@ from pathlib import Path
 
 import pytest
 
-from contract.launch import LaunchRequest, StopRequest
-from contract.mqtt import Connection
-from contract.signing import Signed, generate_keys, load_public_key, verify
-from contract.wire import ReconcilerStatus, Topics
-from readmodel.retained import Ignored, RetainedView
-from reconciler.builds import MAX_REQUEST_BYTES
-from reconciler.delivery import Signer
-from reconciler.desired import Desired, load_desired
-from reconciler.signer import make_signer
-from reconciler.source import LocalBranch
+from robotconf.contract.launch import LaunchRequest, StopRequest
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.signing import Signed, generate_keys, load_public_key, verify
+from robotconf.contract.wire import ReconcilerStatus, Topics
+from robotconf.readmodel.retained import Ignored, RetainedView
+from robotconf.reconciler.builds import MAX_REQUEST_BYTES
+from robotconf.reconciler.delivery import Signer
+from robotconf.reconciler.desired import Desired, load_desired
+from robotconf.reconciler.signer import make_signer
+from robotconf.reconciler.source import LocalBranch
 from tests.support.fleet import ROBOTS, GitLab, Running, robotconf_argv, start_reconciler
 from tests.support.lab import ROOT as LAB
 from tests.support.mosquitto import Mosquitto

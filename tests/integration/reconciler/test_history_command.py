@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from contract.goals import OutcomeRecord, OutcomeState
-from readmodel.ledger import Ledger, ledger_path
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.readmodel.ledger import Ledger, ledger_path
 from tests.support.fleet import robotconf_argv
 
 OLD, NEW = "0a" * 20, "0b" * 20

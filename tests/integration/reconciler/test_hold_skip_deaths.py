@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from contract.wire import ReconcilerStatus
+from robotconf.contract.wire import ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_drift_reconciler import FLEET, NAV2, ODOM
 from tests.integration.reconciler.test_rollout import complete, rename_all, running_digest

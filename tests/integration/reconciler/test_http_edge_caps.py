@@ -11,7 +11,7 @@ from __future__ import annotations
 import socket
 import threading
 
-from readmodel.http_edge import Limits
+from robotconf.readmodel.http_edge import Limits
 from tests.integration.reconciler.test_http_edge_stream import edge, read_to_end
 from tests.integration.reconciler.test_listeners import closed_by_server, connect_from
 from tests.support.watch import wait_for

@@ -9,7 +9,7 @@ import socket
 import threading
 from collections.abc import Iterator
 
-from readmodel.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
+from robotconf.readmodel.http_edge import BoundedHTTPServer, FedStream, Limits, Request, Response
 from tests.integration.reconciler.test_listeners import closed_by_server, connect_from
 from tests.support.watch import wait_for
 

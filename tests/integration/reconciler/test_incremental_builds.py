@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from reconciler.desired import Desired, DesiredBuilder, load_desired
+from robotconf.reconciler.desired import Desired, DesiredBuilder, load_desired
 from tests.support.fleet import GitLab
 
 SCENARIO = "configs/scenarios/delivery-gazebo.yaml"

@@ -24,13 +24,13 @@ import paho.mqtt.client as paho
 import pytest
 from prometheus_client import CollectorRegistry
 
-from contract.goals import OutcomeRecord, OutcomeState
-from contract.mqtt import Connection, make_client
-from contract.wire import Topics
-from readmodel.events import Event, Kind
-from readmodel.ledger import Ledger, ledger_path
-from reconciler.ledger_feed import LedgerFeed, LedgerSettings
-from reconciler.metrics import Metrics
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.events import Event, Kind
+from robotconf.readmodel.ledger import Ledger, ledger_path
+from robotconf.reconciler.ledger_feed import LedgerFeed, LedgerSettings
+from robotconf.reconciler.metrics import Metrics
 from tests.support.fleet import GitLab, Proc, robotconf_argv, start_reconciler
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import wait_for
@@ -360,8 +360,8 @@ WRITER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from contract.goals import OutcomeRecord
-    from readmodel.ledger import Ledger
+    from robotconf.contract.goals import OutcomeRecord
+    from robotconf.readmodel.ledger import Ledger
     ledger = Ledger.open_or_start(Path(sys.argv[1]))
     seq = 0
     while True:

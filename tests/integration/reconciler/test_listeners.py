@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from readmodel.http_edge import Limits, client_key
-from reconciler.metrics import Metrics
-from reconciler.webhook_server import LIMITS, WebhookServer
+from robotconf.readmodel.http_edge import Limits, client_key
+from robotconf.reconciler.metrics import Metrics
+from robotconf.reconciler.webhook_server import LIMITS, WebhookServer
 from tests.integration.reconciler.test_alerts import scrape, value
 from tests.integration.reconciler.test_webhook import SECRET, github, post, push_body
 from tests.support.fleet import GitLab, Proc, start_reconciler

@@ -6,9 +6,9 @@ from collections.abc import Callable
 
 import pytest
 
-from contract.mqtt import Connection
-from readmodel import retained
-from readmodel.retained import RetainedView, speaks_mqtt5
+from robotconf.contract.mqtt import Connection
+from robotconf.readmodel import retained
+from robotconf.readmodel.retained import RetainedView, speaks_mqtt5
 from tests.support.agents import publish
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.watch import wait_for

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from reconciler.notify import MAX_NOTIFY_FILE_BYTES, NOTIFY_ENV
+from robotconf.reconciler.notify import MAX_NOTIFY_FILE_BYTES, NOTIFY_ENV
 from tests.integration.reconciler.test_alerts import Receiver, break_fleet
 from tests.support.fleet import GitLab, refused_reconcile, start_reconciler
 from tests.support.mosquitto import Mosquitto

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from readmodel.events import Event, Kind
-from reconciler.notify import Sender, parse_receiver
+from robotconf.readmodel.events import Event, Kind
+from robotconf.reconciler.notify import Sender, parse_receiver
 from tests.support.receivers import ANSWER, Dripper, Recorder
 from tests.support.tlsutil import make_pki
 from tests.support.watch import wait_for

@@ -10,18 +10,18 @@ from pathlib import Path
 
 import pytest
 
-from contract.mqtt import Connection
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.retained import RetainedView
-from reconciler.controller import Controller
-from reconciler.source import LocalBranch
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.retained import RetainedView
+from robotconf.reconciler.controller import Controller
+from robotconf.reconciler.source import LocalBranch
+from robotconf.workstation.fleet_reader import FleetReader, open_reader, watch
+from robotconf.workstation.fleet_status import DesiredCache, DesiredSource, fleet_status
+from robotconf.workstation.ui.state import LiveFleet
+from robotconf.workstation.up import ServingDesired
 from tests.support.fleet import GitLab
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
-from workstation.fleet_reader import FleetReader, open_reader, watch
-from workstation.fleet_status import DesiredCache, DesiredSource, fleet_status
-from workstation.ui.state import LiveFleet
-from workstation.up import ServingDesired
 
 
 @pytest.fixture

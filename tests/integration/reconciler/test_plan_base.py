@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 
-from contract.wire import ReconcilerStatus, Topics
+from robotconf.contract.wire import ReconcilerStatus, Topics
 from tests.support.agents import publish
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port

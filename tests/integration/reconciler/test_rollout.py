@@ -9,8 +9,8 @@ import json
 
 import yaml
 
-from configurator.rendered import RenderedRequest
-from contract.wire import AgentState, ReconcilerStatus
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.watch import wait_for
 

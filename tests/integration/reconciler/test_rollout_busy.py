@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from contract.wire import AgentState
+from robotconf.contract.wire import AgentState
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_rollout import CANARY, complete, rename_all, with_policy
 

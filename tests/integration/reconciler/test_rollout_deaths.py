@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from configurator.rendered import RenderedRequest
-from contract.wire import AgentState, ReconcilerStatus
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet, fleet_on
 from tests.integration.reconciler.test_rollout import (
     CANARY,

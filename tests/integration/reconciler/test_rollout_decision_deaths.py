@@ -13,11 +13,11 @@ from typing import Literal
 
 import pytest
 
-from contract.launch import RolloutAction
-from contract.notes import VerdictNote
-from contract.wire import ReconcilerStatus, RolloutStatus
-from reconciler.notes_store import NotesStore
-from reconciler.operator_actions import Taken, judge_action
+from robotconf.contract.launch import RolloutAction
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import ReconcilerStatus, RolloutStatus
+from robotconf.reconciler.notes_store import NotesStore
+from robotconf.reconciler.operator_actions import Taken, judge_action
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_alerts import Receiver
 from tests.integration.reconciler.test_rollout import complete, launched, rename_all, with_policy

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from contract.wire import ReconcilerStatus
+from robotconf.contract.wire import ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_rollout import (
     CANARY,

@@ -11,9 +11,9 @@ import subprocess
 import time
 from pathlib import Path
 
-from contract.launch import RolloutAction
-from contract.notes import NOTES_REF, read_notes
-from contract.wire import ReconcilerStatus
+from robotconf.contract.launch import RolloutAction
+from robotconf.contract.notes import NOTES_REF, read_notes
+from robotconf.contract.wire import ReconcilerStatus
 from tests.integration.agent.test_ui_operator import FORM, TOKEN, UiProc
 from tests.integration.reconciler.conftest import Fleet, fleet_on
 from tests.integration.reconciler.test_rollout import (

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from configurator.source import SourceError
-from reconciler.desired import load_desired
-from reconciler.source import LocalBranch, RemoteBranch, redact
+from robotconf.configurator.source import SourceError
+from robotconf.reconciler.desired import load_desired
+from robotconf.reconciler.source import LocalBranch, RemoteBranch, redact
 from tests.support.fleet import GitLab
 from tests.support.watch import wait_for
 

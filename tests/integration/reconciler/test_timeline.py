@@ -15,8 +15,8 @@ from urllib.parse import quote
 
 import pytest
 
-from readmodel.events import Event, Kind
-from readmodel.ledger import Ledger, ledger_path
+from robotconf.readmodel.events import Event, Kind
+from robotconf.readmodel.ledger import Ledger, ledger_path
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.mosquitto import Mosquitto

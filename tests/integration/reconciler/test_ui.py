@@ -16,15 +16,15 @@ from pathlib import Path
 import paho.mqtt.client as paho
 import pytest
 
-from contract.safejson import MAX_PAYLOAD_BYTES
-from contract.wire import Topics
+from robotconf.contract.safejson import MAX_PAYLOAD_BYTES
+from robotconf.contract.wire import Topics
+from robotconf.workstation.ui.server import CSP
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.fleet import GitLab, refused_reconcile, robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port
 from tests.support.tlsutil import make_pki
 from tests.support.ui import UiProc, events
 from tests.support.watch import wait_for
-from workstation.ui.server import CSP
 
 
 @pytest.fixture

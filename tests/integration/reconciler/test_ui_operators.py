@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode
 
-from contract.wire import AgentStatus
+from robotconf.contract.wire import AgentStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.support.fleet import robotconf_argv
 from tests.support.mosquitto import Mosquitto, free_port

@@ -11,13 +11,13 @@ from collections.abc import Iterator
 import paho.mqtt.client as paho
 import pytest
 
-from contract.mqtt import Connection
-from contract.wire import AgentState, Topics
+from robotconf.contract.mqtt import Connection
+from robotconf.contract.wire import AgentState, Topics
+from robotconf.workstation.fleet_status import DesiredCache, fleet_status
+from robotconf.workstation.ui.state import LiveFleet
 from tests.support.fleet import GitLab
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import wait_for
-from workstation.fleet_status import DesiredCache, fleet_status
-from workstation.ui.state import LiveFleet
 
 
 @pytest.fixture

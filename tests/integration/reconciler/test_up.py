@@ -26,16 +26,16 @@ import pytest
 import yaml
 from paho.mqtt.enums import CallbackAPIVersion
 
-from agent.config import parse_config
-from contract.mqtt import Connection
-from reconciler.desired import load_desired
+from robotconf.agent.config import parse_config
+from robotconf.contract.mqtt import Connection
+from robotconf.reconciler.desired import load_desired
+from robotconf.workstation.broker import EmbeddedBroker, free_port
+from robotconf.workstation.broker_login import broker_login
+from robotconf.workstation.up import agent_yaml, prepare
 from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.mosquitto import Mosquitto
 from tests.support.private import write_private
 from tests.support.watch import FleetWatch, wait_for
-from workstation.broker import EmbeddedBroker, free_port
-from workstation.broker_login import broker_login
-from workstation.up import agent_yaml, prepare
 
 
 @contextlib.contextmanager

@@ -12,7 +12,7 @@ from typing import Any
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
-from contract.wire import AgentStatus, LogsRequest
+from robotconf.contract.wire import AgentStatus, LogsRequest
 from tests.support.fleet import GitLab, Proc, robotconf_argv
 from tests.support.watch import wait_for
 

@@ -13,10 +13,10 @@ import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
+from robotconf.workstation.broker import free_port
 from tests.integration.reconciler.test_up import in_sync, start_up, up_folder
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.watch import wait_for
-from workstation.broker import free_port
 
 TIME_WAIT = "06"  # the state column of /proc/net/tcp
 

@@ -16,12 +16,12 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode, urlsplit
 
-from contract.mqtt import Connection
+from robotconf.contract.mqtt import Connection
+from robotconf.workstation.broker import free_port
 from tests.integration.reconciler.test_up import in_sync, start_up, up_folder
 from tests.integration.reconciler.test_up_desk import desk
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.watch import FleetWatch, wait_for
-from workstation.broker import free_port
 
 FORM = "application/x-www-form-urlencoded"
 LINK = re.compile(r"ui: log in as its operator \(robots' logs, restarts\) with (http://\S+)")

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from contract.notes import MAX_NOTE_BYTES, NOTES_REF, VerdictNote, read_notes
-from reconciler.notes_store import NotesError, NotesStore
+from robotconf.contract.notes import MAX_NOTE_BYTES, NOTES_REF, VerdictNote, read_notes
+from robotconf.reconciler.notes_store import NotesError, NotesStore
 
 T0 = 1_000_000.0
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from reconciler.webhook import MAX_BODY
+from robotconf.reconciler.webhook import MAX_BODY
 from tests.integration.reconciler.test_alerts import scrape, value
 from tests.support.fleet import GitLab, Proc, refused_reconcile, start_reconciler
 from tests.support.mosquitto import Mosquitto, free_port

@@ -13,7 +13,7 @@ from pathlib import Path
 import paho.mqtt.client as paho
 import pytest
 
-from contract.mqtt import Connection, make_client
+from robotconf.contract.mqtt import Connection, make_client
 from tests.support.lab import ROBOTCONF, ROOT
 from tests.support.private import write_private
 from tests.support.secure import Secured, start_secured

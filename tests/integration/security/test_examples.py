@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agent.config import load_config
+from robotconf.agent.config import load_config
 from tests.support.lab import ROBOTCONF, ROOT
 from tests.support.private import write_private
 

@@ -11,8 +11,8 @@ from typing import Any
 
 import paho.mqtt.client as paho
 
-from contract.mqtt import Connection, make_client
-from contract.wire import AgentState, AgentStatus, Topics
+from robotconf.contract.mqtt import Connection, make_client
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.support.agents import publish
 from tests.support.lab import ROBOTCONF
 from tests.support.mosquitto import Mosquitto
@@ -84,7 +84,7 @@ def test_restart_prints_the_robots_confirmation_escaped(mosquitto: Mosquitto) ->
 
 def test_status_shows_a_robot_s_hostile_interfaces_escaped(mosquitto: Mosquitto) -> None:
     """The types a robot reports are its own text: a drift line quoting them forges nothing."""
-    from contract.interfaces import Interface, RobotInterfaces
+    from robotconf.contract.interfaces import Interface, RobotInterfaces
     from tests.support.agents import make_request
     from tests.support.interfaces import publish_interfaces
 

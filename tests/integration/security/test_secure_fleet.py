@@ -13,11 +13,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from configurator.rendered import RenderedRequest
-from contract.launch import LaunchRequest, canonical_json, content_digest
-from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.retained import RetainedView
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.launch import LaunchRequest, canonical_json, content_digest
+from robotconf.contract.signing import generate_keys, load_private_key, sign
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.retained import RetainedView
 from tests.support.fleet import GitLab, Proc, pid_alive
 from tests.support.lab import ROBOTCONF
 from tests.support.secure import Secured, start_secured
@@ -64,7 +64,7 @@ def _agent(fleet: SecureFleet, robot_id: str, folder: Path) -> Proc:
     config = {
         "broker": fleet.broker.url,
         "description": {"id": robot_id, "name": robot_id},
-        "command": [sys.executable, "-m", "agent.standin_brain", "{launch_request}"],
+        "command": [sys.executable, "-m", "robotconf.agent.standin_brain", "{launch_request}"],
         "workdir": str(work),
         "stop_timeout": 5,
         "startsecs": 0.2,

@@ -11,13 +11,18 @@ from pathlib import Path
 
 import pytest
 
-from agent.config import ConfigInvalid, load_config
-from agent.workdir import hold_exists
-from contract.signing import SigningKeyError, generate_keys, load_private_key, load_public_key
-from contract.trust import Trust, UntrustedFile, read_trusted
+from robotconf.agent.config import ConfigInvalid, load_config
+from robotconf.agent.workdir import hold_exists
+from robotconf.contract.signing import (
+    SigningKeyError,
+    generate_keys,
+    load_private_key,
+    load_public_key,
+)
+from robotconf.contract.trust import Trust, UntrustedFile, read_trusted
+from robotconf.workstation.up_desk import DESK_FILE, UpDesk, find_desk, write_desk
 from tests.support.fleet import robotconf_argv
 from tests.support.private import write_private
-from workstation.up_desk import DESK_FILE, UpDesk, find_desk, write_desk
 
 NOBODY = 65534
 as_root = pytest.mark.skipif(os.geteuid() != 0, reason="only root can give a file another owner")

@@ -11,8 +11,8 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from configurator.rendered import RenderedRequest
-from contract.wire import AgentStatus
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.wire import AgentStatus
 from tests.support import browser as support
 from tests.support.fleet import GitLab, Proc, start_agent, start_reconciler
 from tests.support.mosquitto import Mosquitto, find_mosquitto

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from contract.wire import AgentState, AgentStatus, RobotDescription, Topics
+from robotconf.contract.wire import AgentState, AgentStatus, RobotDescription, Topics
 from tests.integration.ui.conftest import HELD, TOKEN, UiFleet, passed
 from tests.support.agents import publish
 from tests.support.browser import screenshot_folders

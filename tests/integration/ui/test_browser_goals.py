@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from contract.goals import BrainEvent, CurrentGoal, OutcomeRecord, OutcomeState, Severity
-from readmodel.ledger import Ledger, ledger_path
+from robotconf.contract.goals import BrainEvent, CurrentGoal, OutcomeRecord, OutcomeState, Severity
+from robotconf.readmodel.ledger import Ledger, ledger_path
 from tests.integration.ui.test_browser import (  # noqa: F401 (pages_without_errors: autouse)
     expect_ms,
     open_page,

@@ -32,8 +32,8 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from configurator.brokerconf import queue_lines
-from contract.wire import (
+from robotconf.configurator.brokerconf import queue_lines
+from robotconf.contract.wire import (
     AgentState,
     AgentStatus,
     ReconcilerStatus,

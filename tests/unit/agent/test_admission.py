@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from agent.admission import (
+from robotconf.agent.admission import (
     MAX_ISSUED_AHEAD,
     Accept,
     Admission,
@@ -18,16 +18,16 @@ from agent.admission import (
     Verifier,
     interpret,
 )
-from agent.workdir import IssuedStore
-from contract.launch import LaunchRequest, StopRequest, canonical_json
-from contract.signing import (
+from robotconf.agent.workdir import IssuedStore
+from robotconf.contract.launch import LaunchRequest, StopRequest, canonical_json
+from robotconf.contract.signing import (
     generate_keys,
     load_private_key,
     load_public_key,
     sign,
     verify_object,
 )
-from contract.wire import RobotDescription
+from robotconf.contract.wire import RobotDescription
 from tests.support.agents import make_request
 
 ROBOT = RobotDescription(

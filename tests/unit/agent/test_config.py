@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from agent.cli import main
-from agent.config import ConfigInvalid, load_config
+from robotconf.agent.cli import main
+from robotconf.agent.config import ConfigInvalid, load_config
 from tests.support.private import write_private
 
 GOOD = """\

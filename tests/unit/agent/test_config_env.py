@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.config import AgentConfig, load_config
-from agent.process import brain_environment, request_environment
-from contract.launch import with_digest
+from robotconf.agent.config import AgentConfig, load_config
+from robotconf.agent.process import brain_environment, request_environment
+from robotconf.contract.launch import with_digest
 from tests.support.agents import make_request
 from tests.unit.agent.test_config import GOOD, problems, write
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 import typing
 from pathlib import Path
 
-from agent.brain_runner import EFFECTS
-from agent.config import parse_config
-from agent.events import Event
-from agent.runtime import HANDLERS, Agent
-from agent.supervisor import Effect
+from robotconf.agent.brain_runner import EFFECTS
+from robotconf.agent.config import parse_config
+from robotconf.agent.events import Event
+from robotconf.agent.runtime import HANDLERS, Agent
+from robotconf.agent.supervisor import Effect
 
 
 def test_every_event_the_inbox_carries_has_one_handler() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from agent.workdir import hold_exists, remove_hold
+from robotconf.agent.workdir import hold_exists, remove_hold
 
 
 def test_anything_at_the_path_holds_and_nothing_is_followed(tmp_path: Path) -> None:

@@ -6,7 +6,7 @@ import os
 import select
 import threading
 
-from agent.events import BrainExited, Inbox, Shutdown
+from robotconf.agent.events import BrainExited, Inbox, Shutdown
 
 
 def readable(inbox: Inbox, timeout: float) -> bool:

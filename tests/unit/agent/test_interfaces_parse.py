@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from agent.interfaces import (
+from robotconf.agent.interfaces import (
     SourceError,
     bound,
     check_names,
@@ -16,9 +16,9 @@ from agent.interfaces import (
     parse_cli_list,
     parse_command_json,
 )
-from agent.standin_ros2 import lines_of
-from contract.interfaces import MAX_INTERFACE_NAME, MAX_INTERFACES, MAX_INTERFACES_BYTES
-from contract.wire import AgentState, AgentStatus
+from robotconf.agent.standin_ros2 import lines_of
+from robotconf.contract.interfaces import MAX_INTERFACE_NAME, MAX_INTERFACES, MAX_INTERFACES_BYTES
+from robotconf.contract.wire import AgentState, AgentStatus
 
 # What `ros2 topic list -t` prints on a TurtleBot3 (ros2topic/verb/list.py: name, a space,
 # the types in brackets joined by ', ').

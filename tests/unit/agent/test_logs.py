@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from agent.logs import (
+from robotconf.agent.logs import (
     ASKS_PER_SECOND,
     BURST,
     MAX_LINE_BYTES,
@@ -21,7 +21,7 @@ from agent.logs import (
     fit_line,
     read_tail,
 )
-from contract.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, LogsChunk, LogsRequest
+from robotconf.contract.wire import LOG_FOLLOW_TTL, MAX_LOG_MESSAGE_BYTES, LogsChunk, LogsRequest
 
 
 def stream(
@@ -299,8 +299,8 @@ def test_a_lost_connection_drops_what_waits(tmp_path: Path) -> None:
 
 
 def test_a_bug_while_sending_the_log_stops_the_stream_not_the_agent(tmp_path: Path) -> None:
-    from agent.config import parse_config
-    from agent.runtime import Agent
+    from robotconf.agent.config import parse_config
+    from robotconf.agent.runtime import Agent
 
     text = (
         "broker: mqtt://127.0.0.1:1\n"

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from agent.status_report import STOPPING_QUIET, publish_delay
-from contract.wire import AgentState, AgentStatus
+from robotconf.agent.status_report import STOPPING_QUIET, publish_delay
+from robotconf.contract.wire import AgentState, AgentStatus
 
 
 def status(state: AgentState, message: str = "") -> AgentStatus:
@@ -28,7 +28,7 @@ def test_every_other_state_goes_at_once() -> None:
 
 
 def test_refusals_are_logged_a_few_at_a_time_with_a_count_of_the_rest() -> None:
-    from contract.throttle import Throttle
+    from robotconf.contract.throttle import Throttle
 
     throttle = Throttle(10.0, limit=2)
     assert throttle.admit("a", 0.0) == "a"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from agent.brain_socket import _Connection, split_lines
-from agent.relay import GoalsRelay, Limits, Now, Signal, TokenBucket, safe_text
-from contract.goals import (
+from robotconf.agent.brain_socket import _Connection, split_lines
+from robotconf.agent.relay import GoalsRelay, Limits, Now, Signal, TokenBucket, safe_text
+from robotconf.contract.goals import (
     MAX_LINE_BYTES,
     MAX_TASKS_KEPT,
     MAX_TEXT,

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from agent.admission import (
+from robotconf.agent.admission import (
     MAX_COMMAND_BYTES,
     MAX_RESTARTS_AHEAD,
     RESTART_MAX_AGE,
@@ -18,9 +18,9 @@ from agent.admission import (
     Verifier,
     interpret_restart,
 )
-from agent.workdir import RESTART_ISSUED_FILE, RESTARTS_AHEAD_FILE, RestartLedger
-from contract.launch import RestartRequest
-from contract.signing import (
+from robotconf.agent.workdir import RESTART_ISSUED_FILE, RESTARTS_AHEAD_FILE, RestartLedger
+from robotconf.contract.launch import RestartRequest
+from robotconf.contract.signing import (
     generate_keys,
     load_private_key,
     load_public_key,
@@ -196,8 +196,8 @@ def test_a_signed_launch_request_is_not_a_restart(keyed: tuple[Any, Verifier]) -
 
 
 def test_log_requests_are_bounded_and_strict() -> None:
-    from agent.admission import interpret_logs_request
-    from contract.wire import LogsRequest
+    from robotconf.agent.admission import interpret_logs_request
+    from robotconf.contract.wire import LogsRequest
 
     good = LogsRequest(session="s1", lines=5, follow=True)
     assert interpret_logs_request(good.model_dump_json().encode()) == good

@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
-from agent.supervisor import Kill, Policy, Reload, Spawn, Supervisor, Terminate
-from contract.launch import with_digest
-from contract.wire import AgentState
+from robotconf.agent.supervisor import Kill, Policy, Reload, Spawn, Supervisor, Terminate
+from robotconf.contract.launch import with_digest
+from robotconf.contract.wire import AgentState
 from tests.support.agents import make_request
 
 A = make_request(variant=0)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.supervisor import (
+from robotconf.agent.supervisor import (
     ENDING_RULES,
     TRANSITIONS,
     Ending,
@@ -18,7 +18,7 @@ from agent.supervisor import (
     legal,
     retried,
 )
-from contract.wire import AgentState
+from robotconf.contract.wire import AgentState
 
 ROOT = Path(__file__).resolve().parents[3]
 PHASES = [s for s in AgentState if s not in (AgentState.REJECTED, AgentState.OFFLINE)]

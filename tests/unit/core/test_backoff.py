@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from agent.supervisor import Policy
-from contract.backoff import Backoff, exponential_delay
+from robotconf.agent.supervisor import Policy
+from robotconf.contract.backoff import Backoff, exponential_delay
 
 
 def test_delays_double_up_to_the_cap() -> None:

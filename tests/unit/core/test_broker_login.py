@@ -5,7 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from workstation.broker_login import RECONCILER, USERNAME, accepts, broker_login, prune_logins
+from robotconf.workstation.broker_login import (
+    RECONCILER,
+    USERNAME,
+    accepts,
+    broker_login,
+    prune_logins,
+)
 
 
 def test_a_login_is_made_once_and_kept(tmp_path: Path) -> None:

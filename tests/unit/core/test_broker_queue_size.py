@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from configurator.brokerconf import Listener, queued_messages, render_conf
+from robotconf.configurator.brokerconf import Listener, queued_messages, render_conf
 
 
 def test_the_queue_holds_twice_the_fleet_s_retained_messages() -> None:

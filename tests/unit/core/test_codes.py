@@ -8,16 +8,22 @@ from pathlib import Path
 
 import pytest
 
-from configurator.rules.report import Reporter
-from contract.codes import RULES, Severity, UnregisteredCode, readme_table, with_readme_table
-from contract.diagnostics import Diagnostic
-from contract.yamlio import YamlProblem, parse_document
+from robotconf.configurator.rules.report import Reporter
+from robotconf.contract.codes import (
+    RULES,
+    Severity,
+    UnregisteredCode,
+    readme_table,
+    with_readme_table,
+)
+from robotconf.contract.diagnostics import Diagnostic
+from robotconf.contract.yamlio import YamlProblem, parse_document
 from tests.support.lab import ROOT
 
 CODE = re.compile(r"\bRC\d{3}\b")
 REGISTRY = ROOT / "contract" / "codes.py"
 PAGE = ROOT / "docs" / "reference" / "rules.md"
-UPDATE = "python -m workstation.docs"
+UPDATE = "python -m robotconf.workstation.docs"
 
 
 def _sources() -> list[Path]:
@@ -84,7 +90,8 @@ def test_a_readme_table_if_any_is_generated_too() -> None:
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     if "| code | rule | tunable |" in readme and with_readme_table(readme) != readme:
         pytest.fail(
-            "README.md's table of rule codes is stale: run `python -m contract.codes README.md` "
+            "README.md's table of rule codes is stale: "
+            "run `python -m robotconf.contract.codes README.md` "
             "(or drop it and link docs/reference/rules.md). Rows that differ:\n"
             + "\n".join(_stale_rows(readme))
         )
@@ -136,8 +143,8 @@ def test_a_diagnostic_with_an_undeclared_code_is_refused() -> None:
 
 
 def test_the_reporter_takes_the_severity_from_the_registry() -> None:
-    from configurator.repository import Entry
-    from configurator.types import Task
+    from robotconf.configurator.repository import Entry
+    from robotconf.configurator.types import Task
 
     doc = parse_document("models/tasks/Deliver.yaml", b"implementations: [[Go]]\n")
     entry = Entry("Deliver", Task.model_validate(doc.data), doc)

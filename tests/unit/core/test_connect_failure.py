@@ -9,7 +9,7 @@ import ssl
 
 import pytest
 
-from contract.mqtt import NOTHING_LISTENS, connect_failure
+from robotconf.contract.mqtt import NOTHING_LISTENS, connect_failure
 
 
 def test_a_refused_connection_is_nothing_listening() -> None:

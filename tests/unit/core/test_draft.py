@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 import yaml
 
-from configurator.draft import (
+from robotconf.configurator.draft import (
     Bound,
     Draft,
     ReportError,
@@ -20,11 +20,16 @@ from configurator.draft import (
     scheme_yaml,
     template_yaml,
 )
-from configurator.loader import KIND_BY_NAME, load_file
-from configurator.types import MappingBinding, MappingScheme, RobotTemplate, SettingDefinition
-from configurator.workspace import check
-from contract.interfaces import MAX_INTERFACES, RobotInterfaces
-from contract.yamlio import parse_document
+from robotconf.configurator.loader import KIND_BY_NAME, load_file
+from robotconf.configurator.types import (
+    MappingBinding,
+    MappingScheme,
+    RobotTemplate,
+    SettingDefinition,
+)
+from robotconf.configurator.workspace import check
+from robotconf.contract.interfaces import MAX_INTERFACES, RobotInterfaces
+from robotconf.contract.yamlio import parse_document
 from tests.support.lab import ROOT
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from configurator.drift import (
+from robotconf.configurator.drift import (
     DriftMemo,
     Need,
     drift_of,
@@ -10,9 +10,9 @@ from configurator.drift import (
     needs_of,
     needs_of_rendered,
 )
-from configurator.render import render_fleet
-from contract.interfaces import Interface, RobotInterfaces
-from contract.launch import LaunchRequest
+from robotconf.configurator.render import render_fleet
+from robotconf.contract.interfaces import Interface, RobotInterfaces
+from robotconf.contract.launch import LaunchRequest
 from tests.support.interfaces import PATROL_ON_A_PATH_DRIFT
 from tests.support.lab import Lab
 

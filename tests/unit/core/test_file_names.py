@@ -7,9 +7,9 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from contract.errors import CliError, ExitCode
-from contract.models import file_name, file_name_problem
-from contract.yamlio import document_text, parse_document
+from robotconf.contract.errors import CliError, ExitCode
+from robotconf.contract.models import file_name, file_name_problem
+from robotconf.contract.yamlio import document_text, parse_document
 
 REFUSED = [
     "",

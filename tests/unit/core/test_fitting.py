@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from configurator.fitting import logic_fits_interfaces
-from configurator.types import Logic, MappingBinding, MappingScheme
-from contract.interfaces import RobotInterfaces
+from robotconf.configurator.fitting import logic_fits_interfaces
+from robotconf.configurator.types import Logic, MappingBinding, MappingScheme
+from robotconf.contract.interfaces import RobotInterfaces
 
 SCHEME = MappingScheme(
     mappings={

@@ -8,7 +8,7 @@ from typing import Any
 import jsonschema
 import pytest
 
-from configurator.schemas import generate
+from robotconf.configurator.schemas import generate
 from tests.support.lab import Lab
 
 GOOD: dict[str, Any] = {

@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 from pydantic import BaseModel, ValidationError
 
-from agent.admission import Accept, interpret
-from contract.launch import (
+from robotconf.agent.admission import Accept, interpret
+from robotconf.contract.launch import (
     CONTENT_WHEN_SET,
     DIGEST_EXCLUDED,
     LaunchRequest,
@@ -21,9 +21,9 @@ from contract.launch import (
     template_mismatch,
     with_digest,
 )
-from contract.wire import AgentState, AgentStatus, RobotDescription
-from readmodel.observed import RobotSeen
-from readmodel.verdicts import DesiredRobot, template_warning
+from robotconf.contract.wire import AgentState, AgentStatus, RobotDescription
+from robotconf.readmodel.observed import RobotSeen
+from robotconf.readmodel.verdicts import DesiredRobot, template_warning
 from tests.support.agents import make_request
 
 

@@ -95,7 +95,7 @@ def test_a_command_without_logging_of_its_own_escapes_stray_records(
 ) -> None:
     import logging
 
-    from contract.logsafe import escape_stray_records
+    from robotconf.contract.logsafe import escape_stray_records
 
     before = logging.lastResort
     try:

@@ -9,14 +9,19 @@ from typing import Any
 import jsonschema
 import pytest
 
-from configurator.autofill import select_logics, template_fit, to_yaml
-from configurator.plan import format_plan_markdown, format_plan_text, make_plan, plan_as_json
-from configurator.render import bound_mappings, render_fleet
-from configurator.resolve import resolve_capability
-from configurator.schemas import generate
-from configurator.tree import action_label, build_tree, logic_label
-from configurator.types import Action, CapabilityConfiguration, Logic
-from configurator.workspace import check
+from robotconf.configurator.autofill import select_logics, template_fit, to_yaml
+from robotconf.configurator.plan import (
+    format_plan_markdown,
+    format_plan_text,
+    make_plan,
+    plan_as_json,
+)
+from robotconf.configurator.render import bound_mappings, render_fleet
+from robotconf.configurator.resolve import resolve_capability
+from robotconf.configurator.schemas import generate
+from robotconf.configurator.tree import action_label, build_tree, logic_label
+from robotconf.configurator.types import Action, CapabilityConfiguration, Logic
+from robotconf.configurator.workspace import check
 from tests.support.lab import ROOT, Lab
 
 EITHER = "configs/capabilities/turtlebot3-follow-either.yaml"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from contract.textsafe import markdown_code, printable
+from robotconf.contract.textsafe import markdown_code, printable
 
 
 def test_markdown_code_spans_hold_any_text() -> None:
@@ -12,9 +12,9 @@ def test_markdown_code_spans_hold_any_text() -> None:
 
 
 def test_tree_and_catalog_text_is_never_rich_markup() -> None:
-    from configurator.tree import ActionNode, CapabilityTree, LogicNode, TaskNode
-    from workstation.cli.terminal import plain_text
-    from workstation.cli.views import capability_view, catalogue_view
+    from robotconf.configurator.tree import ActionNode, CapabilityTree, LogicNode, TaskNode
+    from robotconf.workstation.cli.terminal import plain_text
+    from robotconf.workstation.cli.views import capability_view, catalogue_view
 
     action = ActionNode("[bold]Act", True, [], [LogicNode("[red]logic", True, [])])
     tree = CapabilityTree(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.plan import (
+from robotconf.configurator.plan import (
     FleetRead,
     Plan,
     choose_base,
@@ -14,8 +14,8 @@ from configurator.plan import (
     plan_as_json,
     verify_text,
 )
-from configurator.render import FleetRender, render_fleet
-from configurator.types import RolloutPolicy, Verify
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.configurator.types import RolloutPolicy, Verify
 from tests.support.lab import Lab
 
 FLEET = "configs/fleet.yaml"

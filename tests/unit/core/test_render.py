@@ -6,9 +6,9 @@ import re
 
 import pytest
 
-from configurator.render import RenderError, deep_merge, render_fleet, render_robot
-from configurator.rendered import RenderedRequest
-from contract.launch import LaunchRequest
+from robotconf.configurator.render import RenderError, deep_merge, render_fleet, render_robot
+from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.launch import LaunchRequest
 from tests.support.lab import Lab
 
 DELIVERY = "configs/scenarios/delivery-gazebo.yaml"

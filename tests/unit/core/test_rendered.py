@@ -11,12 +11,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from configurator.render import FleetRender, RenderError, render_fleet, request_for
-from configurator.rendered import _SLOT_NAMES, FleetRequests, ScenarioRequests, _prefix
-from configurator.rosnames import UnresolvableName, resolve_name
-from configurator.types import MappingBinding
-from configurator.workspace import check
-from contract.launch import (
+from robotconf.configurator.render import FleetRender, RenderError, render_fleet, request_for
+from robotconf.configurator.rendered import _SLOT_NAMES, FleetRequests, ScenarioRequests, _prefix
+from robotconf.configurator.rosnames import UnresolvableName, resolve_name
+from robotconf.configurator.types import MappingBinding
+from robotconf.configurator.workspace import check
+from robotconf.contract.launch import (
     LaunchRequest,
     LaunchScenario,
     make_launch_request,

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from contract.codes import Severity
+from robotconf.contract.codes import Severity
 from tests.support.lab import Lab
 
 FLEET = "configs/fleet.yaml"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.rosnames import (
+from robotconf.configurator.rosnames import (
     UnresolvableName,
     absolute_namespace,
     mapping_name_problem,

@@ -3,12 +3,12 @@ comments applied to findings by the one pure function every build ends in."""
 
 from __future__ import annotations
 
-from configurator.repository import Entry
-from configurator.ruleconfig import IgnoreComment, IgnoredCode, ignore_comments, judge
-from configurator.types import RuleConfiguration
-from contract.codes import Severity
-from contract.diagnostics import Diagnostic
-from contract.yamlio import parse_document
+from robotconf.configurator.repository import Entry
+from robotconf.configurator.ruleconfig import IgnoreComment, IgnoredCode, ignore_comments, judge
+from robotconf.configurator.types import RuleConfiguration
+from robotconf.contract.codes import Severity
+from robotconf.contract.diagnostics import Diagnostic
+from robotconf.contract.yamlio import parse_document
 
 FLEET = "configs/fleet.yaml"
 

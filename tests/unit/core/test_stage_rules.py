@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.render import render_fleet
-from configurator.stages import SelectorError, fleet_stages, parse_selector
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.stages import SelectorError, fleet_stages, parse_selector
 from tests.support.lab import Lab
 
 FLEET = "configs/fleet.yaml"

@@ -3,12 +3,12 @@ when some robot has any; as text, never as markup."""
 
 from __future__ import annotations
 
-from configurator.render import render_fleet
-from contract.wire import AgentState, AgentStatus
-from readmodel.observed import Retained, RobotSeen
-from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows, desired_from_fleet
+from robotconf.configurator.render import render_fleet
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.readmodel.observed import Retained, RobotSeen
+from robotconf.readmodel.verdicts import DesiredRobot, FleetStatus, build_rows, desired_from_fleet
+from robotconf.workstation.cli.fleet_view import COLUMNS, fleet_status_text
 from tests.support.lab import Lab
-from workstation.cli.fleet_view import COLUMNS, fleet_status_text
 
 D1 = "sha256:" + "1" * 64
 

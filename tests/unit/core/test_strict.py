@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from contract.diagnostics import Diagnostic
+from robotconf.contract.diagnostics import Diagnostic
 from tests.support.lab import Lab
 
 FLEET = "configs/fleet.yaml"

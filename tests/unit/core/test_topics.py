@@ -9,11 +9,11 @@ import re
 
 import pytest
 
-from configurator.brokerconf import ServiceUsers, render_acl
-from contract.topics import BY_KEY, TOPICS, Role, grants, subscriptions
-from contract.wire import Topics, agent_client_id
+from robotconf.configurator.brokerconf import ServiceUsers, render_acl
+from robotconf.contract.topics import BY_KEY, TOPICS, Role, grants, subscriptions
+from robotconf.contract.wire import Topics, agent_client_id
+from robotconf.workstation.docs import topics_page
 from tests.support.lab import ROOT
-from workstation.docs import topics_page
 
 PREFIX = "lab1/robotconf"
 ROBOTS = ["tb3-01", "tb3-02"]
@@ -145,7 +145,7 @@ def test_every_payload_named_in_the_table_exists() -> None:
 def test_the_docs_page_is_the_table() -> None:
     committed = (ROOT / "docs" / "reference" / "topics.md").read_text(encoding="utf-8")
     assert committed == topics_page(), (
-        "docs/reference/topics.md is stale: python -m workstation.docs"
+        "docs/reference/topics.md is stale: python -m robotconf.workstation.docs"
     )
     for topic in TOPICS:
         shown = topic.pattern.replace("{robot}", "<id>").replace("{client}", "<client>")

@@ -7,7 +7,7 @@ import stat
 
 import pytest
 
-from contract.trust import FileFacts, Trust, folder_refusal, owner_trusted, refusal
+from robotconf.contract.trust import FileFacts, Trust, folder_refusal, owner_trusted, refusal
 
 ME, OTHER, ROOT = 1000, 1001, 0
 REG = stat.S_IFREG

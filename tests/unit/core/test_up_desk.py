@@ -12,10 +12,10 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from contract.trust import euid
-from workstation.cli.broker_options import BrokerOptions, desk_broker_options
-from workstation.cli.options import repo_option
-from workstation.up_desk import DESK_FILE, DeskLease, UpDesk, find_desk, write_desk
+from robotconf.contract.trust import euid
+from robotconf.workstation.cli.broker_options import BrokerOptions, desk_broker_options
+from robotconf.workstation.cli.options import repo_option
+from robotconf.workstation.up_desk import DESK_FILE, DeskLease, UpDesk, find_desk, write_desk
 
 
 def a_desk(tmp_path: Path, pid: int | None = None) -> UpDesk:

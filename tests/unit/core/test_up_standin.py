@@ -8,13 +8,13 @@ from pathlib import Path
 
 import yaml
 
-from agent.config import parse_config
-from configurator.drift import drift_of, needs_of_rendered
-from configurator.render import FleetRender, render_fleet
-from contract.interfaces import Interface, RobotInterfaces
-from contract.mqtt import Connection
+from robotconf.agent.config import parse_config
+from robotconf.configurator.drift import drift_of, needs_of_rendered
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.contract.interfaces import Interface, RobotInterfaces
+from robotconf.contract.mqtt import Connection
+from robotconf.workstation.up import GRAPH_FILE, UpSetup, agent_yaml, robots_line, standin_graph
 from tests.support.lab import Lab
-from workstation.up import GRAPH_FILE, UpSetup, agent_yaml, robots_line, standin_graph
 
 
 def fleet(tmp_path: Path) -> FleetRender:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from configurator.types import Wave
-from configurator.waves import assign_waves, failure_budget
+from robotconf.configurator.types import Wave
+from robotconf.configurator.waves import assign_waves, failure_budget
 
 ROBOTS = {
     "a": {"ring": "canary"},

@@ -11,15 +11,15 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.admission import Accept, Freshness, Reject, interpret
-from contract.signing import (
+from robotconf.agent.admission import Accept, Freshness, Reject, interpret
+from robotconf.contract.signing import (
     generate_keys,
     load_private_key,
     load_public_key,
     sign,
     verify_object,
 )
-from contract.wire import RobotDescription
+from robotconf.contract.wire import RobotDescription
 from tests.support.agents import make_request
 from tests.unit.fuzz.strategies import json_values, mutated
 

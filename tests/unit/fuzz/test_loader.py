@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from configurator.render import render_fleet
-from configurator.workspace import check
-from contract.launch import LaunchRequest
-from contract.safejson import parse_object
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.workspace import check
+from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.safejson import parse_object
 from tests.unit.fuzz.strategies import mutated, yaml_text
 
 ROOT = Path(__file__).resolve().parents[3]

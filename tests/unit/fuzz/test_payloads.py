@@ -9,8 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from pydantic import BaseModel, ValidationError
 
-from configurator.types import MappingBinding
-from contract.launch import (
+from robotconf.configurator.types import MappingBinding
+from robotconf.contract.launch import (
     DIGEST_EXCLUDED,
     LaunchCapability,
     LaunchRequest,
@@ -18,8 +18,8 @@ from contract.launch import (
     canonical_json,
     make_launch_request,
 )
-from contract.safejson import PayloadError, parse_json, parse_object
-from contract.wire import AgentStatus, ReconcilerStatus, RobotDescription
+from robotconf.contract.safejson import PayloadError, parse_json, parse_object
+from robotconf.contract.wire import AgentStatus, ReconcilerStatus, RobotDescription
 from tests.unit.fuzz.strategies import json_values, mutated
 
 MODELS: list[type[BaseModel]] = [AgentStatus, ReconcilerStatus, RobotDescription, LaunchRequest]
@@ -141,9 +141,9 @@ def test_a_mutated_request_never_passes_as_another(payload: bytes) -> None:
 def test_an_interfaces_report_is_read_or_an_error_never_a_crash(payload: bytes) -> None:
     """A robot's interfaces report: a model, or `error` with a reason; drift then claims
     nothing from an unreadable one."""
-    from configurator.drift import Need, drift_of
-    from contract.wire import Topics
-    from readmodel.observed import parse_retained
+    from robotconf.configurator.drift import Need, drift_of
+    from robotconf.contract.wire import Topics
+    from robotconf.readmodel.observed import parse_retained
 
     topics = Topics()
     robot = parse_retained({topics.interfaces("r1"): payload}, topics).robots.get("r1")

@@ -14,9 +14,9 @@ from urllib.parse import quote, quote_plus
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.logs import LogStream
-from agent.redact import MIN_SECRET_CHARS, REDACTED, Redactor, encodings, secret_forms
-from contract.wire import LogsChunk, LogsRequest
+from robotconf.agent.logs import LogStream
+from robotconf.agent.redact import MIN_SECRET_CHARS, REDACTED, Redactor, encodings, secret_forms
+from robotconf.contract.wire import LogsChunk, LogsRequest
 
 # What a secret may hold: any printable character (a log line cannot carry a control
 # character as it was written), with the ones that encodings change made likely.

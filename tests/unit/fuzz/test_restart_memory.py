@@ -10,7 +10,7 @@ from pathlib import Path
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.admission import (
+from robotconf.agent.admission import (
     MAX_RESTARTS_AHEAD,
     RESTART_MAX_AGE,
     Reject,
@@ -18,8 +18,8 @@ from agent.admission import (
     RestartMemory,
     interpret_restart,
 )
-from agent.workdir import RestartLedger
-from contract.launch import RestartRequest
+from robotconf.agent.workdir import RestartLedger
+from robotconf.contract.launch import RestartRequest
 
 START = 1_800_000_000.0
 

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from contract.logsafe import SafeFormatter, format_exception
-from contract.textsafe import chat_text, printable
-from reconciler.notify import parse_receiver
+from robotconf.contract.logsafe import SafeFormatter, format_exception
+from robotconf.contract.textsafe import chat_text, printable
+from robotconf.reconciler.notify import parse_receiver
 
 FORMAT = "%(levelname)s %(message)s"
 FORGED = "\nERROR forged line\r\x1b[2J<!channel>"

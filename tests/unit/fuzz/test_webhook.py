@@ -10,7 +10,7 @@ import json
 from hypothesis import given
 from hypothesis import strategies as st
 
-from reconciler.webhook import SERVERS, Outcome, judge
+from robotconf.reconciler.webhook import SERVERS, Outcome, judge
 from tests.unit.fuzz.strategies import json_values, mutated
 
 SECRET = b"s3cret-for-the-fuzzer"

@@ -9,7 +9,7 @@ from pathlib import Path
 from hypothesis import given
 from hypothesis import strategies as st
 
-from contract.yamlio import YamlReadError, parse_document
+from robotconf.contract.yamlio import YamlReadError, parse_document
 from tests.unit.fuzz.strategies import mutated, yaml_text
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -3,16 +3,16 @@ printable data, and each reader shows a revision with its subject (escaped in th
 
 from __future__ import annotations
 
-from contract.wire import (
+from robotconf.contract.wire import (
     MAX_SUBJECT,
     CommitLine,
     ReconcilerStatus,
     RolloutStatus,
     StageState,
 )
-from readmodel.commits import named_revisions
-from readmodel.verdicts import reconciler_lines, rev_text, rollout_line
-from workstation.ui.goals_html import revision_link
+from robotconf.readmodel.commits import named_revisions
+from robotconf.readmodel.verdicts import reconciler_lines, rev_text, rollout_line
+from robotconf.workstation.ui.goals_html import revision_link
 
 A, B, C = "a" * 40, "b" * 40, "c" * 40
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.render import render_fleet
-from contract.launch import StopRequest
-from contract.wire import AgentState, AgentStatus, StatusDiagnostic, Topics
-from readmodel.observed import parse_retained
-from reconciler.decide import Observation, Reason, decide
-from reconciler.desired import Desired, build_failure
-from reconciler.report import Followed, offline_status, status_of
+from robotconf.configurator.render import render_fleet
+from robotconf.contract.launch import StopRequest
+from robotconf.contract.wire import AgentState, AgentStatus, StatusDiagnostic, Topics
+from robotconf.readmodel.observed import parse_retained
+from robotconf.reconciler.decide import Observation, Reason, decide
+from robotconf.reconciler.desired import Desired, build_failure
+from robotconf.reconciler.report import Followed, offline_status, status_of
 from tests.support.lab import Lab
 
 ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05", "tb3-07"]

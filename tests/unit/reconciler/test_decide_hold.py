@@ -3,13 +3,13 @@ reports keeps what it holds until they fit; `warn` delivers; unknown interfaces 
 
 from __future__ import annotations
 
-from configurator.render import FleetRender, render_fleet
-from contract.interfaces import Interface, RobotInterfaces
-from contract.wire import AgentState, AgentStatus
-from reconciler.decide import Observation, Reason, decide
-from reconciler.desired import Desired
-from reconciler.report import Followed, status_of
-from reconciler.rollout import RolloutInput, roll_out
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.contract.interfaces import Interface, RobotInterfaces
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.reconciler.decide import Observation, Reason, decide
+from robotconf.reconciler.desired import Desired
+from robotconf.reconciler.report import Followed, status_of
+from robotconf.reconciler.rollout import RolloutInput, roll_out
 from tests.support.fleet import ROBOTS
 from tests.support.lab import Lab
 

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from configurator.render import render_fleet
-from configurator.workspace import check
-from readmodel.verdicts import DesiredRobot, desired_from_fleet
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.workspace import check
+from robotconf.readmodel.verdicts import DesiredRobot, desired_from_fleet
+from robotconf.workstation import desired_store
 from tests.support.lab import ROOT
-from workstation import desired_store
 
 REV = "a" * 40
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from reconciler.diff import diff
+from robotconf.reconciler.diff import diff
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,18 @@ import json
 
 import pytest
 
-from contract.lifecycle import parse_address
-from contract.wire import AgentState, AgentStatus, CommitLine, ReconcilerStatus, RolloutStatus
-from readmodel.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
-from readmodel.verdicts import DesiredRobot, Verdict
-from reconciler.notify import parse_receiver
-from reconciler.telemetry import verdict_counts
+from robotconf.contract.lifecycle import parse_address
+from robotconf.contract.wire import (
+    AgentState,
+    AgentStatus,
+    CommitLine,
+    ReconcilerStatus,
+    RolloutStatus,
+)
+from robotconf.readmodel.events import REMEMBERED, Event, Kind, Seen, Told, resumed, transitions
+from robotconf.readmodel.verdicts import DesiredRobot, Verdict
+from robotconf.reconciler.notify import parse_receiver
+from robotconf.reconciler.telemetry import verdict_counts
 
 D1 = "sha256:" + "1" * 64
 D2 = "sha256:" + "2" * 64
@@ -415,7 +421,7 @@ def test_verdict_counts_judge_robots_from_their_statuses() -> None:
 
 
 def test_a_robot_is_told_once_into_drift_and_once_out_of_it() -> None:
-    from configurator.drift import UNKNOWN, Drift, DriftItem, Need
+    from robotconf.configurator.drift import UNKNOWN, Drift, DriftItem, Need
 
     need = Need("scan", "/scan", "topic", "sensor_msgs/msg/LaserScan", ("patrol_with_lidar",))
     lacking = Drift("reported", (DriftItem("r1", need),))

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from contract.notes import VerdictNote
-from contract.wire import (
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import (
     ReconcilerStatus,
     RolloutState,
     RolloutStatus,
@@ -14,7 +14,7 @@ from contract.wire import (
     Verdict,
     WaveVerification,
 )
-from readmodel.events import (
+from robotconf.readmodel.events import (
     REMEMBERED,
     RESUMERS,
     Event,

@@ -5,9 +5,16 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.types import Verify
-from readmodel.outcomes import Row
-from reconciler.evidence import Counts, EvidenceKey, Roles, WaveEvidence, judge, new_evidence
+from robotconf.configurator.types import Verify
+from robotconf.readmodel.outcomes import Row
+from robotconf.reconciler.evidence import (
+    Counts,
+    EvidenceKey,
+    Roles,
+    WaveEvidence,
+    judge,
+    new_evidence,
+)
 
 T0 = 1_000_000.0
 KEY = EvidenceKey("a" * 40, 1, T0)

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
-from configurator.render import render_fleet
-from configurator.workspace import check
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.observed import ReadMemo
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.workspace import check
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.observed import ReadMemo
+from robotconf.workstation.fleet_status import DesiredCache, fleet_status
 from tests.support.lab import ROOT
-from workstation.fleet_status import DesiredCache, fleet_status
 
 T = Topics()
 
@@ -48,8 +48,8 @@ def test_redraws_with_memos_are_fresh_reads(repo: Path) -> None:
 def test_drift_is_worked_out_again_only_for_the_robot_whose_report_or_request_changed(
     repo: Path,
 ) -> None:
-    from configurator.drift import DriftMemo
-    from contract.interfaces import Interface, RobotInterfaces
+    from robotconf.configurator.drift import DriftMemo
+    from robotconf.contract.interfaces import Interface, RobotInterfaces
 
     def report(*names: str) -> bytes:
         topics = [Interface(name=n, type="nav_msgs/msg/Odometry") for n in names]

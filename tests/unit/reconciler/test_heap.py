@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from reconciler import heap
+from robotconf.reconciler import heap
 
 
 def _rss_mb() -> float:

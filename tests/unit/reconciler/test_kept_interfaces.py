@@ -9,10 +9,10 @@ import tracemalloc
 from hypothesis import given
 from hypothesis import strategies as st
 
-from configurator.drift import Need, drift_of
-from contract.interfaces import KeptInterfaces, RobotInterfaces, index
-from contract.wire import Topics
-from readmodel.observed import parse_retained
+from robotconf.configurator.drift import Need, drift_of
+from robotconf.contract.interfaces import KeptInterfaces, RobotInterfaces, index
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.observed import parse_retained
 
 TOPICS = Topics()
 NAMES = st.sampled_from(["/scan", "/odom", "/cmd_vel", "/tb3_01/scan", "/navigate_to_pose"])

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import json
 
-from configurator.render import render_fleet
-from configurator.workspace import check
-from contract.wire import Topics
-from readmodel.observed import canonical_digest, parse_retained, summarise_launches
+from robotconf.configurator.render import render_fleet
+from robotconf.configurator.workspace import check
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.observed import canonical_digest, parse_retained, summarise_launches
 from tests.support.lab import ROOT
 
 T = Topics()

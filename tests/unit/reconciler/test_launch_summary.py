@@ -9,10 +9,10 @@ from dataclasses import asdict
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from contract.launch import StopRequest
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.observed import launch_summary, parse_retained, summarise_launches
-from readmodel.retained import oversized
+from robotconf.contract.launch import StopRequest
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.observed import launch_summary, parse_retained, summarise_launches
+from robotconf.readmodel.retained import oversized
 from tests.support.agents import make_request
 
 T = Topics()

@@ -7,9 +7,9 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-from readmodel.events import Event, Kind
-from readmodel.ledger import SCHEMA_VERSION, Ledger, ledger_path
-from readmodel.timeline import EventQuery
+from robotconf.readmodel.events import Event, Kind
+from robotconf.readmodel.ledger import SCHEMA_VERSION, Ledger, ledger_path
+from robotconf.readmodel.timeline import EventQuery
 
 A, B = "a1" * 20, "b2" * 20
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from contract.goals import OutcomeRecord, OutcomeState
-from readmodel.ledger import (
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.readmodel.ledger import (
     KEEP_ASIDE,
     SCHEMA_VERSION,
     Ledger,
@@ -239,9 +239,9 @@ def test_the_stable_revisions_own_counts_per_scenario_come_from_its_report(
 ) -> None:
     """compare: stable's fallback baseline, read by the loop's evidence counter from the
     ledger's tallies (the same ones `history` reports)."""
-    from configurator.render import FleetRender
-    from reconciler.evidence import Counts
-    from reconciler.evidence_feed import EvidenceCounter
+    from robotconf.configurator.render import FleetRender
+    from robotconf.reconciler.evidence import Counts
+    from robotconf.reconciler.evidence_feed import EvidenceCounter
 
     path = ledger_path(tmp_path)
     with Ledger.open_or_start(path) as writer:

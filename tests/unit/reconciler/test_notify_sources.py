@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from reconciler.notify import given_urls, notify_file_urls, parse_receiver
+from robotconf.reconciler.notify import given_urls, notify_file_urls, parse_receiver
 
 
 def test_a_file_gives_one_url_a_line_skipping_comments_and_blank_lines() -> None:

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from contract.launch import StopRequest
-from contract.wire import AgentState, AgentStatus, Topics
-from readmodel.observed import LaunchDigests, ReadMemo, parse_retained
-from readmodel.retained import Ignored
+from robotconf.contract.launch import StopRequest
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
+from robotconf.readmodel.observed import LaunchDigests, ReadMemo, parse_retained
+from robotconf.readmodel.retained import Ignored
 from tests.support.agents import make_request
 
 T = Topics()

@@ -7,10 +7,16 @@ from pathlib import Path
 
 import pytest
 
-from contract.launch import RolloutAction
-from contract.signing import generate_keys, load_private_key, sign
-from contract.wire import RolloutStatus, StageState, WaveVerification
-from reconciler.operator_actions import MAX_ACTION_BYTES, RECENT, Refused, Taken, judge_action
+from robotconf.contract.launch import RolloutAction
+from robotconf.contract.signing import generate_keys, load_private_key, sign
+from robotconf.contract.wire import RolloutStatus, StageState, WaveVerification
+from robotconf.reconciler.operator_actions import (
+    MAX_ACTION_BYTES,
+    RECENT,
+    Refused,
+    Taken,
+    judge_action,
+)
 
 REV = "b" * 40
 T0 = 1_000_000.0

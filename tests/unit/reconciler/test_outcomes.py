@@ -8,10 +8,10 @@ from typing import Any
 
 import pytest
 
-from contract.durations import parse_duration
-from contract.goals import OutcomeRecord, OutcomeState
-from readmodel.events import Kind
-from readmodel.outcomes import (
+from robotconf.contract.durations import parse_duration
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.readmodel.events import Kind
+from robotconf.readmodel.outcomes import (
     MAX_RECORD_BYTES,
     OTHER,
     BoundedLabels,

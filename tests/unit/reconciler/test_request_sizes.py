@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from configurator.render import FleetRender, render_fleet
-from configurator.workspace import check
-from reconciler.builds import RequestSizes
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.configurator.workspace import check
+from robotconf.reconciler.builds import RequestSizes
 from tests.support.agents import make_request
 from tests.support.lab import ROOT
 

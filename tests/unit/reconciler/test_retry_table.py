@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from reconciler.decide import HANDLING, Reason, Retry, retry_of, state_of
+from robotconf.reconciler.decide import HANDLING, Reason, Retry, retry_of, state_of
 
 
 def test_every_reason_is_handled_and_says_something() -> None:

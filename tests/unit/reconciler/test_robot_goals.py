@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from contract.goals import (
+from robotconf.contract.goals import (
     MAX_EVENTS_KEPT,
     MAX_RECENT_KEPT,
     MAX_TEXT,
@@ -15,12 +15,12 @@ from contract.goals import (
     Severity,
     TaskCounts,
 )
-from contract.wire import Topics
-from readmodel.observed import parse_retained
-from readmodel.robot_goals import NO_GOALS, RobotGoals, bounded, goal_rates
-from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows
+from robotconf.contract.wire import Topics
+from robotconf.readmodel.observed import parse_retained
+from robotconf.readmodel.robot_goals import NO_GOALS, RobotGoals, bounded, goal_rates
+from robotconf.readmodel.verdicts import DesiredRobot, FleetStatus, build_rows
+from robotconf.workstation.cli.fleet_view import GOALS, GOALS_LEGEND, columns, fleet_status_text
 from tests.support.goals_summaries import AT, REV1, REV2, ended, summary
-from workstation.cli.fleet_view import GOALS, GOALS_LEGEND, columns, fleet_status_text
 
 T = Topics()
 FIXED = {"completed", "failed", "canceled", "underway", "stale", "current", "last"}

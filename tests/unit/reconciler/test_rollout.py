@@ -7,10 +7,10 @@ from collections.abc import Mapping
 
 import pytest
 
-from configurator.render import FleetRender, render_fleet
-from contract.wire import AgentState, AgentStatus, RolloutStatus
-from readmodel.verdicts import rollout_line
-from reconciler.rollout import RolloutInput, RolloutStep, roll_out
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.contract.wire import AgentState, AgentStatus, RolloutStatus
+from robotconf.readmodel.verdicts import rollout_line
+from robotconf.reconciler.rollout import RolloutInput, RolloutStep, roll_out
 from tests.support.lab import Lab
 
 ROBOTS = ["tb3-01", "tb3-02", "tb3-03", "tb3-04", "tb3-05"]

@@ -4,11 +4,16 @@ carries the verification as the reconciler published it."""
 
 from __future__ import annotations
 
-from contract.wire import ReconcilerStatus, RolloutStatus, WaveVerification
-from readmodel.verdicts import FleetStatus, evidence_words, paused_for_evidence, rollout_line
+from robotconf.contract.wire import ReconcilerStatus, RolloutStatus, WaveVerification
+from robotconf.readmodel.verdicts import (
+    FleetStatus,
+    evidence_words,
+    paused_for_evidence,
+    rollout_line,
+)
+from robotconf.workstation.cli.fleet_view import fleet_status_text
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout_verify import T0, Run
-from workstation.cli.fleet_view import fleet_status_text
 
 HEAD, OLD = "b" * 40, "a" * 40
 EVIDENCE = "14 of 20 goals, 92% ≥ 90%"

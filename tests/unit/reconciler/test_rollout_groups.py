@@ -7,11 +7,11 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from configurator.plan import format_plan_text, make_plan
-from configurator.render import FleetRender, render_fleet
-from configurator.stages import plan_waves
-from contract.wire import AgentState, AgentStatus
-from reconciler.rollout import RolloutInput, roll_out
+from robotconf.configurator.plan import format_plan_text, make_plan
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.configurator.stages import plan_waves
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.reconciler.rollout import RolloutInput, roll_out
 from tests.support.lab import Lab
 
 T0 = 1_000_000.0
@@ -136,7 +136,7 @@ def test_a_busy_member_holds_its_whole_groups_restart_up_to_its_max_defer(lab: L
         return found
 
     def sent(step_: object) -> list[str]:
-        from reconciler.rollout import RolloutStep
+        from robotconf.reconciler.rollout import RolloutStep
 
         assert isinstance(step_, RolloutStep)
         return sorted(

@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from configurator.render import FleetRender
-from contract.wire import AgentState, AgentStatus
-from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
-from reconciler.wave_memory import WaveMemory, memory_of
+from robotconf.configurator.render import FleetRender
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
+from robotconf.reconciler.wave_memory import WaveMemory, memory_of
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout import (
     CANARY,

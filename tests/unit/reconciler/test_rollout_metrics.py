@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from prometheus_client import generate_latest
 
-from contract.notes import VerdictNote
-from contract.wire import RolloutState, RolloutStatus, Verdict, WaveVerification
-from reconciler.metrics import COUNTED, Metrics, RolloutGauges, count_verdicts
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import RolloutState, RolloutStatus, Verdict, WaveVerification
+from robotconf.reconciler.metrics import COUNTED, Metrics, RolloutGauges, count_verdicts
 
 REV = "b" * 40
 VERIFICATIONS = "robotconf_rollout_verifications_total"
@@ -107,7 +107,7 @@ def test_the_pause_gauge_and_the_current_waves_evidence() -> None:
 
 
 def test_each_stage_says_whether_the_revision_is_verified_on_it() -> None:
-    from contract.wire import StageState
+    from robotconf.contract.wire import StageState
 
     metrics = Metrics()
     staged = RolloutStatus(

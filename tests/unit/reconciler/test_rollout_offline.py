@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.plan import format_plan_text, make_plan, plan_as_json
-from configurator.render import FleetRender
-from configurator.types import RolloutPolicy
-from contract.wire import AgentState, AgentStatus
-from readmodel.verdicts import rollout_line
-from reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
+from robotconf.configurator.plan import format_plan_text, make_plan, plan_as_json
+from robotconf.configurator.render import FleetRender
+from robotconf.configurator.types import RolloutPolicy
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.readmodel.verdicts import rollout_line
+from robotconf.reconciler.rollout import DARK_GRACE, RolloutInput, RolloutStep, roll_out
 from tests.support.lab import Lab
 from tests.unit.reconciler.test_rollout import CANARY, ROBOTS, T0, fleet, held, published, running
 from tests.unit.reconciler.test_rollout_memory import offline, state

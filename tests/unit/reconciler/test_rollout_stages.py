@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import yaml
 
-from configurator.render import FleetRender, render_fleet
-from configurator.stages import plan_waves
-from contract.notes import VerdictNote
-from contract.wire import AgentState, RolloutStatus, StageState
-from reconciler.rollout import RolloutStep, stage_bases
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.configurator.stages import plan_waves
+from robotconf.contract.notes import VerdictNote
+from robotconf.contract.wire import AgentState, RolloutStatus, StageState
+from robotconf.reconciler.rollout import RolloutStep, stage_bases
 from tests.support.lab import Lab
 from tests.support.rollout_run import T0, RolloutRun
 
@@ -134,8 +134,8 @@ def test_an_operator_promotes_the_revision_to_a_stage_by_hand(lab: Lab) -> None:
 
 
 def test_status_and_the_browser_view_show_each_stage_and_its_verified_revision(lab: Lab) -> None:
-    from readmodel.verdicts import rollout_line
-    from workstation.ui.pages import stages_html
+    from robotconf.readmodel.verdicts import rollout_line
+    from robotconf.workstation.ui.pages import stages_html
 
     run = Run(lab)
     status = run.step(T0).status
@@ -150,7 +150,7 @@ def test_status_and_the_browser_view_show_each_stage_and_its_verified_revision(l
 
 
 def test_plan_lists_the_stages_and_each_robots_stage_wave(lab: Lab) -> None:
-    from configurator.plan import format_plan_text, make_plan
+    from robotconf.configurator.plan import format_plan_text, make_plan
 
     base, head = build(lab, "a"), build(lab, "b")
     plan = make_plan(base, head, head.rollout)

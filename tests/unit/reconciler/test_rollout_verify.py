@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 
-from configurator.render import FleetRender, render_fleet
-from contract.notes import VerdictNote
-from reconciler.evidence import EvidenceKey
-from reconciler.rollout import VERIFY_POLL, RolloutStep
+from robotconf.configurator.render import FleetRender, render_fleet
+from robotconf.contract.notes import VerdictNote
+from robotconf.reconciler.evidence import EvidenceKey
+from robotconf.reconciler.rollout import VERIFY_POLL, RolloutStep
 from tests.support.lab import Lab
 from tests.support.rollout_run import T0, RolloutRun
 

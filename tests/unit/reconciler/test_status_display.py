@@ -3,10 +3,10 @@ the fleet, restart lines, RELOADS beside RESTARTS (issue 22, item 4)."""
 
 from __future__ import annotations
 
-from contract.wire import AgentStatus, ReconcilerStatus, RolloutStatus
-from readmodel.observed import Retained, RobotSeen
-from readmodel.verdicts import DesiredRobot, FleetStatus, build_rows
-from workstation.cli.fleet_view import fleet_status_text
+from robotconf.contract.wire import AgentStatus, ReconcilerStatus, RolloutStatus
+from robotconf.readmodel.observed import Retained, RobotSeen
+from robotconf.readmodel.verdicts import DesiredRobot, FleetStatus, build_rows
+from robotconf.workstation.cli.fleet_view import fleet_status_text
 
 STABLE = "sha256:" + "1" * 64  # the stable revision's request for each robot
 HEAD, OLD = "b" * 40, "a" * 40
@@ -94,7 +94,7 @@ def test_reloads_stand_beside_restarts_in_the_table_and_the_json() -> None:
 def test_status_json_is_the_fleet_with_one_robot_per_line() -> None:
     import json
 
-    from workstation.cli.status import fleet_json
+    from robotconf.workstation.cli.status import fleet_json
 
     fleet = rolled_back_fleet()
     found = fleet.as_json()

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
-from readmodel.events import Event, Kind
-from readmodel.timeline import (
+from robotconf.contract.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
+from robotconf.readmodel.events import Event, Kind
+from robotconf.readmodel.timeline import (
     KINDS,
     MAX_FIELD,
     MAX_LIMIT,

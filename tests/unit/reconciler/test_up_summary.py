@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from contract.wire import ReconcilerStatus, RolloutStatus
-from readmodel.verdicts import FleetStatus
-from workstation.up import summary
+from robotconf.contract.wire import ReconcilerStatus, RolloutStatus
+from robotconf.readmodel.verdicts import FleetStatus
+from robotconf.workstation.up import summary
 
 
 def fleet_with(rollout: RolloutStatus | None) -> FleetStatus:

@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import pytest
 
-from contract.launch import StopRequest
-from contract.wire import AgentState, AgentStatus, ReconcilerStatus, RobotDescription, Topics
-from readmodel.observed import Retained, RobotSeen, parse_retained
-from readmodel.retained import oversized
-from readmodel.verdicts import (
+from robotconf.contract.launch import StopRequest
+from robotconf.contract.wire import (
+    AgentState,
+    AgentStatus,
+    ReconcilerStatus,
+    RobotDescription,
+    Topics,
+)
+from robotconf.readmodel.observed import Retained, RobotSeen, parse_retained
+from robotconf.readmodel.retained import oversized
+from robotconf.readmodel.verdicts import (
     DesiredRobot,
     FleetStatus,
     Health,
@@ -16,7 +22,7 @@ from readmodel.verdicts import (
     build_rows,
     verdict,
 )
-from workstation.cli.fleet_view import fleet_status_text
+from robotconf.workstation.cli.fleet_view import fleet_status_text
 
 D1 = "sha256:" + "1" * 64
 D2 = "sha256:" + "2" * 64
@@ -255,8 +261,8 @@ def test_a_label_selector_keeps_only_the_robots_it_matches() -> None:
 
 
 def test_a_selector_option_is_key_equals_value() -> None:
-    from contract.errors import CliError
-    from workstation.cli.status import parse_selector
+    from robotconf.contract.errors import CliError
+    from robotconf.workstation.cli.status import parse_selector
 
     assert parse_selector(("ring=canary", "site=hall-a")) == {"ring": "canary", "site": "hall-a"}
     for bad in ("ring", "ring=", "=x", "a b=c", "ring=can ary"):

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from contract.wire import AgentState, AgentStatus
-from readmodel.observed import Retained, RobotSeen
-from readmodel.verdicts import DesiredRobot, FleetStatus, Verdict, build_rows
+from robotconf.contract.wire import AgentState, AgentStatus
+from robotconf.readmodel.observed import Retained, RobotSeen
+from robotconf.readmodel.verdicts import DesiredRobot, FleetStatus, Verdict, build_rows
 
 D1 = "sha256:" + "1" * 64
 

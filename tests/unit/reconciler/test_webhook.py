@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from reconciler.webhook import MAX_BODY, Answer, Outcome, judge, server_of
+from robotconf.reconciler.webhook import MAX_BODY, Answer, Outcome, judge, server_of
 
 SECRET = b"7f3a9c0e1b2d4f6a8c0e2b4d6f8a1c3e"
 HEAD = "0123456789abcdef0123456789abcdef01234567"

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from contract.wire import ReconcilerStatus, StatusDiagnostic
-from readmodel.verdicts import WORST_FIRST, FleetStatus, RobotRow, Verdict
-from workstation.ui.model import Snapshot
+from robotconf.contract.wire import ReconcilerStatus, StatusDiagnostic
+from robotconf.readmodel.verdicts import WORST_FIRST, FleetStatus, RobotRow, Verdict
+from robotconf.workstation.ui.model import Snapshot
 
 D1 = "sha256:" + "1" * 64
 D2 = "sha256:" + "2" * 64

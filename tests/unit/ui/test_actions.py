@@ -9,12 +9,12 @@ from urllib.parse import urlencode
 
 import pytest
 
-from readmodel.http_edge import Request, Response
-from workstation.ui import forms
-from workstation.ui.actions import Actions
-from workstation.ui.auth import COOKIE, Identity, OperatorAuth, Policy
-from workstation.ui.restarts import Outcome
-from workstation.ui.server import Route
+from robotconf.readmodel.http_edge import Request, Response
+from robotconf.workstation.ui import forms
+from robotconf.workstation.ui.actions import Actions
+from robotconf.workstation.ui.auth import COOKIE, Identity, OperatorAuth, Policy
+from robotconf.workstation.ui.restarts import Outcome
+from robotconf.workstation.ui.server import Route
 
 TOKEN = "operator-token-" + "q9" * 10
 FORM = "application/x-www-form-urlencoded"
@@ -293,7 +293,7 @@ def test_robot_text_in_an_outcome_is_escaped() -> None:
 def test_named_operators_log_in_with_their_name_and_the_log_says_who(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    from workstation.ui.operators import MIN_COST, hash_token, parse_operators
+    from robotconf.workstation.ui.operators import MIN_COST, hash_token, parse_operators
 
     hashed = hash_token(TOKEN, MIN_COST).text()
     ui = UI(None)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from contract.errors import CliError
-from workstation.ui.auth import (
+from robotconf.contract.errors import CliError
+from robotconf.workstation.ui.auth import (
     ANONYMOUS,
     COOKIE,
     Identity,

@@ -6,10 +6,10 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
-from readmodel.verdicts import Verdict
+from robotconf.readmodel.verdicts import Verdict
+from robotconf.workstation.ui.changes import Shown, Views, change, changed_rows, first
+from robotconf.workstation.ui.model import FleetQuery
 from tests.unit.ui.fleets import fleet, refused, row, snapshot
-from workstation.ui.changes import Shown, Views, change, changed_rows, first
-from workstation.ui.model import FleetQuery
 
 
 def message(event: bytes | None) -> dict[str, object]:

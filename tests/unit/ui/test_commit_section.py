@@ -3,9 +3,14 @@ counted, and a commit that does not validate says why instead of a plan."""
 
 from __future__ import annotations
 
-from configurator.plan import Plan
-from contract.diagnostics import Diagnostic, Severity
-from workstation.ui.commit_facts import MAX_FILES, ChangedFile, CommitFacts, commit_section
+from robotconf.configurator.plan import Plan
+from robotconf.contract.diagnostics import Diagnostic, Severity
+from robotconf.workstation.ui.commit_facts import (
+    MAX_FILES,
+    ChangedFile,
+    CommitFacts,
+    commit_section,
+)
 
 A, B = "a" * 40, "b" * 40
 

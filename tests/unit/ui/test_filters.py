@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from readmodel.verdicts import Verdict
+from robotconf.readmodel.verdicts import Verdict
+from robotconf.workstation.ui.model import MAX_QUERY, FleetQuery, QueryError, parse_query, visible
 from tests.unit.ui.fleets import fleet, row
-from workstation.ui.model import MAX_QUERY, FleetQuery, QueryError, parse_query, visible
 
 
 def test_a_query_is_read_as_status_reads_its_selector() -> None:

@@ -6,17 +6,17 @@ from __future__ import annotations
 
 import re
 
-from contract.goals import BrainEvent, CurrentGoal, OutcomeState, Severity
-from readmodel.robot_goals import RobotGoals, bounded
+from robotconf.contract.goals import BrainEvent, CurrentGoal, OutcomeState, Severity
+from robotconf.readmodel.robot_goals import RobotGoals, bounded
+from robotconf.workstation.ui.auth import ANONYMOUS
+from robotconf.workstation.ui.changes import Shown, change, first
+from robotconf.workstation.ui.goals_html import duration, goals_box, rates_box
+from robotconf.workstation.ui.model import FleetQuery
+from robotconf.workstation.ui.pages import fleet_page
+from robotconf.workstation.ui.robot_page import robot_page
 from tests.support.goals_summaries import AT, REV1, REV2, ended, summary
 from tests.unit.ui.fleets import fleet, row, snapshot
 from tests.unit.ui.test_pages import assert_no_inline_code, tags
-from workstation.ui.auth import ANONYMOUS
-from workstation.ui.changes import Shown, change, first
-from workstation.ui.goals_html import duration, goals_box, rates_box
-from workstation.ui.model import FleetQuery
-from workstation.ui.pages import fleet_page
-from workstation.ui.robot_page import robot_page
 
 HOSTILE = '<script>alert(1)</script>"\x1b[31m'
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from contract.wire import LogsChunk
-from workstation.ui.logtail import MAX_LINE, chunk_event, event, note
+from robotconf.contract.wire import LogsChunk
+from robotconf.workstation.ui.logtail import MAX_LINE, chunk_event, event, note
 
 
 def fields(sse: bytes) -> list[str]:

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from contract.errors import CliError
-from workstation.ui.auth import OperatorAuth, Policy, refusal_text
-from workstation.ui.clients import LOOPBACK, client_of, parse_proxies
-from workstation.ui.operators import (
+from robotconf.contract.errors import CliError
+from robotconf.workstation.ui.auth import OperatorAuth, Policy, refusal_text
+from robotconf.workstation.ui.clients import LOOPBACK, client_of, parse_proxies
+from robotconf.workstation.ui.operators import (
     MAX_OPERATORS,
     MIN_COST,
     HashError,

@@ -5,14 +5,14 @@ from __future__ import annotations
 import re
 from html.parser import HTMLParser
 
-from contract.wire import AgentState, RolloutStatus
-from readmodel.verdicts import Verdict
+from robotconf.contract.wire import AgentState, RolloutStatus
+from robotconf.readmodel.verdicts import Verdict
+from robotconf.workstation.ui.auth import ANONYMOUS, Identity
+from robotconf.workstation.ui.model import FleetQuery, HistoryEntry
+from robotconf.workstation.ui.pages import error_page, fleet_page
+from robotconf.workstation.ui.robot_page import robot_page
+from robotconf.workstation.ui.text import MAX_TEXT, esc
 from tests.unit.ui.fleets import fleet, reconciler, refused, row, snapshot
-from workstation.ui.auth import ANONYMOUS, Identity
-from workstation.ui.model import FleetQuery, HistoryEntry
-from workstation.ui.pages import error_page, fleet_page
-from workstation.ui.robot_page import robot_page
-from workstation.ui.text import MAX_TEXT, esc
 
 OPERATOR = Identity(operator=True, csrf="c" * 32, via="cookie")
 

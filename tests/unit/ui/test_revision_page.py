@@ -9,21 +9,21 @@ from pathlib import Path
 
 import pytest
 
-from contract.goals import OutcomeRecord, OutcomeState
-from readmodel.ledger import Ledger, ledger_path
-from readmodel.outcomes import History
-from readmodel.robot_goals import RobotGoals, bounded
-from tests.support.goals_summaries import AT, REV1, REV2, summary
-from tests.unit.ui.fleets import fleet, row, snapshot
-from tests.unit.ui.test_pages import assert_no_inline_code, tags
-from workstation.ui.auth import ANONYMOUS
-from workstation.ui.revision_page import revision_page
-from workstation.ui.revisions import (
+from robotconf.contract.goals import OutcomeRecord, OutcomeState
+from robotconf.readmodel.ledger import Ledger, ledger_path
+from robotconf.readmodel.outcomes import History
+from robotconf.readmodel.robot_goals import RobotGoals, bounded
+from robotconf.workstation.ui.auth import ANONYMOUS
+from robotconf.workstation.ui.revision_page import revision_page
+from robotconf.workstation.ui.revisions import (
     CachedHistory,
     HistoryError,
     LedgerHistory,
     rate_change,
 )
+from tests.support.goals_summaries import AT, REV1, REV2, summary
+from tests.unit.ui.fleets import fleet, row, snapshot
+from tests.unit.ui.test_pages import assert_no_inline_code, tags
 
 HOSTILE = "<script>alert(1)</script>"
 

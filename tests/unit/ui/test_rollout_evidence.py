@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import re
 
-from contract.wire import RolloutStatus, WaveVerification
+from robotconf.contract.wire import RolloutStatus, WaveVerification
+from robotconf.workstation.ui.auth import ANONYMOUS
+from robotconf.workstation.ui.model import FleetQuery
+from robotconf.workstation.ui.pages import evidence_html, fleet_page, rollout_box
+from robotconf.workstation.ui.text import when
 from tests.unit.ui.fleets import NOW, fleet, reconciler, snapshot
 from tests.unit.ui.test_pages import assert_no_inline_code
-from workstation.ui.auth import ANONYMOUS
-from workstation.ui.model import FleetQuery
-from workstation.ui.pages import evidence_html, fleet_page, rollout_box
-from workstation.ui.text import when
 
 EVIDENCE = WaveVerification(
     goals=14,

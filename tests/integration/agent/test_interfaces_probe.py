@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from agent.config import InterfacesConfig
-from agent.interfaces import MAX_OUTPUT, InterfaceProbe
-from agent.logs import Redactor
-from agent.process import is_alive
-from contract.interfaces import RobotInterfaces
+from robotconf.agent.config import InterfacesConfig
+from robotconf.agent.interfaces import MAX_OUTPUT, InterfaceProbe
+from robotconf.agent.logs import Redactor
+from robotconf.agent.process import is_alive
+from robotconf.contract.interfaces import RobotInterfaces
 
 
 def drive(probe: InterfaceProbe, deadline: float = 30.0) -> RobotInterfaces:
