@@ -512,3 +512,33 @@ def test_the_class_length_check_finds_a_long_class() -> None:
         + "".join(f"        y{i} = {i}\n" for i in range(400))
     )
     assert long_classes(source, "m.py") == ["m.py:TooLong (402)", "m.py:Inner (401)"]
+
+
+def bare_imports(source: str, filename: str) -> list[str]:
+    """Imports of one of our folders by its bare name (`from agent import x`), as
+    `filename:line name`: installed, only `robotconf.agent` exists, and in this checkout the
+    bare name would load a second copy of every module it reaches."""
+    folders = set(PACKAGES) - {"robotconf"}
+    found: list[str] = []
+    for node in ast.walk(ast.parse(source, filename)):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names = [node.module or ""]
+        else:
+            continue
+        found += [f"{filename}:{node.lineno} {n}" for n in names if n.split(".")[0] in folders]
+    return found
+
+
+def test_every_import_of_ours_is_under_robotconf() -> None:
+    files = [*our_python_files(), *sorted((ROOT / "bench").rglob("*.py"))]
+    offenders = [
+        found
+        for path in files
+        for found in bare_imports(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))
+    ]
+    assert offenders == [], "import these as robotconf.<folder>: " + "; ".join(offenders)
+    assert bare_imports("from agent.cli import main\nimport robotconf.agent\n", "m.py") == [
+        "m.py:1 agent.cli"
+    ]
