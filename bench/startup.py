@@ -109,11 +109,13 @@ def cases(repo: Path, before: Path | None, decompose: bool = False) -> list[Case
 def older_entry(checkout: Path, entry: str) -> list[str]:
     """The command that starts `checkout`'s robotconf: the installed entry point imports
     robotconf.workstation.cli, which a checkout from before the one namespace (issue 33) lacks;
-    there its own top-level `workstation.cli` is started as the entry point would."""
+    there its own top-level `workstation.cli` is started as the entry point would (the
+    checkout first on sys.path: `-c` puts the working folder, this checkout, before
+    PYTHONPATH)."""
     if (checkout / "robotconf" / "workstation").exists():
         return [entry]
-    shim = "import sys\nsys.argv[0] = 'robotconf'\nfrom workstation.cli import main\n"
-    return [sys.executable, "-c", shim + "sys.exit(main())"]
+    shim = f"import sys\nsys.path.insert(0, {str(checkout)!r})\nsys.argv[0] = 'robotconf'\n"
+    return [sys.executable, "-c", shim + "from workstation.cli import main\nsys.exit(main())"]
 
 
 def run_once(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
