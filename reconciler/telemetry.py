@@ -30,6 +30,7 @@ from robotconf.readmodel.verdicts import (
     robot_drift,
     verdict,
 )
+from robotconf.reconciler import heap
 from robotconf.reconciler.controller import Step
 from robotconf.reconciler.decide import state_of
 
@@ -200,6 +201,7 @@ class Telemetry:
             self._desired = (revision, desired_from_fleet(fleet) if fleet is not None else {})
             if self.keep_desired is not None and revision is not None and fleet is not None:
                 self.keep_desired(revision, self._desired[1])
+                heap.release()  # what writing 10,000 robots freed goes back, as after a build
         return self._desired[1]
 
 

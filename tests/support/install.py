@@ -3,11 +3,14 @@ checkout, put into a fresh virtual environment (no system site-packages, no PYTH
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from tests.support.lab import ROOT
 
@@ -70,11 +73,26 @@ def build_wheel(dest: Path) -> Path:
     return wheel
 
 
-def fresh_install(root: Path, *requirements: str, decoys: bool = False) -> Path:
-    """A new virtual environment under `root` with robotconf's wheel (and `requirements`)
+def shared_wheel(factory: pytest.TempPathFactory) -> Path:
+    """robotconf's wheel, built once per test run and shared by every test that installs it:
+    under pytest-xdist the workers' folders have one parent (the run's), and the first worker
+    to ask builds it there while the others wait on a lock."""
+    root = factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    with (root / "wheel.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        built = sorted((root / "shared-wheel" / "wheels").glob("robotconf-*.whl"))
+        if built:
+            return built[0]
+        shutil.rmtree(root / "shared-wheel", ignore_errors=True)  # a build cut short
+        return build_wheel(root / "shared-wheel")
+
+
+def fresh_install(root: Path, wheel: Path, *requirements: str, decoys: bool = False) -> Path:
+    """A new virtual environment under `root` with robotconf's `wheel` (and `requirements`)
     installed as pip resolves them from the package index; returns the environment. With
     `decoys`, packages of other people named `agent` and `contract` are there first."""
-    wheel = build_wheel(root)
     env = root / "venv"
     run([sys.executable, "-m", "venv", str(env)])
     if decoys:

@@ -12,7 +12,14 @@ import pytest
 
 from robotconf.contract.wire import AgentState, Topics
 from tests.support.agents import ROBOT, AgentProc, make_request, publish
-from tests.support.install import DECOYS, clean_env, fresh_install, run, site_packages
+from tests.support.install import (
+    DECOYS,
+    clean_env,
+    fresh_install,
+    run,
+    shared_wheel,
+    site_packages,
+)
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch, wait_for
 
@@ -24,7 +31,8 @@ SERVER_ONLY = {"click", "cryptography", "gitpython", "watchfiles", "amqtt", "ric
 def robot_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fresh virtual environment with only the robot side: `pip install robotconf`, into an
     environment that holds unrelated `agent` and `contract` packages (DECOYS) already."""
-    return fresh_install(tmp_path_factory.mktemp("robot-install"), decoys=True)
+    wheel = shared_wheel(tmp_path_factory)
+    return fresh_install(tmp_path_factory.mktemp("robot-install"), wheel, decoys=True)
 
 
 def _distributions(env: Path) -> set[str]:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.install import DECOYS, add_decoys, build_wheel, clean_env, run, site_packages
+from tests.support.install import DECOYS, add_decoys, clean_env, run, shared_wheel, site_packages
 from tests.support.lab import ROOT
 
 
@@ -24,7 +24,7 @@ def workstation_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
     alone (the editable install's finder lives in a .pth there, which a named folder's .pth
     never runs)."""
     root = tmp_path_factory.mktemp("workstation-install")
-    wheel = build_wheel(root)
+    wheel = shared_wheel(tmp_path_factory)
     env = root / "venv"
     run([sys.executable, "-m", "venv", str(env)])
     add_decoys(env)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.install import PACKAGES, build_wheel, copy_project
+from tests.support.install import PACKAGES, copy_project, shared_wheel
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -71,9 +71,11 @@ def test_editable_build_prints_no_deprecation(tmp_path: Path) -> None:
     assert licenses, "the wheel carries the license file"
 
 
-def test_the_wheel_carries_the_ui_script_and_stylesheet(tmp_path: Path) -> None:
+def test_the_wheel_carries_the_ui_script_and_stylesheet(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> None:
     """`robotconf ui` serves them from the package: no CDN, no build step."""
-    with zipfile.ZipFile(build_wheel(tmp_path)) as built:
+    with zipfile.ZipFile(shared_wheel(tmp_path_factory)) as built:
         names = set(built.namelist())
     assert {
         "robotconf/workstation/ui/static/ui.js",

@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 import yaml
 
-from tests.support.install import clean_env, fresh_install
+from tests.support.install import clean_env, fresh_install, shared_wheel
 from tests.support.lab import ROOT, Lab
 
 BIN = Path(sys.executable).parent
@@ -190,13 +190,13 @@ def _folders(pattern: str) -> set[str]:
 
 
 def test_the_published_hooks_run_in_an_install_made_as_pre_commit_makes_it(
-    tmp_path: Path,
+    tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
     """pre-commit's `language: python` installs the package without extras plus the hook's
     `additional_dependencies`: in such a fresh environment each entry runs and judges the lab."""
     hooks = _published_hooks()
     extra = sorted({dep for hook in hooks for dep in hook.get("additional_dependencies", [])})
-    env = fresh_install(tmp_path / "hook-env", *extra)
+    env = fresh_install(tmp_path / "hook-env", shared_wheel(tmp_path_factory), *extra)
     lab = Lab(tmp_path / "fleet")
     for hook in hooks:
         program, *args = hook["entry"].split()

@@ -3,9 +3,11 @@ revision, other code, a malformed or untrusted file) read as nothing, so the cal
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 
@@ -55,6 +57,27 @@ def test_a_kept_revision_reads_back_as_built(repo: Path, desired: dict[str, Desi
     assert entry.stat().st_mode & 0o777 == 0o600
     _same(desired_store.read(repo, REV), desired)
     assert desired_store.read(repo, "b" * 40) is None  # another revision: not kept
+
+
+def test_an_entry_written_in_slices_is_one_whole_document(
+    repo: Path, desired: dict[str, DesiredRobot]
+) -> None:
+    """More robots than one piece holds (and labels of any mapping type): the pieces make the
+    document a single dump would, and it reads back robot by robot."""
+    template = next(robot for robot in desired.values() if robot.needs and robot.labels)
+    many = {
+        f"r{n:05d}": dataclasses.replace(
+            template, robot_id=f"r{n:05d}", labels=MappingProxyType({"n": str(n)})
+        )
+        for n in range(2 * desired_store._SLICE + 7)
+    }
+    data = desired_store.encode(REV, many)
+    whole = json.loads(data)
+    assert whole["robots"][0] == list(many)
+    assert whole["robots"][5] == [{"n": str(n)} for n in range(len(many))]
+    assert len(whole["robots"][7]) == len(many) and len(whole["needs"][0]) == len(template.needs)
+    desired_store.write(repo, REV, many)
+    _same(desired_store.read(repo, REV), many)
 
 
 def test_an_entry_of_other_code_or_another_revision_is_nothing(
