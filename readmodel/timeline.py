@@ -83,7 +83,7 @@ def event_query(
         if len(since) > MAX_SINCE_TEXT:
             raise QueryRefused(f"since: {len(since)} characters is not a duration (e.g. 2h, 7d)")
         try:
-            after = now - min(parse_duration(since), MAX_SINCE)
+            after = now - min(parse_duration(since, clamp=True), MAX_SINCE)
         except ValueError as exc:
             raise QueryRefused(f"since: {exc}") from None
     if not 1 <= limit <= MAX_LIMIT:

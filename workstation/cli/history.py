@@ -49,7 +49,7 @@ def history(
     scenario and task, and per robot) beside the revision before it, from the outcome ledger
     the reconciler keeps; exits 1 when the ledger holds no outcome that matches."""
     try:
-        after = time.time() - parse_duration(since) if since is not None else None
+        after = time.time() - parse_duration(since, clamp=True) if since is not None else None
     except ValueError as exc:
         raise CliError(f"--since: {exc}") from None
     path = find_ledger(repo, prefix, state_dir)

@@ -182,7 +182,9 @@ def test_durations(text: str, seconds: float) -> None:
     assert parse_duration(text) == seconds
 
 
-@pytest.mark.parametrize("text", ["", "soon", "-1h", "0s", "1y", "1 h 2m"])
+@pytest.mark.parametrize(
+    "text", ["", "soon", "-1h", "0s", "1y", "1 h 2m", "3651d", "9" * 400 + "w"]
+)
 def test_durations_that_are_not(text: str) -> None:
     with pytest.raises(ValueError, match="duration"):
         parse_duration(text)
