@@ -252,10 +252,10 @@ def transitions(
     if seen.robots is not None:
         told, deferral_events = _deferral_transitions(told, seen.robots, branch, at)
         events += deferral_events
-    return told, [_with_subject(event, status) for event in events]
+    return told, [with_subject(event, status) for event in events]
 
 
-def _with_subject(event: Event, status: ReconcilerStatus | None) -> Event:
+def with_subject(event: Event, status: ReconcilerStatus | None) -> Event:
     """The event with its revision's commit subject, when the status describes that commit."""
     line = status.commit(event.revision) if status is not None else None
     return replace(event, subject=line.subject) if line is not None and line.subject else event

@@ -30,7 +30,7 @@ from robotconf.contract.wire import (
     RolloutStatus,
     short_rev,
 )
-from robotconf.readmodel.events import REMEMBERED, Event, Kind
+from robotconf.readmodel.events import REMEMBERED, Event, Kind, with_subject
 
 KINDS = tuple(kind.value for kind in Kind)  # what --kind and the page's filter accept
 DEFAULT_LIMIT = 200  # events listed unless asked for more
@@ -206,7 +206,9 @@ def timeline_transitions(
     if robots is not None:
         noted, restarts = _restarts(noted, robots, branch, at, watching_since)
         events += restarts
-    return noted, events
+    # Every line names its commit by its subject, as the alerts' events do, when the status
+    # describes that commit.
+    return noted, [with_subject(event, status) for event in events]
 
 
 def _applied(noted: Noted, status: ReconcilerStatus, at: float) -> tuple[Noted, list[Event]]:
@@ -215,8 +217,10 @@ def _applied(noted: Noted, status: ReconcilerStatus, at: float) -> tuple[Noted, 
         return noted, []
     if revision in noted.applied:
         return noted, []
-    said = f": {status.message}" if status.message else ""
-    message = f"{short_rev(revision)} on {status.branch} applied{said}"
+    # The status's own words ("applied 9f3c2e1a7b4d, but the last fetch failed ...") after
+    # the revision, without saying "applied" twice.
+    said = (status.message or "").removeprefix(f"applied {short_rev(revision)}").lstrip(", ")
+    message = f"{short_rev(revision)} on {status.branch} applied" + (f": {said}" if said else "")
     event = Event(Kind.COMMIT_APPLIED, message, at, status.branch, revision, reason=status.reason)
     return replace(noted, applied=_remember(noted.applied, revision)), [event]
 

@@ -6,7 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from robotconf.contract.wire import AgentState, AgentStatus, ReconcilerStatus, RolloutStatus
+from robotconf.contract.wire import (
+    AgentState,
+    AgentStatus,
+    CommitLine,
+    ReconcilerStatus,
+    RolloutStatus,
+)
 from robotconf.readmodel.events import Event, Kind
 from robotconf.readmodel.timeline import (
     KINDS,
@@ -180,3 +186,20 @@ def test_a_kept_event_as_a_line_and_as_json() -> None:
     assert kept.line().startswith("1970-01-01 00:00:00 UTC  robot_restarted  tb3-02  ")
     assert "\x1b" not in kept.line()  # a robot's words made inert
     assert kept.as_json()["by"] == "alice" and kept.as_json()["event"] == "robot_restarted"
+
+
+def test_each_timeline_line_names_its_commit_by_subject_and_says_applied_once() -> None:
+    """The reconciler's status carries the subjects of the commits it names: the timeline's
+    own events (a commit applied, a wave started) carry them as the alerts' events do."""
+    line = CommitLine(revision=A, subject="delivery: a new planner", author="ada")
+    status = applied(A).model_copy(update={"message": f"applied {A[:12]}", "commits": [line]})
+    _, events = timeline_transitions(Noted(), status, None, NOW)
+    (event,) = events
+    assert event.subject == "delivery: a new planner"
+    assert event.message == f"{A[:12]} on main applied"  # not "applied: applied aaaa..."
+    stale = status.model_copy(update={"message": f"applied {A[:12]}, but the last fetch failed"})
+    _, (event,) = timeline_transitions(Noted(), stale, None, NOW)
+    assert event.message == f"{A[:12]} on main applied: but the last fetch failed"
+    wave = rolling(A, 0).model_copy(update={"commits": [line]})
+    _, events = timeline_transitions(Noted(), wave, None, NOW)
+    assert [e.subject for e in events if e.kind is Kind.WAVE_STARTED] == [line.subject]
