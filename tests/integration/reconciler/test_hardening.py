@@ -7,6 +7,7 @@ import json
 import logging
 import re
 import subprocess
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -76,22 +77,25 @@ def status_cli(url: str, lab: GitLab, *extra: str) -> subprocess.CompletedProces
 def test_a_build_that_raises_is_stalled_and_the_next_good_commit_applied(
     lab: GitLab, mosquitto: Mosquitto, watch: FleetWatch
 ) -> None:
-    bad: set[str] = set()
+    good = lab.head()
+    # While set, every revision but the first chokes the build. It is set before the bad
+    # commit is made and cleared before the good one: the reconciler may build a commit
+    # before `commit` has returned its id, so a set of ids filled after would race it.
+    choking = threading.Event()
     calls: list[str] = []
 
     def builder(root: Path, revision: str) -> Desired:
         calls.append(revision)
-        if revision in bad:
+        if choking.is_set() and revision != good:
             raise RecursionError("maximum recursion depth exceeded (an injected fault)")
         return load_desired(root, revision)
 
     running = Running(LocalBranch(lab.root, "main"), mosquitto.url, 300.0, builder=builder)
     try:
-        good = lab.head()
         wait_for(lambda: serves(watch, lab, good), "the lab published")
         lab.replace("configs/fleet.yaml", "Guide bot", "Guide")
-        bad.add(lab.commit("a commit the build chokes on"))
-        (failed,) = bad
+        choking.set()
+        failed = lab.commit("a commit the build chokes on")
         # Its build is said first (Progressing), then its end: a loaded machine shows both.
         status = watch.wait_reconciler(
             lambda s: s.last_attempted_revision == failed and s.state != "Progressing", "tried"
@@ -103,6 +107,7 @@ def test_a_build_that_raises_is_stalled_and_the_next_good_commit_applied(
         assert running.thread.is_alive()
 
         lab.replace("configs/fleet.yaml", "Guide", "Guide robot")
+        choking.clear()
         fixed = lab.commit("the next good commit")
         watch.wait_reconciler(lambda s: s.ready and s.last_applied_revision == fixed, "applied")
         assert serves(watch, lab, fixed)

@@ -216,6 +216,9 @@ def test_hostile_statuses_change_only_their_own_rows(fleet: Fleet, ui: UiProc) -
             ),
             "a row for each hostile robot",
         )
+        # The five statuses are read in steps of their own: the page shows the last one's
+        # text (escaped) once the UI has read it too, which a loaded machine may take a step for.
+        ui.wait_page("/", lambda p: "&lt;script&gt;" in p, "the hostile text shown escaped")
         after = ui.get("/")
         assert after.code == 200
         robots = set(fleet.requests())
