@@ -23,6 +23,9 @@ def test_a_knowledge_only_change_reloads_the_running_brain(
     agent = make_agent(reload=RELOAD)
     first = start_running(agent, watch, mosquitto)
     assert first.reloads == 0
+    # `running` may come from startsecs before the brain's hello on its socket, which makes it
+    # `starting` again until its ready: the reload is asked of a brain that said ready.
+    watch.wait_for(ROBOT, lambda s: s.message.endswith(", ready)"), "ready", agent=agent)
     request = make_request(knowledge=SHELVES, revision="rev-2")
     assert request.restart_digest == make_request().restart_digest  # only knowledge changed
     publish(mosquitto.url, LAUNCH, request.payload())
