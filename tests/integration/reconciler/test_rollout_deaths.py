@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from robotconf.agent.process import read_pidfile
+from robotconf.agent.workdir import PID_FILE
 from robotconf.configurator.rendered import RenderedRequest
 from robotconf.contract.wire import AgentState, ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet, fleet_on
@@ -58,10 +60,17 @@ def wait_published(fleet: Fleet, robot: str, request: RenderedRequest) -> None:
 def kill_robot(fleet: Fleet, robot: str) -> None:
     """The robot loses power: its agent and its brain, SIGKILL, nothing said but the Will."""
     status = fleet.watch.status(robot)
-    fleet.agents[robot].kill()
-    if status is not None and status.pid is not None:
+    agent = fleet.agents[robot]
+    agent.kill()
+    # The brain it ran: the one its status named, and the one its pid file names (a brain
+    # started just before the kill, its status never sent, lived on for hours otherwise).
+    pids = {status.pid} if status is not None and status.pid is not None else set()
+    record = read_pidfile(agent.log.parent / PID_FILE)
+    if record is not None and record.is_running():
+        pids.add(record.pid)
+    for pid in pids:
         with contextlib.suppress(ProcessLookupError):
-            os.kill(status.pid, signal.SIGKILL)
+            os.kill(pid, signal.SIGKILL)
     fleet.watch.wait_for(robot, lambda s: s.state is AgentState.OFFLINE, "its Last Will")
 
 
