@@ -10,7 +10,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-from robotconf.contract.durations import MAX_SECONDS, parse_duration
+from robotconf.contract.durations import checked_seconds, parse_duration
 from robotconf.contract.models import CODE_PATTERN
 from robotconf.contract.models import MAX_ROS_DOMAIN_ID as MAX_ROS_DOMAIN_ID
 from robotconf.contract.models import ROBOT_ID_PATTERN as ROBOT_ID_PATTERN
@@ -275,12 +275,10 @@ class Wave(StrictModel):
 
 def _duration(value: str | float) -> str | float:
     try:
-        seconds = parse_duration(value) if isinstance(value, str) else value
+        parse_duration(value) if isinstance(value, str) else checked_seconds(value, str(value))
     except ValueError:
-        seconds = 0
-    if not 0 < seconds <= MAX_SECONDS:
         # Said as what would be right: the message reads "timeout must be <this>, got ...".
-        raise ValueError("a duration such as 30m, 2h or 7d (at most 3650d), or seconds")
+        raise ValueError("a duration such as 30m, 2h or 7d (at most 3650d), or seconds") from None
     return value
 
 

@@ -21,10 +21,17 @@ def parse_duration(text: str, clamp: bool = False) -> float:
             f"{text!r} is not a duration: a number with s, m, h, d or w (e.g. 30m, 2h, 7d)"
         )
     seconds = float(found.group(1)) * _UNITS[found.group(2)]
-    if seconds <= 0:
-        raise ValueError(f"{text!r} is not a positive duration")
     if seconds > MAX_SECONDS and clamp:
         return MAX_SECONDS
+    return checked_seconds(seconds, repr(text))
+
+
+def checked_seconds(seconds: float, said: str) -> float:
+    """`seconds` when it is a duration one means: over 0, at most MAX_SECONDS; ValueError
+    naming the value as `said` otherwise. The one rule for durations written as text or as a
+    number of seconds."""
+    if seconds <= 0:
+        raise ValueError(f"{said} is not a positive duration")
     if seconds > MAX_SECONDS:
-        raise ValueError(f"{text!r} is too long a duration: at most 3650d (10 years)")
+        raise ValueError(f"{said} is too long a duration: at most 3650d (10 years)")
     return seconds

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from robotconf.contract.durations import parse_duration
+from robotconf.contract.durations import MAX_SECONDS, parse_duration
 from robotconf.contract.models import is_robot_id
 from robotconf.contract.textsafe import printable
 from robotconf.contract.wire import (
@@ -36,7 +36,7 @@ KINDS = tuple(kind.value for kind in Kind)  # what --kind and the page's filter 
 DEFAULT_LIMIT = 200  # events listed unless asked for more
 MAX_LIMIT = 5000
 MAX_SINCE_TEXT = 32  # characters of a --since (a duration is `30m`, `7d`)
-MAX_SINCE = 10 * 365 * 86400.0  # ten years: further back is everything the ledger keeps
+MAX_SINCE = MAX_SECONDS  # ten years: further back is everything the ledger keeps
 MAX_MESSAGE = 2000  # characters of an event's message kept
 MAX_FIELD = 200  # characters of every other text field kept
 _WAVE_GOING = {"Progressing", "Paused"}
@@ -83,7 +83,7 @@ def event_query(
         if len(since) > MAX_SINCE_TEXT:
             raise QueryRefused(f"since: {len(since)} characters is not a duration (e.g. 2h, 7d)")
         try:
-            after = now - min(parse_duration(since, clamp=True), MAX_SINCE)
+            after = now - parse_duration(since, clamp=True)
         except ValueError as exc:
             raise QueryRefused(f"since: {exc}") from None
     if not 1 <= limit <= MAX_LIMIT:
