@@ -47,6 +47,7 @@ class RobotSeen:
     launch: LaunchRequest | None = None  # only when read in full (`requests=True`)
     launch_digest: str | None = None  # the digest a launch payload carries, valid or not
     launch_retained: bool = False  # the launch topic holds a request (readable or not)
+    launch_signed: bool = False  # that request carries a signature (good or not)
     stopped: bool = False  # the launch topic holds a Stop for this robot: nothing assigned
     status: AgentStatus | None = None
     description: RobotDescription | None = None
@@ -103,6 +104,8 @@ class LaunchHeader(BaseModel):
 
     kind: str | None = None
     digest: str | None = None
+    signature: str | None = None  # a whole request's
+    signed: bool = False  # a `launch_summary`'s
 
 
 # A request as the reconciler writes it (canonical JSON: sorted keys, no blanks) opens with its
@@ -123,9 +126,23 @@ def canonical_digest(payload: bytes) -> str | None:
     return found.group(1).decode("ascii") if found else None
 
 
-def launch_summary(kind: str | None, digest: str | None) -> bytes:
-    """What the reconciler keeps of a launch request it holds or publishes: its kind and
-    digest, which `parse_retained(requests=False)` reads as it reads the whole request."""
+# A signed request in canonical form ends with its signature: "signature" is the last of its
+# sorted top-level keys, and an unsigned one ends with its scenario's closing brace instead.
+_CANONICAL_SIGNATURE = re.compile(rb',"signature":"[A-Za-z0-9+/=]{1,128}"\}\Z')
+
+
+def canonical_signed(payload: bytes) -> bool:
+    """Whether a launch request in canonical form carries a signature (not whether it is a
+    good one: the agent judges that)."""
+    return _CANONICAL_SIGNATURE.search(payload, max(0, len(payload) - 160)) is not None
+
+
+def launch_summary(kind: str | None, digest: str | None, signed: bool = False) -> bytes:
+    """What the reconciler keeps of a launch request it holds or publishes: its kind, digest
+    and whether it is signed, which `parse_retained(requests=False)` reads as it reads the
+    whole request."""
+    if signed:
+        return canonical_json({"digest": digest, "kind": kind, "signed": True})
     return canonical_json({"digest": digest, "kind": kind})
 
 
@@ -139,14 +156,14 @@ def summarise_launches(topics: Topics) -> Callable[[str, bytes], bytes]:
             return payload
         digest = canonical_digest(payload)
         if digest is not None:
-            return launch_summary("LaunchRequest", digest)
+            return launch_summary("LaunchRequest", digest, canonical_signed(payload))
         try:
             header = LaunchHeader.model_validate(read_object(payload))
         except Exception:  # on the network thread: whatever it is, it is kept whole
             return payload
         if header.kind == "Stop":
             return payload
-        return launch_summary(header.kind, header.digest)
+        return launch_summary(header.kind, header.digest, header.signature is not None)
 
     return keep
 
@@ -248,6 +265,12 @@ class LaunchDigests:
         self._digests: dict[str, str | None] = {}  # robot -> digest: what a step is given
         self._robot_of: dict[str, str] = {}  # launch topic -> the robot it gives a digest
         self._errors: dict[str, tuple[str, bytes, str]] = {}  # topic -> kind, payload, why
+        self._unsigned: set[str] = set()  # robots whose retained request carries no signature
+
+    @property
+    def unsigned(self) -> frozenset[str]:
+        """Robots whose retained request, as the last `update` read it, is not signed."""
+        return frozenset(self._unsigned)
 
     def update(
         self, messages: Mapping[str, bytes], ignored: Ignored | None = None
@@ -270,6 +293,7 @@ class LaunchDigests:
         robot_id = self._robot_of.pop(topic, None)
         if robot_id is not None:
             del self._digests[robot_id]
+            self._unsigned.discard(robot_id)
 
     def _learn(self, topic: str, payload: bytes) -> None:
         found = _kind(topic, self._topics)
@@ -282,6 +306,8 @@ class LaunchDigests:
         if robot_id is not None and reading.fields.get("launch_retained"):
             self._digests[robot_id] = reading.fields.get("launch_digest")
             self._robot_of[topic] = robot_id
+            if not reading.fields.get("launch_signed"):
+                self._unsigned.add(robot_id)
 
 
 def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _Reading:
@@ -290,7 +316,7 @@ def _read(kind: str, robot_id: str | None, payload: bytes, requests: bool) -> _R
     if kind == "launch" and not requests and robot_id is not None:
         digest = canonical_digest(payload)
         if digest is not None:
-            fields["launch_digest"] = digest
+            fields.update(launch_digest=digest, launch_signed=canonical_signed(payload))
             return _Reading(fields)
     try:
         # An interfaces report is bounded tighter than other payloads, before it is parsed.
@@ -346,5 +372,6 @@ def _read_launch(robot_id: str, raw: dict[str, Any], full: bool, fields: dict[st
         fields.update(launch_retained=False, stopped=True)
         return
     fields["launch_digest"] = header.digest
+    fields["launch_signed"] = header.signed or header.signature is not None
     if full:
         fields["launch"] = LaunchRequest.model_validate(raw)

@@ -378,6 +378,7 @@ class Controller:
             fetch_error=self._fetch_error,
             serving=self.serving,
             launches=self._launches.update(self.view.snapshot(), self.ignored),
+            unsigned=self._launches.unsigned if self.delivery.signs else frozenset(),
             active=self.robots.sample_active(fetch, self.view.connections),
             previous_rollout=previous.rollout if previous is not None else None,
             statuses=self.robots.follow_health(rollout, now),

@@ -106,6 +106,7 @@ class Observation:
     fetch_error: str | None = None  # the last fetch failed: the head may be stale
     serving: Desired | None = None  # the last good revision, applied or being applied
     launches: Mapping[str, str | None] = field(default_factory=dict)  # robot -> digest held
+    unsigned: Set[str] = frozenset()  # robots held unsigned while the reconciler signs
     active: Set[str] = frozenset()  # robots whose agent says a brain is up
     # For rollouts: where the last one stood, the robots' statuses (None: not known yet),
     # when each robot was first seen running its digest, and the time now.
@@ -203,6 +204,7 @@ def decide(seen: Observation) -> Decision:
             fleet.suspended | held.keys(),
             fleet.allow_empty,
             seen.active,
+            seen.unsigned,
         )
         if actions.refused:
             problems = [
@@ -219,7 +221,7 @@ def decide(seen: Observation) -> Decision:
         fleet = target.fleet
         held = held_back(fleet, fleet.requests, seen)
         keep = fleet.suspended | held.keys()
-        actions = diff(fleet.requests, seen.launches, keep, True, seen.active)
+        actions = diff(fleet.requests, seen.launches, keep, True, seen.active, seen.unsigned)
     condition = with_held(_condition(seen, target, problems, reason, build.omitted), held)
     return Decision(target, actions, condition, stable=target)
 
@@ -277,7 +279,12 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
         back = stable.fleet
         held = held_back(back, back.requests, seen)
         actions = diff(
-            back.requests, seen.launches, back.suspended | held.keys(), True, seen.active
+            back.requests,
+            seen.launches,
+            back.suspended | held.keys(),
+            True,
+            seen.active,
+            seen.unsigned,
         )
         condition = with_held(_rollout_condition(seen, step), held)
         return Decision(stable, actions, condition, stable=stable, verdicts=tuple(step.verdicts))
@@ -285,7 +292,9 @@ def _decide_rollout(seen: Observation, build: Desired) -> Decision:
     moving = {r: q for r, q in step.requests.items() if r not in step.keep}
     held = held_back(fleet, moving, seen)
     keep = fleet.suspended | step.keep | held.keys()
-    actions = diff(step.requests, seen.launches, keep, fleet.allow_empty, seen.active)
+    actions = diff(
+        step.requests, seen.launches, keep, fleet.allow_empty, seen.active, seen.unsigned
+    )
     if actions.refused:  # the head would unassign every robot: the stable revision stays
         refused = decide(replace(seen, build=Desired(build.revision, None)))
         problem = StatusDiagnostic(

@@ -42,6 +42,11 @@ class Delivery:
         self._sign = signer
         self._timeout = timeout
 
+    @property
+    def signs(self) -> bool:
+        """Whether what it publishes is signed."""
+        return self._sign is not None
+
     def publish(self, decision: Decision) -> Condition:
         """Publishes what differs and clears what is no longer assigned; the outcome."""
         actions, target = decision.actions, decision.target
@@ -57,7 +62,8 @@ class Delivery:
         # What the view keeps of each request is known without reading it back; a Stop's,
         # the view's own `keep` works out.
         kept: list[bytes | None] = [
-            launch_summary("LaunchRequest", req.digest) for req in actions.publish.values()
+            launch_summary("LaunchRequest", req.digest, sign is not None)
+            for req in actions.publish.values()
         ]
         for r in actions.clear:
             items.append((self._topics.launch(r), self._stop_payload(r, target.revision)))

@@ -38,6 +38,7 @@ def diff(
     suspended: Set[str] = frozenset(),
     allow_empty: bool = False,
     running: Set[str] = frozenset(),
+    unsigned: Set[str] = frozenset(),
 ) -> Actions[R]:
     """`observed`: robot -> digest of its retained launch (None: retained but unreadable).
 
@@ -45,7 +46,9 @@ def diff(
     they are, even when nothing is published for them yet. `running`: robots whose agent says
     it runs a brain; one that is no longer assigned is cleared again, because a clear (an
     empty retained message) is not kept by the broker and an agent that was offline then
-    never saw it.
+    never saw it. `unsigned`: robots whose retained request carries no signature while the
+    reconciler signs; each is published again, signed, though its digest is the same (an
+    agent that verifies refuses the unsigned one, and would wait for the next change).
     """
     actions: Actions[R] = Actions()
     # A fleet's requests are stamped with its revision as they are read: only the ones
@@ -55,7 +58,11 @@ def diff(
         if isinstance(desired, FleetRequests)
         else {robot_id: request.digest for robot_id, request in desired.items()}
     )
-    differ = [robot_id for robot_id, digest in digests.items() if observed.get(robot_id) != digest]
+    differ = [
+        robot_id
+        for robot_id, digest in digests.items()
+        if observed.get(robot_id) != digest or robot_id in unsigned
+    ]
     actions.unchanged = len(digests) - len(differ)
     for robot_id in sorted(differ):  # sorted: what differs, not the whole fleet
         if robot_id in suspended:

@@ -78,6 +78,18 @@ def _agent(fleet: SecureFleet, robot_id: str, folder: Path) -> Proc:
     return Proc([str(ROBOTCONF), "agent", "--config", str(path)], work / "agent.log")
 
 
+def _reconciler(fleet: SecureFleet, log: Path) -> Proc:
+    return Proc(
+        [
+            str(ROBOTCONF), "reconcile", "--repo", str(fleet.lab.root), "--branch", "main",
+            *fleet.broker.cli_args("reconciler"),
+            "--signing-key", str(fleet.keys / "launch-signing.key"),
+            "--interval", "300",  # no resync during a test: each repairs what it breaks
+        ],
+        log,
+    )  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
     base = tmp_path_factory.mktemp("secure-fleet")
@@ -95,15 +107,7 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
         assert writer.wait_synced(TIMEOUT)
         for robot_id in lab.robots():
             fleet.agents[robot_id] = _agent(fleet, robot_id, base / "agents")
-        fleet.reconciler = Proc(
-            [
-                str(ROBOTCONF), "reconcile", "--repo", str(lab.root), "--branch", "main",
-                *broker.cli_args("reconciler"),
-                "--signing-key", str(keys / "launch-signing.key"),
-                "--interval", "300",  # no resync during a test: each repairs what it breaks
-            ],
-            base / "reconciler.log",
-        )  # fmt: skip
+        fleet.reconciler = _reconciler(fleet, base / "reconciler.log")
         yield fleet
     finally:
         if fleet.reconciler is not None:
@@ -233,3 +237,28 @@ def test_only_a_signed_stop_stops_a_brain(secure: SecureFleet) -> None:
     )
     assert before.pid is not None and not pid_alive(before.pid)
     assert json.loads(secure.launch(robot_id))["kind"] == "Stop"
+
+
+def test_requests_published_before_signing_was_on_are_signed_when_it_is(
+    secure: SecureFleet, tmp_path: Path
+) -> None:
+    """A lab turns signing on: the reconciler starts with --signing-key over requests it
+    published unsigned, their digests unchanged. It publishes each again, signed, and the robot
+    that refused the unsigned one runs it, not restarted; without this it stayed `rejected`
+    until its next change. The writer stands in for the reconciler that ran without the key."""
+    robot_id = "tb3-02"
+    before = secure.wait_running({robot_id: secure.lab.requests()[robot_id]})[robot_id]
+    assert secure.reconciler is not None
+    secure.reconciler.stop()
+    data = json.loads(secure.launch(robot_id))
+    del data["signature"], data["issued_at"]
+    secure.send(robot_id, canonical_json(data))
+    secure.wait_rejected(robot_id, "not signed")
+    secure.reconciler = _reconciler(secure, tmp_path / "reconciler.log")
+    wait_for(
+        lambda: (s := secure.status(robot_id)) and s.state is AgentState.RUNNING,
+        f"{robot_id} running its request again, signed",
+    )
+    _brain_untouched(secure, robot_id, before)
+    published = json.loads(secure.launch(robot_id))
+    assert published["signature"] and published["digest"] == data["digest"]

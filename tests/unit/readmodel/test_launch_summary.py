@@ -11,7 +11,12 @@ from hypothesis import strategies as st
 
 from robotconf.contract.launch import StopRequest
 from robotconf.contract.wire import AgentState, AgentStatus, Topics
-from robotconf.readmodel.observed import launch_summary, parse_retained, summarise_launches
+from robotconf.readmodel.observed import (
+    LaunchDigests,
+    launch_summary,
+    parse_retained,
+    summarise_launches,
+)
 from robotconf.readmodel.retained import oversized
 from tests.support.agents import make_request
 
@@ -65,3 +70,36 @@ def test_a_request_is_kept_as_its_kind_and_digest_and_the_rest_whole() -> None:
 def test_any_bytes_read_alike_kept_or_whole(payload: bytes) -> None:
     if payload:
         _reads_alike(T.launch("tb3-01"), payload)
+
+
+def _signed() -> bytes:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    from robotconf.contract.signing import sign
+
+    return sign(make_request("tb3-01"), Ed25519PrivateKey.generate()).payload()
+
+
+def test_whether_a_request_is_signed_is_kept_and_read_alike() -> None:
+    signed = _signed()
+    spaced = json.dumps(json.loads(signed), indent=1).encode()  # not canonical: read in full
+    # A knowledge value named "signature" is not the request's signature.
+    lookalike = make_request("tb3-01", knowledge={"signature": "A" * 88}).payload()
+    topic = T.launch("tb3-01")
+    cases = ((signed, True), (spaced, True), (lookalike, False), (REQUEST, False))
+    for payload, is_signed in cases:
+        _reads_alike(topic, payload)
+        kept = parse_retained({topic: KEEP(topic, payload)}, T, requests=False)
+        assert kept.robots["tb3-01"].launch_signed is is_signed, payload[-120:]
+
+
+def test_the_reconciler_s_step_knows_which_robots_hold_an_unsigned_request() -> None:
+    digests = LaunchDigests(T)
+    one, two = T.launch("tb3-01"), T.launch("tb3-02")
+    unsigned = make_request("tb3-02").payload()
+    digests.update({one: KEEP(one, _signed()), two: KEEP(two, unsigned)})
+    assert digests.unsigned == {"tb3-02"}
+    digests.update({one: KEEP(one, _signed()), two: KEEP(two, _signed())})
+    assert digests.unsigned == frozenset()
+    digests.update({one: KEEP(one, REQUEST)})  # tb3-02 cleared: no longer anyone's
+    assert digests.unsigned == {"tb3-01"}

@@ -78,3 +78,12 @@ def test_a_robot_still_running_without_an_assignment_is_cleared_again() -> None:
     assert actions.clear == ["gone"] and actions.publish == {}
     # A suspended or assigned robot that runs is not touched.
     assert diff(desired, {"a": "d1"}, running={"a"}).empty
+
+
+def test_a_request_held_unsigned_is_published_again_while_the_reconciler_signs() -> None:
+    desired = {"a": Req("d1"), "b": Req("d2"), "c": Req("d3")}
+    observed = {"a": "d1", "b": "d2", "c": "old"}
+    actions = diff(desired, observed, unsigned={"a", "c"})
+    assert sorted(actions.publish) == ["a", "c"] and actions.unchanged == 1
+    held = diff(desired, observed, suspended={"a"}, unsigned={"a"})
+    assert held.held == ["a"] and "a" not in held.publish  # a held robot stays as it is
