@@ -13,6 +13,7 @@ import pytest
 from tests.support.fleet import STARTED, kill_leftovers
 from tests.support.lab import Lab
 from tests.support.mosquitto import Mosquitto, find_mosquitto
+from tests.support.schedule import longest_first
 from tests.support.watch import FleetWatch
 
 _SESSION_TMP_PREFIX = "robotconf-tests-"
@@ -35,6 +36,14 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ["XDG_STATE_HOME"] = os.path.join(folder, ".state")
     os.environ["TMPDIR"] = folder
     tempfile.tempdir = folder
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under pytest-xdist, every worker's share of the run starts with some of the longest
+    tests (tests/support/schedule.py). Every worker collects, in the same order."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0"))
+    if workers > 1:
+        items[:] = longest_first([item.nodeid for item in items], items, workers)
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
