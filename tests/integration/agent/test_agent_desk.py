@@ -48,6 +48,18 @@ CHATTY = [
     "    time.sleep(0.2)\n",
     "{launch_request}",
 ]
+# Five ticks, then quiet: its whole log fits a 20-line tail however slow the machine is (a
+# loaded run took 4 s to ask, and CHATTY's ticks had pushed the token out of the tail).
+FIVE_TICKS = [
+    *CHATTY[:3],
+    "import os, time\n"
+    "print('token', os.environ['API_TOKEN'])\n"
+    "for n in range(5):\n"
+    "    print('tick', n)\n"
+    "    time.sleep(0.2)\n"
+    "time.sleep(3600)\n",
+    "{launch_request}",
+]
 # A long line, then a flood of lines at once, then quiet.
 FLOOD = [
     sys.executable,
@@ -127,9 +139,9 @@ class Listener:
 def test_logs_show_the_brain_and_its_agent_without_secrets(
     mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory
 ) -> None:
-    agent, request = run_brain(make_agent, watch, mosquitto, CHATTY, env={"API_TOKEN": SECRET})
+    agent, request = run_brain(make_agent, watch, mosquitto, FIVE_TICKS, env={"API_TOKEN": SECRET})
     watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
-    wait_for(lambda: "tick 3" in agent.brain_log(), "the brain's ticks")
+    wait_for(lambda: "tick 4" in agent.brain_log(), "the brain's ticks")
     assert SECRET in agent.brain_log()  # the brain printed it; the desk must not see it
 
     done = robotconf("logs", ROBOT, "--lines", "20", broker=mosquitto)
