@@ -107,6 +107,11 @@ class LaunchHeader(BaseModel):
     signature: str | None = None  # a whole request's
     signed: bool = False  # a `launch_summary`'s
 
+    @property
+    def carries_signature(self) -> bool:
+        """The request, or the summary kept of it, is signed (good or not: the agent judges)."""
+        return self.signed or self.signature is not None
+
 
 # A request as the reconciler writes it (canonical JSON: sorted keys, no blanks) opens with its
 # header. Read there, 10,000 requests of a few kB cost one match each, not one parse each (the
@@ -163,7 +168,7 @@ def summarise_launches(topics: Topics) -> Callable[[str, bytes], bytes]:
             return payload
         if header.kind == "Stop":
             return payload
-        return launch_summary(header.kind, header.digest, header.signature is not None)
+        return launch_summary(header.kind, header.digest, header.carries_signature)
 
     return keep
 
@@ -372,6 +377,6 @@ def _read_launch(robot_id: str, raw: dict[str, Any], full: bool, fields: dict[st
         fields.update(launch_retained=False, stopped=True)
         return
     fields["launch_digest"] = header.digest
-    fields["launch_signed"] = header.signed or header.signature is not None
+    fields["launch_signed"] = header.carries_signature
     if full:
         fields["launch"] = LaunchRequest.model_validate(raw)
