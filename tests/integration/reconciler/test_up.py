@@ -18,6 +18,7 @@ import termios
 import threading
 import urllib.request
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,10 @@ def processes_mentioning(text: str) -> list[int]:
 
 def start_up(lab: GitLab, tmp_path: Path, *extra: str, log: str = "up.out") -> Proc:
     return Proc(robotconf_argv("up", "--repo", str(lab.root), *extra), tmp_path / log, cwd=lab.root)
+
+
+def _says(log: Path, text: str) -> bool:
+    return text in log.read_text()
 
 
 def up_folder(lab: GitLab) -> str:
@@ -305,6 +310,11 @@ def test_a_killed_up_takes_its_agents_and_brains_along_and_the_next_starts_clean
     first = start_up(lab, tmp_path, log="first.out")
     try:
         in_sync(first, lab)
+        # Each brain past its start-up (it says what it runs): a brain killed while Python
+        # still starts cannot stop cleanly, and a loaded run got there within a second.
+        for robot_id in lab.robots():
+            log = lab.root / ".robotconf" / "up" / robot_id / "brain.log"
+            wait_for(partial(_says, log, "stand-in brain for"), f"{robot_id}'s brain up")
         os.kill(first.pid, signal.SIGKILL)  # up alone: no chance to stop anything itself
         first.popen.wait()
         none_left(folder)
