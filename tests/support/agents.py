@@ -178,6 +178,7 @@ class AgentProc:
         self.root = root
         self.program = program or agent_argv()  # another install's agent, e.g. a robot-only one
         self.robot_id = robot_id
+        self.says_ready = command is None  # the stand-in brain says ready through the library
         self.workdir = root / "work"
         self.config_path = root / "agent.yaml"
         self.stderr_path = root / "agent.stderr"
@@ -286,6 +287,15 @@ def start_running(
     request = make_request(variant=variant)
     publish(broker.url, Topics().launch(ROBOT), request.payload())
     status = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=request.digest)
+    if agent.says_ready:
+        # A loaded machine may count the brain running at startsecs, before its hello: it is
+        # then `starting` again until it says ready. Tests compare what follows with this.
+        status = watch.wait_for(
+            ROBOT,
+            lambda s: s.state is AgentState.RUNNING and (s.message or "").endswith(", ready)"),
+            "running from the brain's ready",
+            agent=agent,
+        )
     agent.note_brain(status.pid)
     assert status.pid is not None and is_alive(status.pid)
     # `running` says the brain stayed up startsecs, not that it is done starting: wait until
