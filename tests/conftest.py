@@ -36,6 +36,11 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ["XDG_STATE_HOME"] = os.path.join(folder, ".state")
     os.environ["TMPDIR"] = folder
     tempfile.tempdir = folder
+    config.addinivalue_line(
+        "markers",
+        "agents_apart: the fleet fixture runs an agent process per robot (fleet.agents), for "
+        "tests that kill or start one robot; otherwise they share one process",
+    )
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

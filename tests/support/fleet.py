@@ -145,6 +145,22 @@ def start_agent(
 ) -> Proc:
     """A real agent whose brain is the stand-in brain service (given `brain_options`, such as
     `--hold-while MARKER`)."""
+    path = agent_config(robot_id, url, folder, brain_options)
+    return Proc(robotconf_argv("agent", "--config", str(path)), path.parent / "agent.log")
+
+
+def start_agents(robot_ids: Sequence[str], url: str, folder: Path) -> Proc:
+    """Real agents for `robot_ids`, all in one process (`--config` repeated, as a simulation
+    host runs them): each with its own connection, work folder and stand-in brain, without
+    the start-up of a process each. Tests that kill or start one robot use `start_agent`."""
+    argv = ["agent"]
+    for robot_id in robot_ids:
+        argv += ["--config", str(agent_config(robot_id, url, folder))]
+    return Proc(robotconf_argv(*argv), folder / "agents.log")
+
+
+def agent_config(robot_id: str, url: str, folder: Path, brain_options: Sequence[str] = ()) -> Path:
+    """The agent.yaml of `robot_id` in `folder/robot_id`, written."""
     work = folder / robot_id
     work.mkdir(parents=True, exist_ok=True)
     config = {
@@ -163,7 +179,7 @@ def start_agent(
     }
     path = work / "agent.yaml"
     path.write_text(yaml.safe_dump(config), encoding="utf-8")
-    return Proc(robotconf_argv("agent", "--config", str(path)), work / "agent.log")
+    return path
 
 
 def start_reconciler(lab: GitLab, url: str, log: Path, *extra: str) -> Proc:

@@ -12,7 +12,14 @@ import pytest
 
 from robotconf.configurator.rendered import RenderedRequest
 from robotconf.contract.wire import AgentStatus
-from tests.support.fleet import GitLab, Proc, robotconf_argv, start_agent, start_reconciler
+from tests.support.fleet import (
+    GitLab,
+    Proc,
+    robotconf_argv,
+    start_agent,
+    start_agents,
+    start_reconciler,
+)
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import FleetWatch
 
@@ -31,7 +38,8 @@ class Fleet:
     broker: Mosquitto
     watch: FleetWatch
     folder: Path
-    agents: dict[str, Proc] = field(default_factory=dict)
+    agents: dict[str, Proc] = field(default_factory=dict)  # one process a robot (apart)
+    host: Proc | None = None  # or every robot's agent in one process
     reconciler: Proc | None = None
     converged: dict[str, AgentStatus] = field(default_factory=dict)
     logs: int = 0
@@ -61,17 +69,21 @@ class Fleet:
 
 
 @contextlib.contextmanager
-def fleet_on(tmp_path: Path, broker: Mosquitto) -> Iterator[Fleet]:
+def fleet_on(tmp_path: Path, broker: Mosquitto, apart: bool = False) -> Iterator[Fleet]:
     """Seven agents with the stand-in brain and a reconciler on `main` on `broker`, all running
-    (converged); stopped on the way out."""
+    (converged); stopped on the way out. The agents share one process (as a simulation host
+    runs them), or with `apart` each has its own, for tests that kill or start one robot."""
     lab = GitLab(tmp_path / "lab")
     lab.write("configs/fleet.yaml", lab.read("configs/fleet.yaml") + EXTRA_ROBOT)
     lab.commit("one more robot")
     watch = FleetWatch(broker.url)
     state = Fleet(lab, broker, watch, tmp_path)
     try:
-        for robot_id in lab.robots():
-            state.agents[robot_id] = start_agent(lab, robot_id, broker.url, tmp_path / "agents")
+        if apart:
+            for robot_id in lab.robots():
+                state.agents[robot_id] = start_agent(lab, robot_id, broker.url, tmp_path / "agents")
+        else:
+            state.host = start_agents(lab.robots(), broker.url, tmp_path / "agents")
         state.start_reconciler("--interval", "5")
         state.converged = watch.wait_running(state.requests())
         yield state
@@ -79,12 +91,14 @@ def fleet_on(tmp_path: Path, broker: Mosquitto) -> Iterator[Fleet]:
         watch.close()
         if state.reconciler is not None:
             state.reconciler.stop()
-        for proc in state.agents.values():
+        for proc in [*state.agents.values(), *([state.host] if state.host else [])]:
             proc.stop()
 
 
 @pytest.fixture
-def fleet(tmp_path: Path, mosquitto: Mosquitto) -> Iterator[Fleet]:
-    """The whole fleet on the test session's broker."""
-    with fleet_on(tmp_path, mosquitto) as state:
+def fleet(tmp_path: Path, mosquitto: Mosquitto, request: pytest.FixtureRequest) -> Iterator[Fleet]:
+    """The whole fleet on the test's broker; a test marked `agents_apart` gets an agent
+    process per robot (fleet.agents)."""
+    apart = request.node.get_closest_marker("agents_apart") is not None
+    with fleet_on(tmp_path, mosquitto, apart) as state:
         yield state

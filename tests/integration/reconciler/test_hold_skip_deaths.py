@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from robotconf.contract.wire import ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_drift_reconciler import FLEET, NAV2, ODOM
@@ -88,6 +90,7 @@ def test_a_reconciler_killed_while_it_holds_a_robot_for_drift_holds_it_when_back
             proc.kill()
 
 
+@pytest.mark.agents_apart  # a robot is killed
 def test_a_reconciler_killed_while_a_wave_skips_an_offline_robot_keeps_it_skipped(
     fleet: Fleet,
 ) -> None:

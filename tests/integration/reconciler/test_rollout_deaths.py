@@ -30,6 +30,9 @@ from tests.support.fleet import start_agent
 from tests.support.mosquitto import Mosquitto
 from tests.support.watch import wait_for
 
+# These tests kill, stop and start single robots: each has an agent process of its own.
+pytestmark = pytest.mark.agents_apart
+
 LAST = "tb3-06"  # in the last wave, with the canary's scenario
 
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from robotconf.contract.wire import ReconcilerStatus
 from tests.integration.reconciler.conftest import Fleet
 from tests.integration.reconciler.test_rollout import (
@@ -23,6 +25,9 @@ from tests.integration.reconciler.test_rollout_deaths import (
 )
 from tests.support.fleet import start_agent
 from tests.support.watch import TIMEOUT, wait_for
+
+# These tests kill, stop and start single robots: each has an agent process of its own.
+pytestmark = pytest.mark.agents_apart
 
 # wave_timeout far beyond the watcher's TIMEOUT: a rollout that waited it out fails the test.
 WAVE_TIMEOUT = 300
