@@ -15,8 +15,8 @@ from robotconf.agent.events import RestartMessage
 from robotconf.agent.logs import LogStream
 from robotconf.agent.supervisor import Effect, Supervisor
 from robotconf.agent.workdir import RestartLedger
+from robotconf.contract.clock import now as now_wall
 from robotconf.contract.throttle import Throttle
-from robotconf.contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from robotconf.agent import process
 from robotconf.agent.config import InterfacesConfig
+from robotconf.contract.clock import now as now_wall
 from robotconf.contract.interfaces import (
     MAX_INTERFACE_NAME,
     MAX_INTERFACES,
@@ -28,7 +29,6 @@ from robotconf.contract.interfaces import (
 )
 from robotconf.contract.safejson import PayloadError, parse_object
 from robotconf.contract.textsafe import printable
-from robotconf.contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent.interfaces")
 

@@ -15,9 +15,9 @@ from pydantic import ValidationError
 from robotconf.agent.broker_link import MAX_STATUS_BYTES, BrokerLink
 from robotconf.agent.supervisor import Supervisor
 from robotconf.agent.workdir import SeqStore
+from robotconf.contract.clock import now as now_wall
 from robotconf.contract.safejson import PayloadError, parse_object
 from robotconf.contract.wire import AgentState, AgentStatus
-from robotconf.contract.wire import now as now_wall
 
 log = logging.getLogger("robotconf.agent")
 

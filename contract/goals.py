@@ -20,8 +20,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from robotconf.contract.clock import now
 from robotconf.contract.models import CODE_PATTERN as CODE_PATTERN
-from robotconf.contract.wire import now
 
 WIRE_VERSION = 1
 MAX_LINE_BYTES = 4096  # one JSON line from a brain; a longer one is cut off and counted

@@ -7,7 +7,6 @@ Pure pydantic; shared by the agent, the reconciler and `robotconf status`.
 from __future__ import annotations
 
 import re
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
@@ -16,6 +15,7 @@ from urllib.parse import unquote, urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from robotconf.contract.clock import now
 from robotconf.contract.diagnostics import Diagnostic
 from robotconf.contract.models import ROBOT_ID_PATTERN
 from robotconf.contract.textsafe import printable, shorten
@@ -192,10 +192,6 @@ ACTIVE_STATES = frozenset(
         AgentState.DEFERRED,
     }
 )
-
-
-def now() -> float:
-    return round(time.time(), 3)
 
 
 _COMMIT = re.compile(r"[0-9a-f]{40}")

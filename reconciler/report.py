@@ -14,8 +14,9 @@ from dataclasses import dataclass
 from pydantic import ValidationError
 
 from robotconf.configurator.rendered import RenderedRequest
+from robotconf.contract.clock import now
 from robotconf.contract.safejson import PayloadError
-from robotconf.contract.wire import ReconcilerStatus, Topics, now
+from robotconf.contract.wire import ReconcilerStatus, Topics
 from robotconf.readmodel.observed import RECONCILER_STATUS
 from robotconf.readmodel.retained import Ignored, Presence, RetainedView, read_object
 from robotconf.reconciler.decide import Condition, Reason
