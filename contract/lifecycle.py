@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import queue
 import re
 import signal
 import sys
@@ -23,18 +24,33 @@ def on_stop_signals(
 ) -> None:
     """SIGINT, SIGTERM and SIGHUP (the terminal was closed) end the command cleanly instead
     of raising in a random place or, for SIGHUP, killing it without its cleanup; a second one
-    calls `again` (for those who will not wait) when given."""
+    calls `again` (for those who will not wait) when given.
+
+    The handler only hands the signal on; a thread of its own sets `stop` and calls the
+    callbacks. Run in the handler, they would take locks on the main thread, interrupted
+    wherever it was: inside an Event's wait on that same event (the lock held between two
+    bytecodes), `stop.set()` waited for itself forever and a SIGTERM never stopped the
+    process. SimpleQueue.put is reentrant (the standard library says so), so it may run
+    anywhere."""
+    signals: queue.SimpleQueue[int] = queue.SimpleQueue()
+
+    def act() -> None:
+        while True:
+            signum = signals.get()
+            if stop is not None and stop.is_set():
+                # A closed terminal may send SIGHUP twice (the kernel, then the shell): no hurry.
+                if again is not None and signum != signal.SIGHUP:
+                    again()
+                continue
+            if stop is not None:
+                stop.set()
+            if callback is not None:
+                callback()
+
+    threading.Thread(target=act, name="robotconf-stop-signals", daemon=True).start()
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        if stop is not None and stop.is_set():
-            # A closed terminal may send SIGHUP twice (the kernel, then the shell): not a hurry.
-            if again is not None and signum != signal.SIGHUP:
-                again()
-            return
-        if stop is not None:
-            stop.set()
-        if callback is not None:
-            callback()
+        signals.put(signum)
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
