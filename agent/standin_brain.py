@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import queue
 import signal
 import sys
 import threading
@@ -228,26 +229,45 @@ def _start_work(
     return current
 
 
+class Signals:
+    """The signals received, handed from the handler to the main loop. The handler only puts
+    (SimpleQueue.put is reentrant): setting an Event there took its lock on the main thread,
+    which may have held it already, inside its own wait on that Event, and waited forever."""
+
+    def __init__(self) -> None:
+        self.queue: queue.SimpleQueue[int] = queue.SimpleQueue()
+        self.stop = threading.Event()
+        self.received: list[str] = []  # the stop signals' names
+        self.reloads = 0  # SIGHUPs not acted on yet
+
+    def handler(self, signum: int, frame: FrameType | None) -> None:
+        self.queue.put(signum)
+
+    def take(self, timeout: float | None = 0.0) -> None:
+        """Takes in what was received, waiting up to `timeout` for the first one."""
+        try:
+            first = self.queue.get(timeout=timeout) if timeout else self.queue.get_nowait()
+        except queue.Empty:
+            return
+        pending = [first]
+        with contextlib.suppress(queue.Empty):
+            while True:
+                pending.append(self.queue.get_nowait())
+        for signum in pending:
+            if signum == signal.SIGHUP:
+                self.reloads += 1
+            else:
+                self.received.append(signal.Signals(signum).name)
+                self.stop.set()
+
+
 def main(argv: list[str]) -> int:
-    stop = threading.Event()
-    wake = threading.Event()
-    received: list[str] = []
-    reloads: list[int] = []
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        received.append(signal.Signals(signum).name)
-        stop.set()
-        wake.set()
-
-    def on_reload(signum: int, frame: FrameType | None) -> None:
-        reloads.append(signum)
-        wake.set()
-
+    signals = Signals()
+    stop = signals.stop
     # Before the slow imports: a brain stopped while it starts should still stop cleanly, and
     # one told to reload while it starts should not die of SIGHUP's default action.
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGHUP, on_reload)
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, signals.handler)
     args = _parser().parse_args(argv)
     if args.ignore_sigterm:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -263,11 +283,12 @@ def main(argv: list[str]) -> int:
         print(f"stand-in brain: crashing with code {crash}, as {CRASH_KEY} asks", flush=True)
         return crash
 
+    signals.take()  # a stop asked while it started: no goal begins
     current = _start_work(args, request, stop)
     deadline = None if args.exit_after is None else time.monotonic() + args.exit_after
     while not stop.is_set():
-        if reloads:
-            reloads.clear()  # several signals before it looked: one reading is enough
+        if signals.reloads:
+            signals.reloads = 0  # several signals before it looked: one reading is enough
             with contextlib.suppress(OSError):  # the log may be gone
                 request = current[0] = _reload(args.request, request)
                 sys.stdout.flush()
@@ -282,11 +303,10 @@ def main(argv: list[str]) -> int:
         if remaining is not None and remaining <= 0:
             print(f"stand-in brain: exiting with code {args.exit_code} as asked", flush=True)
             return int(args.exit_code)
-        wake.wait(remaining if remaining is not None else 3600)
-        wake.clear()
+        signals.take(timeout=remaining if remaining is not None else 3600)
     # The log may be gone; stopping matters more than saying so.
     with contextlib.suppress(OSError):
-        print(f"stand-in brain: {received[0]} received, stopping", flush=True)
+        print(f"stand-in brain: {signals.received[0]} received, stopping", flush=True)
     return 0
 
 
