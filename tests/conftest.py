@@ -41,6 +41,11 @@ def pytest_configure(config: pytest.Config) -> None:
         "agents_apart: the fleet fixture runs an agent process per robot (fleet.agents), for "
         "tests that kill or start one robot; otherwise they share one process",
     )
+    config.addinivalue_line(
+        "markers",
+        "robots(ID, ...): the reconciler tests' lab keeps only these robots of the example's "
+        "fleet (a test of up's processes needs two, not six of them starting)",
+    )
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -70,6 +71,17 @@ class GitLab(Lab):
 
     def head(self) -> str:
         return self.git("rev-parse", "HEAD")
+
+    def keep_robots(self, *robot_ids: str) -> str:
+        """fleet.yaml down to `robot_ids` (its other lines as they were), committed."""
+        kept = []
+        for line in self.read("configs/fleet.yaml").splitlines(keepends=True):
+            robot = re.match(r"  ([\w.-]+): \{", line)
+            if robot is None or robot.group(1) in robot_ids:
+                kept.append(line)
+        self.write("configs/fleet.yaml", "".join(kept))
+        assert self.robots() == sorted(robot_ids), self.robots()
+        return self.commit(f"only {', '.join(robot_ids)}")
 
     def requests(self, revision: str | None = None) -> dict[str, RenderedRequest]:
         desired = load_desired(self.root, revision or self.head())

@@ -28,8 +28,13 @@ EXTRA_ROBOT = "  tb3-06: {scenario: delivery-gazebo, name: Second delivery bot}\
 
 
 @pytest.fixture
-def lab(tmp_path: Path) -> GitLab:
-    return GitLab(tmp_path / "lab")
+def lab(tmp_path: Path, request: pytest.FixtureRequest) -> GitLab:
+    """The example lab, committed; a test marked `robots(ID, ...)` keeps only those robots."""
+    lab = GitLab(tmp_path / "lab")
+    kept = request.node.get_closest_marker("robots")
+    if kept is not None:
+        lab.keep_robots(*kept.args)
+    return lab
 
 
 @dataclass

@@ -70,6 +70,11 @@ def processes_mentioning(text: str) -> list[int]:
     return found
 
 
+# A test of up's processes, signals and lines needs two robots (the whole example lab is
+# tested in test_up_runs_the_whole_loop_and_stops_cleanly), not six agents and brains starting.
+TWO_ROBOTS = pytest.mark.robots("tb3-01", "tb3-02")
+
+
 def start_up(lab: GitLab, tmp_path: Path, *extra: str, log: str = "up.out") -> Proc:
     return Proc(robotconf_argv("up", "--repo", str(lab.root), *extra), tmp_path / log, cwd=lab.root)
 
@@ -84,7 +89,8 @@ def up_folder(lab: GitLab) -> str:
 
 def in_sync(up: Proc, lab: GitLab) -> None:
     wait_for(lambda: "all robots InSync" in up.output(), "up to report InSync")
-    assert len(processes_mentioning(up_folder(lab))) == 12  # six agents, six brains
+    # An agent and a brain a robot.
+    assert len(processes_mentioning(up_folder(lab))) == 2 * len(lab.robots())
 
 
 def none_left(folder: str) -> None:
@@ -151,6 +157,7 @@ def test_up_runs_the_whole_loop_and_stops_cleanly(lab: GitLab, tmp_path: Path) -
     assert " ERROR " not in log and "Traceback" not in log, log
 
 
+@TWO_ROBOTS
 def test_up_with_an_existing_broker(lab: GitLab, tmp_path: Path, mosquitto: Mosquitto) -> None:
     up = start_up(lab, tmp_path, "--broker", mosquitto.url)
     try:
@@ -219,6 +226,7 @@ def test_the_generated_agent_yaml_is_valid_with_credentials_and_tls(
     assert config.tls is not None and config.tls.ca_file == secrets["ca.crt"]
 
 
+@TWO_ROBOTS
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_a_stop_signal_stops_every_agent_and_brain(
     lab: GitLab, tmp_path: Path, sig: signal.Signals
@@ -276,6 +284,7 @@ class Terminal:
             os.close(self.master)
 
 
+@TWO_ROBOTS
 def test_closing_the_terminal_stops_everything(lab: GitLab, tmp_path: Path) -> None:
     """up on a terminal (the live screen) whose terminal goes away: the kernel's SIGHUP, then
     every write failing. The refused commit is drawn on the live screen, framed."""
@@ -284,8 +293,8 @@ def test_closing_the_terminal_stops_everything(lab: GitLab, tmp_path: Path) -> N
     try:
         screen = terminal.screen
         wait_for(lambda: b"all robots InSync" in screen, "the live screen to report InSync")
-        assert b"tb3-05" in screen  # the fleet is drawn, not said as lines
-        assert len(processes_mentioning(up_folder(lab))) == 12
+        assert b"tb3-02" in screen  # the fleet is drawn, not said as lines
+        assert len(processes_mentioning(up_folder(lab))) == 2 * len(lab.robots())
         lab.replace("configs/scenarios/guide-gazebo.yaml", "capability: ", "capability: nope-")
         bad = lab.commit("typo")
         # Framed above the robots on the live screen, not only said in a line over it.
@@ -303,6 +312,7 @@ def test_closing_the_terminal_stops_everything(lab: GitLab, tmp_path: Path) -> N
     assert "Traceback" not in log
 
 
+@TWO_ROBOTS
 def test_a_killed_up_takes_its_agents_and_brains_along_and_the_next_starts_cleanly(
     lab: GitLab, tmp_path: Path
 ) -> None:
@@ -335,6 +345,7 @@ def test_a_killed_up_takes_its_agents_and_brains_along_and_the_next_starts_clean
     assert "Traceback" not in second.output() and "left running" not in second.output()
 
 
+@TWO_ROBOTS
 def test_up_stops_an_agent_a_previous_up_left_running(lab: GitLab, tmp_path: Path) -> None:
     """Where no parent-death signal stopped it (another OS, or an agent still stopping): its
     work directory's lock names it, and the next up stops it before starting its own."""
@@ -366,6 +377,7 @@ def start_agent_from(robot: Path, tmp_path: Path, config: Path | None = None) ->
     return Proc(robotconf_argv("agent", "--config", str(config)), tmp_path / "left.out")
 
 
+@TWO_ROBOTS
 def test_up_leaves_alone_an_agent_it_did_not_start(lab: GitLab, tmp_path: Path) -> None:
     """An agent of the same work directory run from another agent.yaml (a robot's own, say)
     is not up's to stop: up says so and starts nothing."""
@@ -406,6 +418,7 @@ def events(lab: GitLab, kind: str) -> str:
     return " ".join(str(e.get("revision")) for e in json.loads(done.stdout or "[]"))
 
 
+@TWO_ROBOTS
 def test_a_refused_commit_is_said_in_the_line_output(lab: GitLab, tmp_path: Path) -> None:
     up = start_up(lab, tmp_path)
     try:

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from robotconf.workstation.broker import free_port
-from tests.integration.reconciler.test_up import in_sync, start_up, up_folder
+from tests.integration.reconciler.test_up import TWO_ROBOTS, in_sync, start_up, up_folder
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.watch import wait_for
 
@@ -55,6 +55,7 @@ def time_wait_on(port: int) -> bool:
     return False
 
 
+@TWO_ROBOTS
 def test_status_logs_and_restart_need_no_options_even_when_the_port_moved(
     lab: GitLab, tmp_path: Path
 ) -> None:
@@ -80,7 +81,7 @@ def test_status_logs_and_restart_need_no_options_even_when_the_port_moved(
 
             status = desk(lab, "status")
             assert status.returncode == 0, status.stdout + status.stderr
-            assert len(re.findall(r"^tb3-0\d\s+InSync\s", status.stdout, re.M)) == 6
+            assert len(re.findall(r"^tb3-0\d\s+InSync\s", status.stdout, re.M)) == 2
             logs = desk(lab, "logs", "tb3-01", "--lines", "5", cwd=lab.root / "configs")
             assert logs.returncode == 0 and logs.stdout.strip(), logs.stdout + logs.stderr
             # up's agents verify signatures: the restart is signed with up's key, found too.
@@ -95,6 +96,7 @@ def test_status_logs_and_restart_need_no_options_even_when_the_port_moved(
     assert not (lab.root / ".robotconf" / "up" / "desk.json").exists()
 
 
+@TWO_ROBOTS
 def test_a_desk_file_whose_up_is_gone_is_not_trusted(lab: GitLab, tmp_path: Path) -> None:
     up = start_up(lab, tmp_path, "--port", str(free_port("127.0.0.1")))
     try:
@@ -108,6 +110,7 @@ def test_a_desk_file_whose_up_is_gone_is_not_trusted(lab: GitLab, tmp_path: Path
     assert "desk.json is stale: the robotconf up that wrote it" in status.stderr, status.stderr
 
 
+@TWO_ROBOTS
 def test_a_quick_restart_keeps_the_broker_port(lab: GitLab, tmp_path: Path) -> None:
     port = free_port("127.0.0.1")
     first = start_up(lab, tmp_path, "--port", str(port), log="first.out")
@@ -177,6 +180,7 @@ def test_a_given_broker_nobody_listens_on_is_said_at_once(lab: GitLab, tmp_path:
     ), up.stderr
 
 
+@TWO_ROBOTS
 def test_a_settings_only_commit_reloads_up_s_brains(lab: GitLab, tmp_path: Path) -> None:
     up = start_up(lab, tmp_path, "--port", str(free_port("127.0.0.1")))
     try:

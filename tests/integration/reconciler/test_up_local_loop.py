@@ -18,7 +18,7 @@ from urllib.parse import urlencode, urlsplit
 
 from robotconf.contract.mqtt import Connection
 from robotconf.workstation.broker import free_port
-from tests.integration.reconciler.test_up import in_sync, start_up, up_folder
+from tests.integration.reconciler.test_up import TWO_ROBOTS, in_sync, start_up, up_folder
 from tests.integration.reconciler.test_up_desk import desk
 from tests.support.fleet import GitLab, robotconf_argv
 from tests.support.watch import FleetWatch, wait_for
@@ -68,6 +68,7 @@ def status_rows(lab: GitLab) -> dict[str, dict[str, Any]] | None:
     return {row["robot_id"]: row for row in json.loads(done.stdout)["robots"]}
 
 
+@TWO_ROBOTS
 def test_up_ui_logs_its_operator_in_with_the_link_it_prints(lab: GitLab, tmp_path: Path) -> None:
     port = free_port("127.0.0.1")
     up = start_up(lab, tmp_path, "--ui", f"127.0.0.1:{port}")
