@@ -21,10 +21,12 @@ def on_stop_signals(
     stop: threading.Event | None = None,
     callback: Callable[[], None] | None = None,
     again: Callable[[], None] | None = None,
+    signals: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP),
 ) -> None:
     """SIGINT, SIGTERM and SIGHUP (the terminal was closed) end the command cleanly instead
     of raising in a random place or, for SIGHUP, killing it without its cleanup; a second one
-    calls `again` (for those who will not wait) when given.
+    calls `again` (for those who will not wait) when given. `signals` narrows which (a brain
+    keeps SIGHUP for reloads). Call it on the main thread.
 
     The handler only hands the signal on; a thread of its own sets `stop` and calls the
     callbacks. Run in the handler, they would take locks on the main thread, interrupted
@@ -32,11 +34,11 @@ def on_stop_signals(
     bytecodes), `stop.set()` waited for itself forever and a SIGTERM never stopped the
     process. SimpleQueue.put is reentrant (the standard library says so), so it may run
     anywhere."""
-    signals: queue.SimpleQueue[int] = queue.SimpleQueue()
+    received: queue.SimpleQueue[int] = queue.SimpleQueue()
 
     def act() -> None:
         while True:
-            signum = signals.get()
+            signum = received.get()
             if stop is not None and stop.is_set():
                 # A closed terminal may send SIGHUP twice (the kernel, then the shell): no hurry.
                 if again is not None and signum != signal.SIGHUP:
@@ -50,11 +52,10 @@ def on_stop_signals(
     threading.Thread(target=act, name="robotconf-stop-signals", daemon=True).start()
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        signals.put(signum)
+        received.put(signum)
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-    signal.signal(signal.SIGHUP, handler)
+    for signum in signals:
+        signal.signal(signum, handler)
 
 
 def _quiet_chatty_loggers() -> None:

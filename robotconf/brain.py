@@ -28,6 +28,7 @@ import collections
 import contextlib
 import itertools
 import os
+import signal
 import socket
 import sys
 import threading
@@ -51,6 +52,7 @@ from robotconf.contract.goals import (
     VitalsLine,
 )
 from robotconf.contract.launch import LaunchRequest
+from robotconf.contract.lifecycle import on_stop_signals
 from robotconf.contract.textsafe import shorten
 
 __all__ = [
@@ -62,6 +64,7 @@ __all__ = [
     "goal",
     "ready",
     "request",
+    "stop_signal",
     "vitals",
 ]
 
@@ -396,6 +399,16 @@ def _checked(make: Any, **fields: Any) -> bytes:
             for error in exc.errors()[:3]
         )
         raise ValueError(f"robotconf.brain: {problems}") from None
+
+
+def stop_signal() -> threading.Event:
+    """An Event set once SIGTERM (the agent stopping the brain) or SIGINT (Ctrl-C) arrives:
+    wait on it between steps (`stop.wait(0.2)`). Call it once, from the main thread. The
+    handler takes no lock: setting an Event in a handler of one's own can hang the brain for
+    good, when the signal lands while the main thread is inside its own wait on that Event."""
+    stop = threading.Event()
+    on_stop_signals(stop, signals=(signal.SIGTERM, signal.SIGINT))
+    return stop
 
 
 def ready() -> None:

@@ -1,13 +1,10 @@
 """A brain in 30 lines: runs its scenario's goal tasks and reports each (write-a-brain.md)."""
 
-import signal
 import sys
-import threading
 
 from robotconf import brain
 
-stop = threading.Event()
-signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
+stop = brain.stop_signal()  # set by the agent's SIGTERM (or Ctrl-C)
 
 request = brain.request(sys.argv[1] if len(sys.argv) > 1 else None)
 speed = request.settings().get("max_linear_speed", 0.1)
