@@ -66,7 +66,7 @@ def test_a_brain_that_says_hello_is_starting_until_ready_and_its_goals_are_relay
 ) -> None:
     plan = [
         {"send": HELLO},
-        {"sleep": 3.0},  # past startsecs: without its hello it would be running by now
+        {"sleep": 4.0},  # past startsecs: without its hello it would be running by now
         {"send": READY},
         goal("g1", "Delivery", "started"),
         goal("g1", "Delivery", "progress", fraction=0.5, eta=3.0, note="halfway"),
@@ -80,7 +80,9 @@ def test_a_brain_that_says_hello_is_starting_until_ready_and_its_goals_are_relay
         line(type="vitals", values={"battery": 0.82, "pose": "1.0,2.0", "docked": False}),
         line(type="event", severity="info", message="all good"),
     ]
-    agent = raw_agent(make_agent, tmp_path, plan, startsecs=1.0)
+    # startsecs long enough for the hello to come first on a loaded machine (a brain's
+    # Python can take over a second to start there); the plan's sleep outlasts it.
+    agent = raw_agent(make_agent, tmp_path, plan, startsecs=2.0)
     agent.start()
     watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
     digest = launch(mosquitto)
@@ -93,7 +95,7 @@ def test_a_brain_that_says_hello_is_starting_until_ready_and_its_goals_are_relay
     agent.note_brain(hello.pid)
     running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=digest)
     assert running.pid == hello.pid and "ready" in running.message
-    # Between its start and its ready, never running: startsecs (1 s) did not count.
+    # Between its start and its ready, never running: startsecs (2 s) did not count.
     started = [s for s in watch.history(ROBOT) if s.pid == hello.pid]
     assert [s.state for s in started].index(AgentState.RUNNING) == len(started) - 1
 
@@ -165,7 +167,9 @@ def test_a_brain_that_says_hello_but_never_ready_is_stopped_as_a_failed_start(
     make_agent: AgentFactory,
     tmp_path: Path,
 ) -> None:
-    agent = raw_agent(make_agent, tmp_path, [{"send": HELLO}], ready_timeout=1.0)
+    # startsecs long enough for the hello to come first on a loaded machine: a brain counted
+    # running at startsecs before its hello is `running` for a moment (documented).
+    agent = raw_agent(make_agent, tmp_path, [{"send": HELLO}], ready_timeout=1.0, startsecs=5.0)
     agent.start()
     watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
     digest = launch(mosquitto)
