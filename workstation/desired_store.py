@@ -11,10 +11,12 @@ valid; anything else is ignored and built again (never an error: it is a cache).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import stat
+import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from functools import lru_cache
 from itertools import chain
@@ -29,6 +31,9 @@ from robotconf.readmodel.verdicts import DesiredRobot
 FORMAT = 1
 MAX_BYTES = 256 * 1024 * 1024  # far above 10,000 robots (about 4 MB): a bound, not a size
 KEEP = 8  # revisions kept per repository: the newest, by when they were written
+# A half-written entry (`.<revision>.<pid>.part`) older than this was left by a writer killed
+# mid-write: a whole fleet's entry is written in well under a second.
+STALE_PART = 300.0
 
 
 @lru_cache(maxsize=1)
@@ -246,19 +251,25 @@ def write(repo: Path, revision: str, robots: Mapping[str, DesiredRobot]) -> None
     folder = _folder(repo)
     if folder is None or not is_commit(revision):
         return
+    part = folder / f".{revision}.{os.getpid()}.part"
     try:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
-        part = folder / f".{revision}.{os.getpid()}.part"
         fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
         with os.fdopen(fd, "wb") as file:
             file.writelines(encoded(revision, robots))
         os.replace(part, folder / f"{revision}.json")
-        _prune(folder)
+        _prune(folder, time.time())
     except OSError:
-        return
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)  # a full disk's half entry: not left behind
 
 
-def _prune(folder: Path) -> None:
+def _prune(folder: Path, now: float) -> None:
+    """Only the newest KEEP entries, and no half-written one that a killed writer left."""
     entries = sorted(folder.glob("*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
     for old in entries[KEEP:]:
         old.unlink(missing_ok=True)
+    for part in folder.glob(".*.part"):
+        with contextlib.suppress(OSError):  # another writer may have just renamed it
+            if now - part.lstat().st_mtime > STALE_PART:
+                part.unlink()

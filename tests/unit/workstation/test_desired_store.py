@@ -154,3 +154,30 @@ def test_only_the_newest_entries_are_kept(repo: Path, desired: dict[str, Desired
         os.utime(entry, (1_000_000 + age, 1_000_000 + age))
     kept = sorted(p.stem for p in (repo / ".git" / "robotconf" / "desired").glob("*.json"))
     assert kept == sorted(revisions[-desired_store.KEEP :])
+
+
+def test_a_half_entry_a_killed_writer_left_goes_and_a_fresh_one_stays(
+    repo: Path, desired: dict[str, DesiredRobot]
+) -> None:
+    folder = repo / ".git" / "robotconf" / "desired"
+    folder.mkdir(parents=True)
+    left = folder / f".{REV}.4242.part"  # killed mid-write, long ago
+    left.write_bytes(b'{"format": 1, "rev')
+    old = 1_000_000.0
+    os.utime(left, (old, old))
+    writing = folder / f".{'c' * 40}.4343.part"  # another writer at it right now
+    writing.write_bytes(b"{")
+    desired_store.write(repo, "b" * 40, desired)
+    assert not left.exists()
+    assert writing.exists()
+    _same(desired_store.read(repo, "b" * 40), desired)
+
+
+def test_a_write_that_fails_leaves_no_half_entry(
+    repo: Path, desired: dict[str, DesiredRobot]
+) -> None:
+    folder = repo / ".git" / "robotconf" / "desired"
+    folder.mkdir(parents=True)
+    (folder / f"{REV}.json").mkdir()  # the rename onto it fails: a folder is in the way
+    desired_store.write(repo, REV, desired)  # no error: a cache that cannot keep, builds again
+    assert list(folder.glob(".*.part")) == []
