@@ -42,6 +42,9 @@ class Accept:
 @dataclass(frozen=True)
 class Reject:
     reason: str
+    # For a signed request dated too far ahead of this robot's clock: the wall time from which
+    # the same request is no longer too far ahead (the agent looks at it again then).
+    retry_at: float | None = None
 
 
 Admission = Clear | Accept | Reject
@@ -145,21 +148,24 @@ class Freshness:
     now: float | None = None
 
 
-def _stale(issued_at: float | None, digest: str | None, freshness: Freshness | None) -> str | None:
+def _stale(
+    issued_at: float | None, digest: str | None, freshness: Freshness | None
+) -> Reject | None:
     if freshness is None or issued_at is None:
         return None
     if digest is not None and digest == freshness.running_digest:
         return None
     now = freshness.now
     if now is not None and issued_at > now + MAX_ISSUED_AHEAD:
-        return (
+        return Reject(
             f"request issued at {_iso(issued_at)}, ahead of this robot's clock ({_iso(now)}) "
             f"by more than {MAX_ISSUED_AHEAD:g} s: the reconciler's clock or this robot's is "
-            "wrong (check NTP); accepting it would lock out the requests that follow"
+            "wrong (check NTP); accepting it would lock out the requests that follow",
+            retry_at=issued_at - MAX_ISSUED_AHEAD,
         )
     if freshness.newest_issued_at is None or issued_at >= freshness.newest_issued_at:
         return None
-    return (
+    return Reject(
         f"replayed request: issued at {_iso(issued_at)}, before the newest one this "
         f"robot accepted ({_iso(freshness.newest_issued_at)}); a rollback must come as a new "
         "commit"
@@ -224,9 +230,9 @@ def interpret(
     except ValidationError as exc:
         return Reject(f"not a valid launch request: {_validation_summary(exc)}")
     if verify is not None:
-        problem = _stale(request.issued_at, request.digest, freshness)
-        if problem is not None:
-            return Reject(problem)
+        stale = _stale(request.issued_at, request.digest, freshness)
+        if stale is not None:
+            return stale
     if not request.digest_matches():
         return Reject(f"digest {request.digest} does not match the request's content")
     capability = request.scenario.capability
@@ -245,9 +251,9 @@ def _stop(data: dict[str, Any], signed: bool, freshness: Freshness | None) -> Ad
     except ValidationError as exc:
         return Reject(f"not a valid stop: {_validation_summary(exc)}")
     if signed:
-        problem = _stale(stop.issued_at, None, freshness)
-        if problem is not None:
-            return Reject(problem)
+        stale = _stale(stop.issued_at, None, freshness)
+        if stale is not None:
+            return stale
     return Clear(stop.issued_at if signed else None)
 
 

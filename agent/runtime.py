@@ -58,6 +58,9 @@ log = logging.getLogger("robotconf.agent")
 # log line names its robot (`RobotIdFilter`), whichever module logged it.
 _acting_for: ContextVar[str | None] = ContextVar("robotconf_agent_robot", default=None)
 
+# Seconds between looks at a request refused as dated ahead, at most: NTP may set this
+# robot's clock right at any moment, long before real time catches up with a fast reconciler.
+AHEAD_LOOK = 30.0
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
 BUSY_LOOK = 1.0  # seconds between looks at the brain's hold file, for the status's `busy`
 
@@ -99,6 +102,10 @@ class Agent:
         self.issued = IssuedStore(workdir / ISSUED_FILE)
         self.hold_file = workdir / HOLD_FILE
         self._busy_look = 0.0  # monotonic time of the next look at it (`supervisor.look_busy`)
+        # A signed request refused only for being dated ahead of this robot's clock, and the
+        # monotonic time to look at it again: time passing, or NTP setting the clock right,
+        # admits it without another publish (a retained request is not sent again).
+        self._ahead: tuple[bytes, float] | None = None
         self.supervisor = Supervisor(
             config.robot_id, policy_of(config), held=lambda: hold_exists(self.hold_file)
         )
@@ -190,6 +197,7 @@ class Agent:
             self._handle_guarded(event, time.monotonic())
             handled = True
         now = time.monotonic()
+        handled |= self._look_ahead_again(now)
         deadline = self.supervisor.deadline
         if deadline is not None and now >= deadline:
             self._apply(self.supervisor.tick(now))
@@ -246,6 +254,8 @@ class Agent:
             due = min(due, log_check)
         if self.status.held_until is not None:
             due = min(due, self.status.held_until)
+        if self._ahead is not None:
+            due = min(due, self._ahead[1])
         if self.interfaces is not None:
             due = min(due, self.interfaces.due())
         logs = self.logs.due(now)
@@ -317,7 +327,20 @@ class Agent:
         self._apply(self.supervisor.shutdown(now))
 
     def _on_launch(self, event: LaunchMessage, now: float) -> None:
-        payload = event.payload
+        self._ahead = None  # a newer request replaces one that waited for the clock
+        self._admit(event.payload, now)
+
+    def _look_ahead_again(self, now: float) -> bool:
+        """The request refused as dated ahead, once its time has come: admitted now, or still
+        ahead (then looked at again later, without a second rejection said)."""
+        if self._ahead is None or now < self._ahead[1]:
+            return False
+        payload = self._ahead[0]
+        self._ahead = None
+        self._admit(payload, now, again=True)
+        return True
+
+    def _admit(self, payload: bytes, now: float, again: bool = False) -> None:
         desired = self.supervisor.desired
         freshness = admission.Freshness(
             self.issued.newest,
@@ -326,6 +349,11 @@ class Agent:
         )
         outcome = admission.interpret(payload, self.description, self.verify, freshness)
         sup = self.supervisor
+        if isinstance(outcome, admission.Reject) and outcome.retry_at is not None:
+            wait = min(max(outcome.retry_at - time.time(), 0.0), AHEAD_LOOK) + 0.05
+            self._ahead = (payload, now + wait)
+            if again:
+                return  # still ahead: said when it came
         if isinstance(outcome, admission.Clear):
             log.info("launch request cleared")
             if outcome.issued_at is not None:

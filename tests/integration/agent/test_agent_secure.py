@@ -189,6 +189,30 @@ def test_wrong_password_is_reported_and_retried(tmp_path: Path, secured: Secured
         agent.cleanup()
 
 
+def test_a_request_refused_as_dated_ahead_runs_once_the_robot_s_clock_reaches_it(
+    mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
+) -> None:
+    """A retained request is not sent again: refused for a date a few seconds too far ahead
+    (a reconciler's clock slightly fast), the agent looks at it again once its own clock has
+    caught up, and runs it without another publish."""
+    keys = generate_keys(tmp_path / "keys")
+    private = load_private_key(keys.private)
+    agent = make_agent(public_key=str(keys.public)).start()
+    watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
+    ahead = sign(make_request(variant=1), private, issued_at=time.time() + 34)  # 4 s too far
+    publish(mosquitto.url, LAUNCH, ahead.payload())
+    refused = watch.wait_for(
+        ROBOT,
+        lambda s: s.state == AgentState.REJECTED and "ahead of this robot's clock" in s.message,
+        "the request refused as dated ahead",
+        agent=agent,
+    )
+    running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=ahead.digest)
+    agent.note_brain(running.pid)
+    assert "check NTP" in refused.message and running.pid is not None
+    assert agent.brain_log().count("ahead of this robot's clock") == 1  # said once
+
+
 def test_a_fast_reconcilers_request_is_refused_and_locks_nothing_out(
     mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
 ) -> None:

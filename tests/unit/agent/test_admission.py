@@ -199,6 +199,7 @@ def test_a_fast_clock_cannot_lock_out_later_requests_and_replays_stay_refused(
     refused = admit(fast, now)
     assert isinstance(refused, Reject) and "ahead of this robot's clock" in refused.reason
     assert "check NTP" in refused.reason and store.newest is None
+    assert refused.retry_at == now + 3600 - MAX_ISSUED_AHEAD  # when it is no longer too far ahead
     # Its clock fixed, its next request is accepted at once.
     fixed = sign(make_request(variant=2), private, issued_at=now + 5)
     assert isinstance(admit(fixed, now + 4), Accept) and store.newest == now + 5
