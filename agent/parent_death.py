@@ -49,12 +49,18 @@ def die_with_parent(parent: int) -> bool:
     process is re-parented, i.e. once per thread of a killed multi-threaded parent, and a
     second SIGTERM means "do not wait" to the agent (its brain would be killed, not stopped)."""
     stop = signal.getsignal(signal.SIGTERM)
-    fired = False
+    # One token, taken by list.pop (one C call): a Python handler can run again between two
+    # bytecodes of itself, and the kernel's SIGHUPs come in a burst, so a flag tested and then
+    # set let two through (a loaded run logged "SIGHUP received: stopping" twice, and the
+    # second, as a second SIGTERM does, killed the brain instead of stopping it).
+    token = [True]
 
     def once(signum: int, frame: FrameType | None) -> None:
-        nonlocal fired
-        if not fired and callable(stop):
-            fired = True
+        try:
+            token.pop()
+        except IndexError:
+            return
+        if callable(stop):
             stop(signum, frame)
 
     signal.signal(signal.SIGHUP, once)
