@@ -19,7 +19,7 @@ from cryptography.x509.oid import NameOID
 
 from robotconf.contract.mqtt import Connection
 from robotconf.contract.signing import generate_keys, load_private_key, sign
-from robotconf.contract.wire import AgentState, Topics
+from robotconf.contract.wire import AgentState, AgentStatus, Topics
 from tests.integration.agent.conftest import AgentFactory
 from tests.support.agents import AgentProc, make_request, publish
 from tests.support.mosquitto import Mosquitto
@@ -189,6 +189,16 @@ def test_wrong_password_is_reported_and_retried(tmp_path: Path, secured: Secured
         agent.cleanup()
 
 
+def refused_as_ahead(watch: FleetWatch, agent: AgentProc) -> AgentStatus:
+    """The status that refuses a signed request as dated ahead of the robot's clock."""
+    return watch.wait_for(
+        ROBOT,
+        lambda s: s.state == AgentState.REJECTED and "ahead of this robot's clock" in s.message,
+        "the request refused as dated ahead",
+        agent=agent,
+    )
+
+
 def test_a_request_refused_as_dated_ahead_runs_once_the_robot_s_clock_reaches_it(
     mosquitto: Mosquitto, watch: FleetWatch, make_agent: AgentFactory, tmp_path: Path
 ) -> None:
@@ -201,12 +211,7 @@ def test_a_request_refused_as_dated_ahead_runs_once_the_robot_s_clock_reaches_it
     watch.wait_state(ROBOT, AgentState.IDLE, agent=agent)
     ahead = sign(make_request(variant=1), private, issued_at=time.time() + 34)  # 4 s too far
     publish(mosquitto.url, LAUNCH, ahead.payload())
-    refused = watch.wait_for(
-        ROBOT,
-        lambda s: s.state == AgentState.REJECTED and "ahead of this robot's clock" in s.message,
-        "the request refused as dated ahead",
-        agent=agent,
-    )
+    refused = refused_as_ahead(watch, agent)
     running = watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=ahead.digest)
     agent.note_brain(running.pid)
     assert "check NTP" in refused.message and running.pid is not None
@@ -228,12 +233,7 @@ def test_a_fast_reconcilers_request_is_refused_and_locks_nothing_out(
     watch.wait_state(ROBOT, AgentState.RUNNING, agent=agent, digest=first.digest)
     fast = sign(make_request(variant=2), private, issued_at=time.time() + 3600)
     publish(mosquitto.url, LAUNCH, fast.payload())
-    refused = watch.wait_for(
-        ROBOT,
-        lambda s: s.state == AgentState.REJECTED and "ahead of this robot's clock" in s.message,
-        "the request from a fast clock refused",
-        agent=agent,
-    )
+    refused = refused_as_ahead(watch, agent)
     assert "check NTP" in refused.message
     correct = sign(make_request(variant=3), private)
     publish(mosquitto.url, LAUNCH, correct.payload())
