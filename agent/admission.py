@@ -136,6 +136,17 @@ class RestartMemory:
 # long at most (instead of until real time catches up), and the watermark is never lowered,
 # so no replay is let in. Far beyond NTP's error, far below a lock-out that matters.
 MAX_ISSUED_AHEAD = 30.0
+# Seconds between looks at a request refused as dated ahead, at most: NTP may set this
+# robot's clock right at any moment, long before real time catches up with a fast reconciler.
+AHEAD_LOOK = 30.0
+
+
+def look_again_in(outcome: Admission, now: float) -> float | None:
+    """Seconds (from wall time `now`) until a request refused as dated ahead is looked at
+    again: when this clock reaches it, or AHEAD_LOOK at most; None for any other outcome."""
+    if not isinstance(outcome, Reject) or outcome.retry_at is None:
+        return None
+    return min(max(outcome.retry_at - now, 0.0), AHEAD_LOOK) + 0.05
 
 
 @dataclass(frozen=True)

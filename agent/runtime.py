@@ -58,9 +58,6 @@ log = logging.getLogger("robotconf.agent")
 # log line names its robot (`RobotIdFilter`), whichever module logged it.
 _acting_for: ContextVar[str | None] = ContextVar("robotconf_agent_robot", default=None)
 
-# Seconds between looks at a request refused as dated ahead, at most: NTP may set this
-# robot's clock right at any moment, long before real time catches up with a fast reconciler.
-AHEAD_LOOK = 30.0
 IDLE_WAKEUP = 60.0  # an upper bound on sleeping, so that no missed wake-up can hang the agent
 BUSY_LOOK = 1.0  # seconds between looks at the brain's hold file, for the status's `busy`
 
@@ -342,15 +339,14 @@ class Agent:
 
     def _admit(self, payload: bytes, now: float, again: bool = False) -> None:
         desired = self.supervisor.desired
+        wall = time.time()
         freshness = admission.Freshness(
-            self.issued.newest,
-            desired.request.digest if desired is not None else None,
-            time.time(),
+            self.issued.newest, desired.request.digest if desired is not None else None, wall
         )
         outcome = admission.interpret(payload, self.description, self.verify, freshness)
         sup = self.supervisor
-        if isinstance(outcome, admission.Reject) and outcome.retry_at is not None:
-            wait = min(max(outcome.retry_at - time.time(), 0.0), AHEAD_LOOK) + 0.05
+        wait = admission.look_again_in(outcome, wall)
+        if wait is not None:
             self._ahead = (payload, now + wait)
             if again:
                 return  # still ahead: said when it came

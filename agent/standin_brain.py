@@ -20,8 +20,9 @@ import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING
+
+from robotconf.contract.lifecycle import queued_signals
 
 if TYPE_CHECKING:
     from robotconf.contract.launch import LaunchRequest
@@ -230,18 +231,16 @@ def _start_work(
 
 
 class Signals:
-    """The signals received, handed from the handler to the main loop. The handler only puts
-    (SimpleQueue.put is reentrant): setting an Event there took its lock on the main thread,
-    which may have held it already, inside its own wait on that Event, and waited forever."""
+    """The signals received, taken by the main loop from the queue their handler puts them on
+    (`queued_signals`): an Event set in the handler could wait forever for its own lock."""
 
     def __init__(self) -> None:
-        self.queue: queue.SimpleQueue[int] = queue.SimpleQueue()
+        # Before the slow imports: a brain stopped while it starts should still stop cleanly,
+        # and one told to reload while it starts should not die of SIGHUP's default action.
+        self.queue = queued_signals((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))
         self.stop = threading.Event()
         self.received: list[str] = []  # the stop signals' names
         self.reloads = 0  # SIGHUPs not acted on yet
-
-    def handler(self, signum: int, frame: FrameType | None) -> None:
-        self.queue.put(signum)
 
     def take(self, timeout: float | None = 0.0) -> None:
         """Takes in what was received, waiting up to `timeout` for the first one."""
@@ -264,10 +263,6 @@ class Signals:
 def main(argv: list[str]) -> int:
     signals = Signals()
     stop = signals.stop
-    # Before the slow imports: a brain stopped while it starts should still stop cleanly, and
-    # one told to reload while it starts should not die of SIGHUP's default action.
-    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(signum, signals.handler)
     args = _parser().parse_args(argv)
     if args.ignore_sigterm:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

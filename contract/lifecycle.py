@@ -8,7 +8,7 @@ import re
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import FrameType
 
@@ -28,13 +28,12 @@ def on_stop_signals(
     calls `again` (for those who will not wait) when given. `signals` narrows which (a brain
     keeps SIGHUP for reloads). Call it on the main thread.
 
-    The handler only hands the signal on; a thread of its own sets `stop` and calls the
-    callbacks. Run in the handler, they would take locks on the main thread, interrupted
-    wherever it was: inside an Event's wait on that same event (the lock held between two
-    bytecodes), `stop.set()` waited for itself forever and a SIGTERM never stopped the
-    process. SimpleQueue.put is reentrant (the standard library says so), so it may run
-    anywhere."""
-    received: queue.SimpleQueue[int] = queue.SimpleQueue()
+    The handler only queues the signal (`queued_signals`); a thread of its own sets `stop`
+    and calls the callbacks. Run in the handler, they would take locks on the main thread,
+    interrupted wherever it was: inside an Event's wait on that same event (the lock held
+    between two bytecodes), `stop.set()` waited for itself forever and a SIGTERM never
+    stopped the process."""
+    received = queued_signals(signals)
 
     def act() -> None:
         while True:
@@ -51,11 +50,20 @@ def on_stop_signals(
 
     threading.Thread(target=act, name="robotconf-stop-signals", daemon=True).start()
 
+
+def queued_signals(signals: Iterable[signal.Signals]) -> queue.SimpleQueue[int]:
+    """`signals` handled by putting each on the queue returned, and nothing else: whoever
+    acts on them takes them from there. SimpleQueue.put is reentrant (the standard library
+    says so), so the handler may land anywhere, even inside itself; an Event set or a flag
+    tested in a handler may not. Call it on the main thread."""
+    received: queue.SimpleQueue[int] = queue.SimpleQueue()
+
     def handler(signum: int, frame: FrameType | None) -> None:
         received.put(signum)
 
     for signum in signals:
         signal.signal(signum, handler)
+    return received
 
 
 def _quiet_chatty_loggers() -> None:

@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 from robotconf.agent.admission import (
+    AHEAD_LOOK,
     MAX_ISSUED_AHEAD,
     Accept,
     Admission,
@@ -17,6 +18,7 @@ from robotconf.agent.admission import (
     Reject,
     Verifier,
     interpret,
+    look_again_in,
 )
 from robotconf.agent.workdir import IssuedStore
 from robotconf.contract.launch import LaunchRequest, StopRequest, canonical_json
@@ -200,6 +202,8 @@ def test_a_fast_clock_cannot_lock_out_later_requests_and_replays_stay_refused(
     assert isinstance(refused, Reject) and "ahead of this robot's clock" in refused.reason
     assert "check NTP" in refused.reason and store.newest is None
     assert refused.retry_at == now + 3600 - MAX_ISSUED_AHEAD  # when it is no longer too far ahead
+    assert look_again_in(refused, now) == AHEAD_LOOK + 0.05  # NTP may fix the clock before
+    assert look_again_in(refused, now + 3600 - MAX_ISSUED_AHEAD - 2) == 2 + 0.05
     # Its clock fixed, its next request is accepted at once.
     fixed = sign(make_request(variant=2), private, issued_at=now + 5)
     assert isinstance(admit(fixed, now + 4), Accept) and store.newest == now + 5
