@@ -153,14 +153,20 @@ def break_fleet(lab: GitLab) -> str:
 def assert_refusals_scraped(port: int, fixed: str, receivers: dict[str, Receiver]) -> None:
     """The scrape after refused, recovered (at `fixed`), refused again: the errors, the steps,
     not ready, and what each receiver was told."""
-    metrics = scrape(port)
+    told = "robotconf_notifications_total"
+    ok = f"#3 {receivers['ok'].base}"
+    # The receiver has the third event once its POST arrived; the reconciler counts it "sent"
+    # only once the answer is back: scrape until it has (a loaded run scraped in between).
+    metrics = wait_for(
+        lambda: m if value(m := scrape(port), told, receiver=ok, outcome="sent") == 3.0 else None,
+        "the third event counted sent",
+    )
     assert value(metrics, "robotconf_applied_revision_info", revision=fixed) == 1.0
     assert (value(metrics, "robotconf_reconcile_errors_total", reason="BuildFailed") or 0) >= 3
     assert (value(metrics, "robotconf_reconcile_duration_seconds_count") or 0) >= 5
     assert value(metrics, "robotconf_ready") == 0.0
-    told = "robotconf_notifications_total"
     # refused, recovered, refused again
-    assert value(metrics, told, receiver=f"#3 {receivers['ok'].base}", outcome="sent") == 3.0
+    assert value(metrics, told, receiver=ok, outcome="sent") == 3.0
     failed = value(metrics, told, receiver=f"#2 {receivers['500'].base}", outcome="failed")
     assert failed is not None and failed >= 1
 
